@@ -1,0 +1,131 @@
+"""The static data of a scene on one device: every cloth's particles in one array, sticks sorted by colour.
+
+All cloths share one particle array (cloth ``k`` owns a contiguous slice), so one launch serves every
+cloth. Colour ``c`` of one cloth and colour ``c`` of another touch disjoint particles, so their union is
+still a valid colour: a step costs as many launches as the most-coloured cloth, not the sum.
+
+Only what the scene's solver needs is allocated: the coloured solver gets per-colour contiguous stick
+arrays; the Jacobi solver gets a per-particle neighbour list (CSR) instead.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import warp as wp
+
+from .colouring import Colouring, check_partition, graph_colouring, grid_colouring
+from .scene import Scene
+from .topology import STRUCT_H, STRUCT_V, ClothTopology, build_cloth
+
+
+@dataclass(frozen=True)
+class ClothSlot:
+    """Where one cloth lives in the shared particle array."""
+
+    topology: ClothTopology
+    first: int  # index of its first particle
+
+    @property
+    def name(self) -> str:
+        return self.topology.name
+
+    @property
+    def count(self) -> int:
+        return self.topology.particle_count
+
+    @property
+    def particles(self) -> slice:
+        return slice(self.first, self.first + self.count)
+
+
+def per_iteration_stiffness(k: np.ndarray, iterations: int) -> np.ndarray:
+    """k' = 1 - (1 - k)^(1/K): K relaxations with k' remove the same fraction k of an isolated stick's error
+    as one with k, so a cloth's look does not depend on the iteration count (Mueller et al. 2007, 3.3)."""
+    if iterations <= 1:
+        return k.astype(np.float32)
+    return (1.0 - np.power(1.0 - k.astype(np.float64), 1.0 / iterations)).astype(np.float32)
+
+
+class Model:
+    def __init__(self, scene: Scene, device, colouring: str = "auto"):
+        """``colouring``: "auto" (analytic for grids), "grid" or "graph" (Warp's graph colouring)."""
+        if colouring not in ("auto", "grid", "graph"):
+            raise ValueError(f"colouring must be 'auto', 'grid' or 'graph', got {colouring!r}")
+        self.device = device
+        self.solver = scene.simulation.solver
+        slots, first = [], 0
+        for spec in scene.cloths:
+            slots.append(ClothSlot(build_cloth(spec), first))
+            first += spec.particle_count
+        self.cloths: tuple[ClothSlot, ...] = tuple(slots)
+        self.particle_count = first
+
+        # Host copies of everything, concatenated with particle indices made global.
+        self.rest_positions = np.concatenate([s.topology.positions for s in slots])
+        inv_mass = np.concatenate([s.topology.inv_mass for s in slots])
+        sticks = np.concatenate([s.topology.sticks + s.first for s in slots]).astype(np.int32)
+        rest = np.concatenate([s.topology.rest_length for s in slots])
+        stiffness = per_iteration_stiffness(
+            np.concatenate([s.topology.stiffness for s in slots]), scene.simulation.iterations
+        )
+        grid_class = np.concatenate([s.topology.grid_class for s in slots])
+        self.stick_count = len(sticks)
+
+        self.inv_mass = wp.array(inv_mass, dtype=float, device=device)
+        self.has_free_particles = bool((inv_mass > 0).any())
+
+        if self.solver == "coloured":
+            if colouring == "graph":
+                self.colouring: Colouring | None = graph_colouring(sticks)
+            else:
+                anchor = np.concatenate([s.topology.anchor for s in slots])
+                self.colouring = grid_colouring(grid_class, anchor)
+            check_partition(sticks, self.colouring.colour)  # cheap, and a wrong colouring is a silent race
+            order = np.argsort(self.colouring.colour, kind="stable")
+            sticks, rest, stiffness, grid_class = sticks[order], rest[order], stiffness[order], grid_class[order]
+            sizes = self.colouring.sizes
+            self.colour_ranges = [(int(a), int(n)) for a, n in zip(np.r_[0, np.cumsum(sizes)[:-1]], sizes) if n > 0]
+            self.stick_ends = wp.array(sticks, dtype=wp.vec2i, device=device)
+            self.stick_rest = wp.array(rest, dtype=float, device=device)
+            self.stick_stiffness = wp.array(stiffness, dtype=float, device=device)
+        else:
+            self.colouring = None
+            self.colour_ranges = []
+            self._build_neighbours(sticks, rest, stiffness, device)
+
+        # Kept on the host for metrics (stretch over structural sticks) in the device order.
+        self.host_sticks = sticks
+        self.host_rest = rest
+        self.structural = np.isin(grid_class, (STRUCT_H, STRUCT_V))
+
+    def _build_neighbours(self, sticks, rest, stiffness, device) -> None:
+        """CSR list of (neighbour, rest, stiffness) per particle for the gather-form Jacobi solver."""
+        n = self.particle_count
+        a = np.concatenate([sticks[:, 0], sticks[:, 1]])
+        b = np.concatenate([sticks[:, 1], sticks[:, 0]])
+        order = np.lexsort((b, a))  # by particle, then neighbour: a fixed summation order
+        counts = np.bincount(a, minlength=n)
+        start = np.zeros(n + 1, np.int32)
+        np.cumsum(counts, out=start[1:])
+        self.neighbour_start = wp.array(start, dtype=int, device=device)
+        self.neighbour = wp.array(b[order].astype(np.int32), dtype=int, device=device)
+        self.neighbour_rest = wp.array(np.tile(rest, 2)[order], dtype=float, device=device)
+        self.neighbour_stiffness = wp.array(np.tile(stiffness, 2)[order], dtype=float, device=device)
+
+    @property
+    def colour_count(self) -> int:
+        return len(self.colour_ranges)
+
+    def split(self, points: np.ndarray) -> list[np.ndarray]:
+        """Per-cloth views of a (particle_count, 3) array."""
+        return [points[s.particles] for s in self.cloths]
+
+    def structural_stretch(self, points: np.ndarray) -> np.ndarray:
+        """|D - L| / L for every structural stick (the cloth's stretch; bend sticks measure bending)."""
+        s = self.host_sticks[self.structural]
+        rest = self.host_rest[self.structural].astype(np.float64)
+        p = points.astype(np.float64)
+        length = np.linalg.norm(p[s[:, 1]] - p[s[:, 0]], axis=1)
+        return np.abs(length - rest) / rest

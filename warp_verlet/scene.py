@@ -1,0 +1,393 @@
+"""Scene files: TOML in, a validated, immutable :class:`Scene` out.
+
+This is the first stage of the one-way data flow
+(scene file -> validated scene -> device state -> step loop -> writer). Nothing downstream ever
+sees raw TOML: every key is checked here, once, and every failure is one :class:`SceneError` naming
+the file, the key and what was expected. ``docs/scenes.md`` documents every key with unit and default.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - exercised on Python 3.10 only
+    import tomli as tomllib
+
+from .errors import SceneError
+
+SOLVERS = ("coloured", "jacobi")
+ORIENTATIONS = ("vertical", "horizontal")
+STICK_FAMILIES = ("structural", "shear", "bend")
+UP_AXES = ("Y", "Z")
+# Named pin groups; each maps (rows, cols) to a list of (row, col). Row 0 is the top edge (the origin's
+# edge), column 0 the left edge.
+NAMED_PINS: dict[str, Callable[[int, int], list[tuple[int, int]]]] = {
+    "top-left": lambda r, c: [(0, 0)],
+    "top-right": lambda r, c: [(0, c - 1)],
+    "bottom-left": lambda r, c: [(r - 1, 0)],
+    "bottom-right": lambda r, c: [(r - 1, c - 1)],
+    "top-edge": lambda r, c: [(0, j) for j in range(c)],
+    "bottom-edge": lambda r, c: [(r - 1, j) for j in range(c)],
+    "left-edge": lambda r, c: [(i, 0) for i in range(r)],
+    "right-edge": lambda r, c: [(i, c - 1) for i in range(r)],
+}
+_PRIM_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+
+
+@dataclass(frozen=True)
+class SimulationSettings:
+    fps: float = 60.0
+    frames: int = 120
+    substeps: int = 4
+    iterations: int = 8
+    gravity: tuple[float, float, float] = (0.0, -9.81, 0.0)
+    wind: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    drag: float = 1.0
+    solver: str = "coloured"
+    max_dt_ratio: float = 2.0
+    max_frame_time: float = 0.1
+    position_bound: float = 1.0e4
+
+    @property
+    def dt(self) -> float:
+        """The fixed physics time step in seconds."""
+        return 1.0 / (self.fps * self.substeps)
+
+
+@dataclass(frozen=True)
+class OutputSettings:
+    path: Path
+    save_every: int = 10
+    up_axis: str = "Y"
+    meters_per_unit: float = 1.0
+
+
+@dataclass(frozen=True)
+class ClothSpec:
+    name: str
+    resolution: tuple[int, int]
+    size: tuple[float, float]
+    origin: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    orientation: str = "vertical"
+    mass: float = 1.0
+    stiffness: dict[str, float] = field(default_factory=lambda: {"structural": 1.0})
+    pins: tuple[tuple[int, int], ...] = ()
+
+    @property
+    def particle_count(self) -> int:
+        return self.resolution[0] * self.resolution[1]
+
+
+@dataclass(frozen=True)
+class Scene:
+    source: str
+    simulation: SimulationSettings
+    output: OutputSettings
+    cloths: tuple[ClothSpec, ...]
+
+    @property
+    def particle_count(self) -> int:
+        return sum(c.particle_count for c in self.cloths)
+
+
+_REQUIRED = object()
+
+
+class _Table:
+    """One TOML table being read: remembers the file and the dotted key path for error messages, and
+    which keys were consumed so that unknown keys are reported."""
+
+    def __init__(self, file: str, path: str, data: Any):
+        self.file, self.path = file, path
+        if not isinstance(data, dict):
+            raise SceneError(file, path, f"expected a table, got {_describe(data)}")
+        self.data = data
+        self.seen: set[str] = set()
+
+    def key(self, name: str) -> str:
+        return f"{self.path}.{name}" if self.path else name
+
+    def error(self, name: str | None, problem: str) -> SceneError:
+        return SceneError(self.file, self.key(name) if name else self.path or None, problem)
+
+    def take(self, name: str, parse: Callable[[Any, str], Any], default: Any = _REQUIRED) -> Any:
+        self.seen.add(name)
+        if name not in self.data:
+            if default is _REQUIRED:
+                raise self.error(name, "is required but missing")
+            return default
+        try:
+            return parse(self.data[name], self.key(name))
+        except _Invalid as bad:
+            raise SceneError(self.file, bad.key or self.key(name), bad.problem) from None
+
+    def finish(self) -> None:
+        unknown = sorted(set(self.data) - self.seen)
+        if unknown:
+            known = ", ".join(sorted(self.seen))
+            raise self.error(unknown[0], f"unknown key (known keys here: {known})")
+
+
+class _Invalid(Exception):
+    def __init__(self, problem: str, key: str | None = None):
+        self.problem, self.key = problem, key
+
+
+def _int_text(n: int) -> str:
+    """An integer for a message. Huge ones (TOML hex/octal/binary literals have no length limit) are
+    summarised: printing them in full is unreadable and, past sys.get_int_max_str_digits(), raises."""
+    if n.bit_length() > 128:
+        return f"{'-' if n < 0 else ''}an integer of {n.bit_length()} bits"
+    return str(n)
+
+
+def _describe(value: Any) -> str:
+    if isinstance(value, bool):
+        return f"boolean {str(value).lower()}"
+    if isinstance(value, int):
+        return f"int {_int_text(value)}"
+    if isinstance(value, dict):
+        return "a table"
+    if isinstance(value, list):
+        return f"an array of {len(value)}"
+    return f"{type(value).__name__} {value!r}"
+
+
+def _number(value: Any, integer: bool = False) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or (integer and not isinstance(value, int)):
+        raise _Invalid(f"expected {'an integer' if integer else 'a number'}, got {_describe(value)}")
+    if isinstance(value, float) and not math.isfinite(value):
+        raise _Invalid(f"expected a finite number, got {value}")
+    if not integer and isinstance(value, int):
+        try:
+            float(value)
+        except OverflowError:  # an integer literal beyond the float range (about 1.8e308)
+            raise _Invalid(f"expected a finite number, got {_int_text(value)}") from None
+    return value
+
+
+def real(lo: float | None = None, hi: float | None = None, lo_open: bool = False, hi_open: bool = False):
+    """A finite float within [lo, hi] (ends open where asked)."""
+
+    def parse(value: Any, key: str) -> float:
+        x = float(_number(value))
+        bad_lo = lo is not None and (x <= lo if lo_open else x < lo)
+        bad_hi = hi is not None and (x >= hi if hi_open else x > hi)
+        if bad_lo or bad_hi:
+            left = "(" if lo_open or lo is None else "["  # an infinite end is never included
+            right = ")" if hi_open or hi is None else "]"
+            span = f"{left}{'-inf' if lo is None else lo}, {'inf' if hi is None else hi}{right}"
+            raise _Invalid(f"expected a number in {span}, got {x}")
+        return x
+
+    return parse
+
+
+def integer(lo: int, hi: int | None = None):
+    def parse(value: Any, key: str) -> int:
+        n = int(_number(value, integer=True))
+        if n < lo or (hi is not None and n > hi):
+            raise _Invalid(f"expected an integer {'>= ' + str(lo) if hi is None else f'in [{lo}, {hi}]'}, got {_int_text(n)}")
+        return n
+
+    return parse
+
+
+def vector(length: int, element: Callable[[Any, str], Any]):
+    def parse(value: Any, key: str) -> tuple:
+        if not isinstance(value, list) or len(value) != length:
+            raise _Invalid(f"expected an array of {length} numbers, got {_describe(value)}")
+        return tuple(element(v, f"{key}[{i}]") for i, v in enumerate(value))
+
+    return parse
+
+
+def choice(options: tuple[str, ...]):
+    def parse(value: Any, key: str) -> str:
+        if not isinstance(value, str) or value not in options:
+            raise _Invalid(f"expected one of {', '.join(repr(o) for o in options)}, got {_describe(value)}")
+        return value
+
+    return parse
+
+
+def text(value: Any, key: str) -> str:
+    if not isinstance(value, str) or not value:
+        raise _Invalid(f"expected a non-empty string, got {_describe(value)}")
+    return value
+
+
+def _per_element(parse_one):
+    """Wrap a scalar parser so that an error inside a vector names the element, e.g. ``size[1]``."""
+
+    def parse(value: Any, key: str):
+        try:
+            return parse_one(value, key)
+        except _Invalid as bad:
+            raise _Invalid(bad.problem, bad.key or key) from None
+
+    return parse
+
+
+_any_real = _per_element(real())
+_non_negative = _per_element(real(0.0))
+
+
+def _read_simulation(file: str, data: Any) -> SimulationSettings:
+    t = _Table(file, "simulation", data)
+    d = SimulationSettings()
+    settings = SimulationSettings(
+        fps=t.take("fps", real(0.0, lo_open=True), d.fps),
+        frames=t.take("frames", integer(1), d.frames),
+        substeps=t.take("substeps", integer(1, 10_000), d.substeps),
+        iterations=t.take("iterations", integer(0, 100_000), d.iterations),
+        gravity=t.take("gravity", vector(3, _any_real), d.gravity),
+        wind=t.take("wind", vector(3, _any_real), d.wind),
+        drag=t.take("drag", real(0.0, 1.0), d.drag),
+        solver=t.take("solver", choice(SOLVERS), d.solver),
+        max_dt_ratio=t.take("max_dt_ratio", real(1.0), d.max_dt_ratio),
+        max_frame_time=t.take("max_frame_time", real(0.0, lo_open=True), d.max_frame_time),
+        position_bound=t.take("position_bound", real(0.0, lo_open=True), d.position_bound),
+    )
+    t.finish()
+    return settings
+
+
+def _read_output(file: str, data: Any, scene_path: Path) -> OutputSettings:
+    t = _Table(file, "output", data)
+
+    def usd_path(value: Any, key: str) -> Path:
+        if "\0" in text(value, key):
+            raise _Invalid("expected a path without NUL characters")
+        p = Path(value)
+        if p.suffix not in (".usd", ".usdc", ".usda"):
+            raise _Invalid(f"expected a path ending in .usd, .usdc or .usda, got {value!r}")
+        return p
+
+    settings = OutputSettings(
+        path=t.take("path", usd_path, Path(scene_path.stem + ".usdc")),
+        save_every=t.take("save_every", integer(1), 10),
+        up_axis=t.take("up_axis", choice(UP_AXES), "Y"),
+        meters_per_unit=t.take("meters_per_unit", real(0.0, lo_open=True), 1.0),
+    )
+    t.finish()
+    return settings
+
+
+def _read_stiffness(value: Any, key: str) -> dict[str, float]:
+    if not isinstance(value, dict):
+        raise _Invalid(f"expected a table like {{ structural = 1.0 }}, got {_describe(value)}")
+    out: dict[str, float] = {}
+    for family, k in value.items():
+        if family not in STICK_FAMILIES:
+            raise _Invalid(f"unknown stick family (expected {', '.join(STICK_FAMILIES)})", f"{key}.{family}")
+        k = _per_element(real(0.0, 1.0))(k, f"{key}.{family}")
+        if k > 0.0:  # 0 means "family not built"
+            out[family] = k
+    return out
+
+
+def _read_pins(value: Any, key: str, rows: int, cols: int) -> tuple[tuple[int, int], ...]:
+    if not isinstance(value, list):
+        raise _Invalid(f"expected an array of pin names, indices or [row, col] pairs, got {_describe(value)}")
+    pins: list[tuple[int, int]] = []
+    for i, item in enumerate(value):
+        item_key = f"{key}[{i}]"
+        if isinstance(item, str):
+            if item not in NAMED_PINS:
+                raise _Invalid(f"unknown pin name {item!r} (expected one of {', '.join(NAMED_PINS)})", item_key)
+            pins.extend(NAMED_PINS[item](rows, cols))
+        elif isinstance(item, int) and not isinstance(item, bool):
+            if not 0 <= item < rows * cols:
+                raise _Invalid(f"particle index {_int_text(item)} is outside the grid (0 .. {rows * cols - 1})", item_key)
+            pins.append(divmod(item, cols))
+        elif isinstance(item, list) and len(item) == 2 and all(isinstance(v, int) and not isinstance(v, bool) for v in item):
+            r, c = item
+            if not (0 <= r < rows and 0 <= c < cols):
+                raise _Invalid(f"[row, col] = [{_int_text(r)}, {_int_text(c)}] is outside the {rows} x {cols} grid", item_key)
+            pins.append((r, c))
+        else:
+            raise _Invalid(f"expected a pin name, a particle index or a [row, col] pair, got {_describe(item)}", item_key)
+    return tuple(sorted(set(pins)))
+
+
+def _read_cloth(file: str, index: int, data: Any) -> ClothSpec:
+    t = _Table(file, f"cloth[{index}]", data)
+
+    def prim_name(value: Any, key: str) -> str:
+        name = text(value, key)
+        if not _PRIM_NAME.fullmatch(name):  # not .match: "$" would accept a trailing newline
+            raise _Invalid(f"expected a name of letters, digits and '_' not starting with a digit, got {name!r}")
+        return name
+
+    name = t.take("name", prim_name, f"cloth{index}")
+    rows, cols = t.take("resolution", vector(2, _per_element(integer(1, 1 << 15))))
+    if rows * cols < 2:
+        raise t.error("resolution", "expected at least 2 particles, got a 1 x 1 grid")
+    size = t.take("size", vector(2, _non_negative))
+    for axis, (n, s) in enumerate(zip((rows, cols), size)):
+        if n > 1 and s <= 0.0:
+            raise t.error(f"size[{axis}]", f"expected a length > 0 m along an axis with {n} particles, got {s}")
+    spec = ClothSpec(
+        name=name,
+        resolution=(rows, cols),
+        size=size,
+        origin=t.take("origin", vector(3, _any_real), (0.0, 0.0, 0.0)),
+        orientation=t.take("orientation", choice(ORIENTATIONS), "vertical"),
+        mass=t.take("mass", real(0.0, lo_open=True), 1.0),
+        stiffness=t.take("sticks", _read_stiffness, {"structural": 1.0}),
+        pins=t.take("pins", lambda v, k: _read_pins(v, k, rows, cols), ()),
+    )
+    t.finish()
+    if not spec.stiffness:
+        raise t.error("sticks", "every stick family is 0: a cloth needs at least one family with stiffness in (0, 1]")
+    return spec
+
+
+def parse_scene(data: dict, file: str = "<scene>", scene_path: Path | None = None) -> Scene:
+    """Validate an already-parsed TOML document. ``file`` is used in error messages."""
+    scene_path = scene_path or Path(file)
+    top = _Table(file, "", data)
+    simulation = top.take("simulation", lambda v, k: _read_simulation(file, v), None) or SimulationSettings()
+    output = top.take("output", lambda v, k: _read_output(file, v, scene_path), None) or _read_output(file, {}, scene_path)
+
+    def cloths(value: Any, key: str) -> tuple[ClothSpec, ...]:
+        if not isinstance(value, list) or not value:
+            raise _Invalid("expected one or more [[cloth]] tables")
+        return tuple(_read_cloth(file, i, c) for i, c in enumerate(value))
+
+    cloth_specs = top.take("cloth", cloths)
+    top.finish()
+    names = [c.name for c in cloth_specs]
+    for i, n in enumerate(names):
+        if n in names[:i]:
+            raise SceneError(file, f"cloth[{i}].name", f"expected a unique name, but {n!r} is used twice")
+    return Scene(source=file, simulation=simulation, output=output, cloths=cloth_specs)
+
+
+def load_scene(path: str | Path) -> Scene:
+    """Read and validate a scene file. Raises :class:`SceneError` on any problem."""
+    path = Path(path)
+    file = str(path)
+    try:
+        raw = path.read_bytes()
+    except (OSError, ValueError) as exc:  # ValueError: a path with a NUL character
+        raise SceneError(file, None, f"cannot read the file ({getattr(exc, 'strerror', None) or exc})") from None
+    try:
+        data = tomllib.loads(raw.decode("utf-8"))
+    except UnicodeDecodeError as exc:
+        raise SceneError(file, None, f"expected UTF-8 text ({exc.reason} at byte {exc.start})") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise SceneError(file, None, f"not valid TOML: {exc}") from None
+    except ValueError as exc:  # tomllib lets int()'s digit limit through (an integer of > 4300 digits)
+        raise SceneError(file, None, f"not valid TOML: {exc}") from None
+    except RecursionError:  # tomllib recurses once per level of nested arrays / inline tables
+        raise SceneError(file, None, "not valid TOML: arrays or inline tables nested too deeply") from None
+    return parse_scene(data, file, path)

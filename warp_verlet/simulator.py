@@ -1,0 +1,190 @@
+"""The step loop: decides which kernels a scene needs and launches only those.
+
+A substep is
+
+1. ``verlet_step`` (gravity and wind folded into one acceleration on the host, drag as a scale),
+2. relaxation: ``iterations`` sweeps, each one launch of ``relax_colour`` per colour (Gauss-Seidel across
+   colours), or one ``relax_jacobi`` gather plus a copy (Jacobi),
+
+and nothing else unless the scene asks for it. On CUDA, a frame's fixed-dt substeps are captured once as a
+CUDA graph and replayed, so the host issues one launch per frame.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import warp as wp
+
+from warp_verlet.kernels.integrate import verlet_start, verlet_step
+from warp_verlet.kernels.relax import relax_colour, relax_jacobi
+
+from .errors import WarpVerletError
+from .model import Model
+from .scene import Scene
+
+
+def resolve_device(name: str | None = None):
+    """``None`` picks CUDA when present, else the CPU. Accepts "cpu", "cuda" and "cuda:N"."""
+    if name is None:
+        return wp.get_device("cuda" if wp.is_cuda_available() else "cpu")
+    if name != "cpu" and not (name == "cuda" or (name.startswith("cuda:") and name[5:].isdigit())):
+        raise WarpVerletError(f"device must be 'cpu', 'cuda' or 'cuda:N', got {name!r}")
+    if name.startswith("cuda") and not wp.is_cuda_available():
+        raise WarpVerletError(f"device {name!r} asked for, but no CUDA device is available (try --device cpu)")
+    try:
+        return wp.get_device(name)
+    except Exception as exc:  # Warp raises a bare error for an index past the device count
+        raise WarpVerletError(f"device {name!r} is not available: {exc}") from None
+
+
+@dataclass(frozen=True)
+class StretchStats:
+    """Relative stretch |D - L| / L over structural sticks."""
+
+    max: float
+    rms: float
+
+    @classmethod
+    def of(cls, values: np.ndarray) -> "StretchStats":
+        if values.size == 0:
+            return cls(0.0, 0.0)
+        return cls(float(values.max()), float(np.sqrt(np.mean(values * values))))
+
+
+class Simulator:
+    """One scene on one device.
+
+    ``step(dt)`` runs one substep of any dt (time-step-corrected Verlet); ``step_frame()`` runs the scene's
+    fixed substeps of one frame; ``advance(frame_time)`` is the real-time entry point with a clamped
+    accumulator.
+    """
+
+    def __init__(self, scene: Scene, device: str | None = None, colouring: str = "auto", use_graph: bool = True):
+        self.scene = scene
+        self.settings = scene.simulation
+        self.device = resolve_device(device)
+        with wp.ScopedDevice(self.device):
+            self.model = Model(scene, self.device, colouring)
+            self.x = wp.array(self.model.rest_positions, dtype=wp.vec3)
+            # Summed-form Verlet state (kernels/integrate.py): what the last step predicted, and its increment.
+            self.x_inertial = wp.empty_like(self.x)
+            self.delta = wp.empty_like(self.x)
+            # Jacobi reads old positions while writing new ones: only it needs a second buffer.
+            self._x_scratch = wp.empty_like(self.x) if self.settings.solver == "jacobi" else None
+        self.accel = wp.vec3(*(np.add(self.settings.gravity, self.settings.wind)))
+        self.time = 0.0
+        self.steps = 0
+        self._dt_prev: float | None = None
+        self._accumulator = 0.0
+        self._use_graph = use_graph and self.device.is_cuda
+        self._frame_graph = None
+
+    # ------------------------------------------------------------------ what a substep launches
+    def launch_plan(self) -> list[str]:
+        """The kernel launches of one substep, in order (after the first, which also runs verlet_start)."""
+        plan = ["verlet_step"] if self.model.has_free_particles else []
+        if self.settings.solver == "coloured":
+            plan += ["relax_colour"] * (self.model.colour_count * self.settings.iterations)
+        elif self.model.stick_count:
+            plan += ["relax_jacobi", "copy"] * self.settings.iterations
+        return plan
+
+    # ------------------------------------------------------------------ stepping
+    def step(self, dt: float | None = None) -> None:
+        """Advance by one substep of ``dt`` seconds (the scene's fixed dt by default)."""
+        dt = self.settings.dt if dt is None else float(dt)
+        if not (dt > 0.0 and np.isfinite(dt)):
+            raise ValueError(f"dt must be a positive finite number of seconds, got {dt}")
+        with wp.ScopedDevice(self.device):
+            self._substep(dt)
+
+    def _substep(self, dt: float) -> None:
+        if self._dt_prev is None:
+            # Exact start for constant acceleration: x_prev = x0 - v0 dt + a dt^2 / 2 (v0 = 0).
+            wp.launch(verlet_start, self.model.particle_count,
+                      inputs=[self.x, self.model.inv_mass, wp.vec3(0.0), self.accel, dt],
+                      outputs=[self.x_inertial, self.delta])
+            self._dt_prev = dt
+        if self.model.has_free_particles:
+            ratio = min(dt / self._dt_prev, self.settings.max_dt_ratio)
+            accel_offset = self.accel * (dt * (dt + self._dt_prev) * 0.5)
+            wp.launch(verlet_step, self.model.particle_count,
+                      inputs=[self.x, self.x_inertial, self.delta, self.model.inv_mass, self.settings.drag * ratio,
+                              accel_offset])
+        self._relax()
+        self._dt_prev = dt
+        self.time += dt
+        self.steps += 1
+
+    def _relax(self) -> None:
+        m = self.model
+        if self.settings.solver == "coloured":
+            for _ in range(self.settings.iterations):
+                for first, count in m.colour_ranges:
+                    wp.launch(relax_colour, count,
+                              inputs=[self.x, m.inv_mass, m.stick_ends, m.stick_rest, m.stick_stiffness, first])
+        elif m.stick_count:
+            for _ in range(self.settings.iterations):
+                wp.launch(relax_jacobi, m.particle_count,
+                          inputs=[self.x, m.inv_mass, m.neighbour_start, m.neighbour, m.neighbour_rest,
+                                  m.neighbour_stiffness],
+                          outputs=[self._x_scratch])
+                wp.copy(self.x, self._x_scratch)
+
+    def step_frame(self) -> None:
+        """The scene's ``substeps`` fixed steps of one frame. On CUDA, replayed from a captured graph once the
+        first frame (which initialises x_prev) has run."""
+        n, dt = self.settings.substeps, self.settings.dt
+        with wp.ScopedDevice(self.device):
+            if not self._use_graph or self._dt_prev != dt:
+                for _ in range(n):
+                    self._substep(dt)
+                return
+            if self._frame_graph is None:
+                time, steps = self.time, self.steps
+                with wp.ScopedCapture() as capture:
+                    for _ in range(n):
+                        self._substep(dt)
+                self._frame_graph = capture.graph
+                self.time, self.steps = time, steps  # capture recorded the work; it has not run yet
+            wp.capture_launch(self._frame_graph)
+            self.time += n * dt
+            self.steps += n
+
+    def advance(self, frame_time: float) -> float:
+        """Real-time stepping: bank ``frame_time`` seconds, run as many fixed substeps as it pays for, and
+        return the interpolation factor alpha in [0, 1) for :meth:`render_positions`.
+
+        The bank is clamped to ``max_frame_time`` so that a stall (a debugger pause, a slow frame) cannot
+        queue more substeps than the next frame can afford: the spiral of death."""
+        if not (frame_time >= 0.0 and np.isfinite(frame_time)):
+            raise ValueError(f"frame_time must be a finite number of seconds >= 0, got {frame_time}")
+        dt = self.settings.dt
+        self._accumulator = min(self._accumulator + frame_time, self.settings.max_frame_time)
+        n = int(self._accumulator / dt)
+        with wp.ScopedDevice(self.device):
+            for _ in range(n):
+                self._substep(dt)
+        self._accumulator -= n * dt
+        return self._accumulator / dt
+
+    # ------------------------------------------------------------------ reading state
+    def positions(self) -> np.ndarray:
+        """All particle positions, (particle_count, 3) float32: a snapshot on the host."""
+        points = self.x.numpy()
+        # On the CPU, numpy() is a view of the live array, which the next step would overwrite.
+        return points.copy() if self.device.is_cpu else points
+
+    def previous_positions(self) -> np.ndarray:
+        """Positions at the end of the previous substep (x_prev of the textbook form)."""
+        return self.x_inertial.numpy() - self.delta.numpy()
+
+    def render_positions(self, alpha: float) -> np.ndarray:
+        """Positions interpolated between the last two substeps: x_prev + alpha (x - x_prev)."""
+        x, x_prev = self.positions(), self.previous_positions()
+        return x_prev + np.float32(alpha) * (x - x_prev)
+
+    def stretch(self, points: np.ndarray | None = None) -> StretchStats:
+        return StretchStats.of(self.model.structural_stretch(self.positions() if points is None else points))

@@ -1,0 +1,137 @@
+"""Cloth grids as flat numpy arrays: particles, sticks, faces, UVs and inverse masses.
+
+A grid is ``rows x cols`` particles in row-major order (particle ``r * cols + c``). Row 0 lies at the
+``origin``; columns run along +X and rows run along -Y (``vertical``) or +Z (``horizontal``).
+
+Stick families, each built only when its stiffness is non-zero:
+
+- structural: (r, c)-(r, c+1) and (r, c)-(r+1, c)
+- shear:      (r, c)-(r+1, c+1) and (r, c+1)-(r+1, c)
+- bend:       (r, c)-(r, c+2) and (r, c)-(r+2, c)
+
+Each stick also records its *grid class* (which of the six directions above it is) and its anchor
+(r, c). :mod:`warp_verlet.colouring` uses those for the analytic 12-colour grid colouring.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .scene import ClothSpec
+
+# Grid classes, in the order the analytic colouring numbers them.
+STRUCT_H, STRUCT_V, SHEAR_DIAG, SHEAR_ANTI, BEND_H, BEND_V = range(6)
+FAMILY_OF_CLASS = ("structural", "structural", "shear", "shear", "bend", "bend")
+
+
+@dataclass
+class ClothTopology:
+    """One cloth's static data on the host. Index arrays are local to this cloth."""
+
+    name: str
+    rows: int
+    cols: int
+    positions: np.ndarray  # (N, 3) float32, metres
+    inv_mass: np.ndarray  # (N,) float32, 1/kg; 0 for pinned particles
+    sticks: np.ndarray  # (M, 2) int32 particle indices
+    rest_length: np.ndarray  # (M,) float32, metres
+    stiffness: np.ndarray  # (M,) float32 in (0, 1], per full solve (see relax kernels)
+    grid_class: np.ndarray  # (M,) int8, one of the six classes above
+    anchor: np.ndarray  # (M, 2) int32 (row, col) of the stick's first particle
+    faces: np.ndarray  # (F, 4) int32 quads, counter-clockwise seen from the front (+Z for vertical)
+    uvs: np.ndarray  # (N, 2) float32 in [0, 1]
+    pinned: np.ndarray  # (P,) int32 indices of pinned particles
+
+    @property
+    def particle_count(self) -> int:
+        return self.rows * self.cols
+
+    @property
+    def families(self) -> tuple[str, ...]:
+        return tuple(sorted({FAMILY_OF_CLASS[c] for c in np.unique(self.grid_class)}))
+
+
+def grid_positions(spec: ClothSpec) -> np.ndarray:
+    rows, cols = spec.resolution
+    height, width = spec.size
+    # A 1-particle axis has no spacing; linspace(0, s, 1) gives [0] as wanted.
+    down = np.linspace(0.0, height, rows) if rows > 1 else np.zeros(1)
+    across = np.linspace(0.0, width, cols) if cols > 1 else np.zeros(1)
+    r, c = np.meshgrid(down, across, indexing="ij")
+    pos = np.zeros((rows, cols, 3), dtype=np.float64)
+    pos[..., 0] = c
+    if spec.orientation == "vertical":
+        pos[..., 1] = -r
+    else:
+        pos[..., 2] = r
+    pos += np.asarray(spec.origin, dtype=np.float64)
+    return pos.reshape(-1, 3).astype(np.float32)
+
+
+def _stick_block(rows: int, cols: int, dr: int, dc: int, grid_class: int):
+    """All sticks (r, c) -> (r + dr, c + dc) that fit inside the grid, or None if none fit."""
+    r_range = np.arange(rows - dr)
+    c_range = np.arange(max(0, -dc), cols - max(0, dc))
+    if r_range.size == 0 or c_range.size == 0:
+        return None
+    r, c = (g.ravel() for g in np.meshgrid(r_range, c_range, indexing="ij"))
+    ends = np.stack([r * cols + c, (r + dr) * cols + (c + dc)], axis=1)
+    return ends, np.full(r.shape, grid_class, np.int8), np.stack([r, c], axis=1)
+
+
+def build_cloth(spec: ClothSpec) -> ClothTopology:
+    rows, cols = spec.resolution
+    positions = grid_positions(spec)
+    n = rows * cols
+
+    # (dr, dc, class) per stick direction, grouped by family.
+    directions = {
+        "structural": [(0, 1, STRUCT_H), (1, 0, STRUCT_V)],
+        "shear": [(1, 1, SHEAR_DIAG), (1, -1, SHEAR_ANTI)],
+        "bend": [(0, 2, BEND_H), (2, 0, BEND_V)],
+    }
+    blocks, stiffness = [], []
+    for family, k in spec.stiffness.items():
+        for dr, dc, cls in directions[family]:
+            block = _stick_block(rows, cols, dr, dc, cls)
+            if block is not None:
+                blocks.append(block)
+                stiffness.append(np.full(len(block[0]), k, np.float32))
+    if blocks:
+        sticks = np.concatenate([b[0] for b in blocks]).astype(np.int32)
+        grid_class = np.concatenate([b[1] for b in blocks])
+        anchor = np.concatenate([b[2] for b in blocks]).astype(np.int32)
+        stiffness_arr = np.concatenate(stiffness)
+    else:
+        sticks = np.zeros((0, 2), np.int32)
+        grid_class = np.zeros(0, np.int8)
+        anchor = np.zeros((0, 2), np.int32)
+        stiffness_arr = np.zeros(0, np.float32)
+    # Rest lengths from the float64 layout, so that every stick of one direction has the same length.
+    pos64 = positions.astype(np.float64)
+    rest = np.linalg.norm(pos64[sticks[:, 1]] - pos64[sticks[:, 0]], axis=1).astype(np.float32)
+
+    inv_mass = np.full(n, n / spec.mass, dtype=np.float32)  # uniform: each particle carries mass/n
+    pinned = np.array([r * cols + c for r, c in spec.pins], dtype=np.int32)
+    inv_mass[pinned] = 0.0
+
+    if rows > 1 and cols > 1:
+        r, c = np.meshgrid(np.arange(rows - 1), np.arange(cols - 1), indexing="ij")
+        a = (r * cols + c).ravel()
+        # (r,c) -> (r+1,c) -> (r+1,c+1) -> (r,c+1): counter-clockwise seen from +Z for a vertical cloth
+        # (rows run down -Y, columns along +X), so the front face looks at +Z.
+        faces = np.stack([a, a + cols, a + cols + 1, a + 1], axis=1).astype(np.int32)
+    else:
+        faces = np.zeros((0, 4), np.int32)  # a rope has no surface
+    u = np.arange(cols) / max(cols - 1, 1)
+    v = 1.0 - np.arange(rows) / max(rows - 1, 1)
+    uu, vv = np.meshgrid(u, v, indexing="xy")
+    uvs = np.stack([uu.ravel(), vv.ravel()], axis=1).astype(np.float32)
+
+    return ClothTopology(
+        name=spec.name, rows=rows, cols=cols, positions=positions, inv_mass=inv_mass, sticks=sticks,
+        rest_length=rest, stiffness=stiffness_arr, grid_class=grid_class, anchor=anchor, faces=faces,
+        uvs=uvs, pinned=pinned,
+    )
