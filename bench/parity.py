@@ -1,0 +1,65 @@
+"""CPU/CUDA parity and CUDA determinism on every shipped scene.
+
+    python bench/parity.py --frames 30 --out bench/results/h100
+
+Runs each scene on the CPU and on CUDA from the same start, and reports the largest and RMS difference in
+particle position after the given frames, relative to the cloth's size; and whether two CUDA runs of the
+same scene are bit-identical.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from datetime import date
+from pathlib import Path
+
+import numpy as np
+import warp as wp
+
+sys.path.insert(0, str(Path(__file__).parent))
+from common import machine, write_table  # noqa: E402
+
+from warp_verlet.scene import load_scene  # noqa: E402
+from warp_verlet.simulator import Simulator  # noqa: E402
+
+SCENES = Path(__file__).resolve().parent.parent / "scenes"
+
+
+def run(scene, device, frames):
+    sim = Simulator(scene, device)
+    for _ in range(frames):
+        sim.step_frame()
+    return sim.positions()
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--frames", type=int, default=30)
+    p.add_argument("--big-frames", type=int, default=3, help="frames for grids over 256^2 (slow on the CPU)")
+    p.add_argument("--out", type=Path, default=None)
+    args = p.parse_args(argv)
+    wp.config.quiet = True
+    if not wp.is_cuda_available():
+        print("parity: no CUDA device, nothing to compare")
+        return 0
+    rows = []
+    for path in sorted(SCENES.glob("*.toml")):
+        scene = load_scene(path)
+        frames = args.big_frames if scene.particle_count > 256 * 256 else args.frames
+        cpu, cuda, cuda2 = run(scene, "cpu", frames), run(scene, "cuda", frames), run(scene, "cuda", frames)
+        extent = max(max(c.size) for c in scene.cloths)  # metres
+        diff = np.linalg.norm(cpu.astype(np.float64) - cuda, axis=1)
+        rows.append({
+            "scene": path.name, "particles": scene.particle_count, "frames": frames,
+            "max |cpu - cuda| / size": f"{diff.max() / extent:.2e}",
+            "rms |cpu - cuda| / size": f"{np.sqrt(np.mean(diff**2)) / extent:.2e}",
+            "cuda runs bit-identical": bool(np.array_equal(cuda, cuda2)),
+        })
+        print(rows[-1], flush=True)
+    write_table(rows, args.out, "parity", f"CPU vs CUDA parity: {machine(wp.get_device('cuda'))}, {date.today()}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,129 @@
+"""The command line end to end, as a user runs it: scene file in, valid USD point cache out."""
+
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+from pxr import Usd, UsdGeom
+
+from warp_verlet.cli import main
+from warp_verlet.usd_writer import validate_cache
+
+SCENE = """
+[simulation]
+fps = 30
+frames = 6
+substeps = 2
+iterations = 4
+drag = 0.99
+
+[output]
+path = "small.usdc"
+save_every = 2
+
+[[cloth]]
+name = "sheet"
+resolution = [6, 7]
+size = [0.5, 0.6]
+origin = [0.0, 1.0, 0.0]
+sticks = { structural = 1.0, shear = 1.0 }
+pins = ["top-left", "top-right"]
+
+[[cloth]]
+name = "rope"
+resolution = [1, 5]
+size = [0.0, 0.4]
+pins = [0]
+"""
+
+
+@pytest.fixture
+def scene_file(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    path = tmp_path / "small.toml"
+    path.write_text(SCENE)
+    return path
+
+
+def read_points(path, prim):
+    stage = Usd.Stage.Open(str(path))
+    attr = UsdGeom.PointBased(stage.GetPrimAtPath(prim)).GetPointsAttr()
+    return stage, {t: np.array(attr.Get(t)) for t in attr.GetTimeSamples()}
+
+
+def test_run_writes_a_valid_cache_with_every_frame(scene_file, capsys):
+    assert main(["run", str(scene_file), "--device", "cpu", "-q"]) == 0
+    out = capsys.readouterr().out
+    for word in ("frames", "simulated", "wall", "colours", "stretch"):
+        assert word in out
+    cache = scene_file.parent / "small.usdc"
+    assert validate_cache(cache) == []
+    stage, samples = read_points(cache, "/World/sheet")
+    assert sorted(samples) == [0, 1, 2, 3, 4, 5, 6]  # the rest pose plus 6 frames
+    assert stage.GetTimeCodesPerSecond() == 30 and stage.GetFramesPerSecond() == 30
+    assert stage.GetEndTimeCode() == 6
+    assert samples[6].shape == (42, 3) and np.isfinite(samples[6]).all()
+    assert samples[6][:, 1].mean() < samples[0][:, 1].mean()  # it fell under gravity
+    assert stage.GetPrimAtPath("/World/rope").IsA(UsdGeom.BasisCurves)
+
+
+def test_output_override_and_frames(scene_file):
+    out = scene_file.parent / "other.usda"
+    assert main(["run", str(scene_file), "-o", str(out), "--frames", "2", "--device", "cpu", "-q"]) == 0
+    _, samples = read_points(out, "/World/sheet")
+    assert sorted(samples) == [0, 1, 2]
+
+
+def test_same_scene_gives_bit_identical_caches(scene_file):
+    a, b = scene_file.parent / "a.usdc", scene_file.parent / "b.usdc"
+    for path in (a, b):
+        assert main(["run", str(scene_file), "-o", str(path), "--device", "cpu", "-q"]) == 0
+    _, pa = read_points(a, "/World/sheet")
+    _, pb = read_points(b, "/World/sheet")
+    assert all(np.array_equal(pa[t], pb[t]) for t in pa)
+
+
+def test_invalid_scene_exits_nonzero_names_the_key_and_writes_nothing(scene_file, capsys):
+    scene_file.write_text(SCENE.replace("drag = 0.99", "drag = 1.5"))
+    assert main(["run", str(scene_file), "--device", "cpu", "-q"]) == 2
+    err = capsys.readouterr().err
+    assert "small.toml: simulation.drag: expected a number in [0.0, 1.0], got 1.5" in err
+    assert not (scene_file.parent / "small.usdc").exists()
+
+
+def test_unwritable_output_fails_before_simulating(scene_file, capsys):
+    assert main(["run", str(scene_file), "-o", str(scene_file.parent / "no" / "dir" / "x.usdc"), "--device", "cpu", "-q"]) == 1
+    assert "x.usdc" in capsys.readouterr().err
+
+
+def test_divergence_stops_names_the_frame_and_keeps_frames_done(scene_file, capsys):
+    # 1000 m/s^2 for a rope with one pin: the free end leaves a 3 m bound during frame 3.
+    # x(t) = a t^2 / 2 = 3 m at t = 0.077 s, i.e. frame 3 at 30 fps.
+    text = SCENE.replace("drag = 0.99", "drag = 1.0\ngravity = [0.0, -1000.0, 0.0]\nposition_bound = 3.0")
+    scene_file.write_text(text.replace('pins = ["top-left", "top-right"]', "pins = []"))
+    assert main(["run", str(scene_file), "--device", "cpu", "-q"]) == 1
+    err = capsys.readouterr().err
+    assert "diverged at frame 3: cloth 'sheet'" in err and "position_bound = 3.0 m" in err
+    cache = scene_file.parent / "small.usdc"
+    assert validate_cache(cache) == []
+    stage, samples = read_points(cache, "/World/sheet")
+    assert sorted(samples) == [0, 1, 2] and stage.GetEndTimeCode() == 2
+
+
+def test_validate_command(scene_file, capsys):
+    assert main(["validate", str(scene_file)]) == 0
+    assert "valid scene, 2 cloth(s), 47 particles" in capsys.readouterr().out
+    assert main(["validate", str(scene_file.parent / "missing.toml")]) == 2
+
+
+def test_module_and_console_script_behave_the_same(scene_file):
+    # python -m warp_verlet and the installed warp-verlet script print the same and exit the same.
+    bad = scene_file.parent / "bad.toml"
+    bad.write_text("[[cloth]]\nresolution = [4, 4]\nsize = [1.0, 1.0]\nmass = -1.0\n")
+    module = subprocess.run([sys.executable, "-m", "warp_verlet", "validate", str(bad)], capture_output=True, text=True)
+    script = subprocess.run(["warp-verlet", "validate", str(bad)], capture_output=True, text=True)
+    assert module.returncode == script.returncode == 2
+    assert module.stderr == script.stderr
+    assert "cloth[0].mass" in module.stderr and "Traceback" not in module.stderr
