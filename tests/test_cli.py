@@ -127,3 +127,33 @@ def test_module_and_console_script_behave_the_same(scene_file):
     assert module.returncode == script.returncode == 2
     assert module.stderr == script.stderr
     assert "cloth[0].mass" in module.stderr and "Traceback" not in module.stderr
+
+
+def test_ctrl_c_leaves_a_valid_cache_of_the_frames_done(scene_file, monkeypatch):
+    # Interrupt after frame 3, as a KeyboardInterrupt from the terminal would arrive between frames.
+    from warp_verlet import runner
+
+    real = runner.run_scene
+
+    def interrupted(*args, **kwargs):
+        def progress(frame):
+            if frame == 3:
+                raise KeyboardInterrupt
+
+        return real(*args, **dict(kwargs, progress=progress))
+
+    monkeypatch.setattr(runner, "run_scene", interrupted)
+    assert main(["run", str(scene_file), "--device", "cpu", "-q"]) == 130
+    cache = scene_file.parent / "small.usdc"
+    assert validate_cache(cache) == []
+    _, samples = read_points(cache, "/World/sheet")
+    assert sorted(samples) == [0, 1, 2, 3]
+
+
+def test_validate_imports_no_heavy_module(scene_file):
+    probe = (
+        "import sys; from warp_verlet.cli import main; rc = main(['validate', 'small.toml']); "
+        "print(rc, *(m in sys.modules for m in ('warp', 'pxr', 'trimesh')))"
+    )
+    out = subprocess.run([sys.executable, "-c", probe], cwd=scene_file.parent, capture_output=True, text=True, check=True)
+    assert out.stdout.split()[-4:] == ["0", "False", "False", "False"]

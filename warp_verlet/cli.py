@@ -39,6 +39,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--device", help="cpu, cuda or cuda:N (default: CUDA when present, else CPU)")
     run.add_argument("--frames", type=_positive_int, help="number of frames (default: the scene's)")
     run.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    run.add_argument("-v", "--verbose", action="store_true", help="show Warp's device and kernel-compilation messages")
 
     validate = commands.add_parser("validate", help="check a scene file without running it")
     validate.add_argument("scene", type=Path)
@@ -56,6 +57,11 @@ def _validate(args) -> int:
 
 def _run(args) -> int:
     scene = load_scene(args.scene)
+    import warp as wp
+
+    if not args.verbose:  # Warp's start-up banner and its per-module load timings
+        wp.config.quiet = True
+        wp.config.log_level = wp.LOG_WARNING
     from .runner import run_scene
 
     frames = args.frames or scene.simulation.frames
@@ -67,7 +73,7 @@ def _run(args) -> int:
                    file=sys.stderr, dynamic_ncols=True)
     try:
         summary = run_scene(scene, output=args.output, device=args.device, frames=args.frames,
-                            progress=bar.update if bar else None)
+                            progress=(lambda frame: bar.update(1)) if bar else None)
     finally:
         if bar is not None:
             bar.close()
