@@ -7,7 +7,7 @@ out=${OUT:-bench/results/gpu}
 mkdir -p "$out"
 export PYTHONUNBUFFERED=1
 python3 -m pip install -q --no-deps --no-build-isolation -e . 2>&1 | tail -2 \
-  || echo "editable install failed (old setuptools?): falling back to PYTHONPATH"
+  || { echo "editable install failed (old setuptools?): using the tree on PYTHONPATH"; ln -sfn ../kernels warp_verlet/kernels; }
 nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv,noheader | tee "$out/gpu.txt"
 python3 -m pytest -q -rs tests 2>&1 | tail -25 | tee "$out/pytest-cuda.txt"
 python3 bench/throughput.py --device cuda --sizes 64 256 512 1024 2048 --repeats 5 --out "$out"
