@@ -13,3 +13,6 @@ python3 -m pytest -q -rs tests 2>&1 | tail -25 | tee "$out/pytest-cuda.txt"
 python3 bench/throughput.py --device cuda --sizes 64 256 512 1024 2048 --repeats 5 --out "$out"
 python3 bench/throughput.py --device cuda --sizes 64 1024 --repeats 3 --no-graph --out "$out"
 python3 bench/parity.py --frames 30 --big-frames 3 --out "$out"
+# End to end through the CLI, USD writing included (summaries appended to gpu.txt: $OUT holds 8 files at most).
+{ python3 -m warp_verlet run scenes/hanging_cloth.toml --device cuda -q -o /tmp/hanging.usdc
+  python3 -m warp_verlet run scenes/big_grid_1024.toml --device cuda -q -o /tmp/big.usdc --frames 20; } 2>&1 | tee -a "$out/gpu.txt"
