@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 import warp as wp
 
-from warp_verlet.scene import parse_scene
+from warp_verlet.scene import Scene, parse_scene
 
 wp.config.quiet = True
 
@@ -21,7 +21,7 @@ def device(request) -> str:
     return request.param
 
 
-def make_scene(simulation: dict | None = None, **cloth) -> "Scene":  # noqa: F821
+def make_scene(simulation: dict | None = None, **cloth) -> Scene:
     """A one-cloth scene from keyword overrides of a small default cloth."""
     spec = {"resolution": [4, 4], "size": [1.0, 1.0]}
     spec.update(cloth)

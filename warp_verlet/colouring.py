@@ -36,13 +36,6 @@ class Colouring:
         sizes = self.sizes[self.sizes > 0]
         return float(sizes.max() / sizes.min()) if sizes.size else 1.0
 
-    def describe(self) -> str:
-        sizes = self.sizes
-        return (
-            f"{self.count} colours ({self.method}), sizes {sizes.min() if sizes.size else 0}..{sizes.max() if sizes.size else 0}, "
-            f"balance max/min {self.balance:.2f}"
-        )
-
 
 def grid_colouring(grid_class: np.ndarray, anchor: np.ndarray) -> Colouring:
     """Analytic colouring of grid sticks. A stick's colour is 2 * class + parity, where parity is that of
