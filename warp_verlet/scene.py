@@ -86,11 +86,58 @@ class ClothSpec:
 
 
 @dataclass(frozen=True)
+class PlaneCollider:
+    """An infinite plane through ``point`` whose ``normal`` (unit length) points to the free side."""
+
+    name: str
+    point: tuple[float, float, float]
+    normal: tuple[float, float, float]
+    thickness: float = 0.0
+    friction: float = 0.0
+    display_size: float = 10.0
+
+
+@dataclass(frozen=True)
+class SphereCollider:
+    """A sphere whose centre follows ``keyframes`` ((time s, (x, y, z)), ...) linearly, held at the ends."""
+
+    name: str
+    radius: float
+    keyframes: tuple[tuple[float, tuple[float, float, float]], ...]
+    thickness: float = 0.0
+    friction: float = 0.0
+
+    @property
+    def moving(self) -> bool:
+        return len({c for _, c in self.keyframes}) > 1
+
+    def centre_at(self, time: float) -> tuple[float, float, float]:
+        times = [t for t, _ in self.keyframes]
+        return tuple(float(v) for v in _lerp_keys(times, [c for _, c in self.keyframes], time))
+
+
+def _lerp_keys(times: list[float], values: list[tuple], time: float):
+    import numpy as np  # host-side only: USD authoring and tests
+
+    values = np.asarray(values, dtype=np.float64)
+    return np.array([np.interp(time, times, values[:, k]) for k in range(values.shape[1])])
+
+
+@dataclass(frozen=True)
 class Scene:
     source: str
     simulation: SimulationSettings
     output: OutputSettings
     cloths: tuple[ClothSpec, ...]
+    colliders: tuple = ()
+
+    @property
+    def planes(self) -> tuple[PlaneCollider, ...]:
+        return tuple(c for c in self.colliders if isinstance(c, PlaneCollider))
+
+    @property
+    def spheres(self) -> tuple[SphereCollider, ...]:
+        return tuple(c for c in self.colliders if isinstance(c, SphereCollider))
 
     @property
     def particle_count(self) -> int:
@@ -318,16 +365,18 @@ def _read_pins(value: Any, key: str, rows: int, cols: int) -> tuple[tuple[int, i
     return tuple(sorted(set(pins)))
 
 
+def _prim_name(value: Any, key: str) -> str:
+    """A USD prim name: the cloth or collider appears under that name in the cache."""
+    name = text(value, key)
+    if not _PRIM_NAME.fullmatch(name):  # not .match: "$" would accept a trailing newline
+        raise _Invalid(f"expected a name of letters, digits and '_' not starting with a digit, got {name!r}")
+    return name
+
+
 def _read_cloth(file: str, index: int, data: Any) -> ClothSpec:
     t = _Table(file, f"cloth[{index}]", data)
 
-    def prim_name(value: Any, key: str) -> str:
-        name = text(value, key)
-        if not _PRIM_NAME.fullmatch(name):  # not .match: "$" would accept a trailing newline
-            raise _Invalid(f"expected a name of letters, digits and '_' not starting with a digit, got {name!r}")
-        return name
-
-    name = t.take("name", prim_name, f"cloth{index}")
+    name = t.take("name", _prim_name, f"cloth{index}")
     rows, cols = t.take("resolution", vector(2, _per_element(integer(1, 1 << 15))))
     if rows * cols < 2:
         raise t.error("resolution", "expected at least 2 particles, got a 1 x 1 grid")
@@ -351,6 +400,47 @@ def _read_cloth(file: str, index: int, data: Any) -> ClothSpec:
     return spec
 
 
+def _read_collider(file: str, index: int, data: Any) -> PlaneCollider | SphereCollider:
+    t = _Table(file, f"collider[{index}]", data)
+    kind = t.take("type", choice(("plane", "sphere")))
+    name = t.take("name", _prim_name, f"{kind}{index}")
+    thickness = t.take("thickness", real(0.0), 0.0)
+    friction = t.take("friction", real(0.0, 1.0), 0.0)
+    if kind == "plane":
+        normal = t.take("normal", vector(3, _any_real), (0.0, 1.0, 0.0))
+        length = math.sqrt(sum(v * v for v in normal))
+        if length < 1e-12:
+            raise t.error("normal", "expected a non-zero vector")
+        collider: PlaneCollider | SphereCollider = PlaneCollider(
+            name=name, point=t.take("point", vector(3, _any_real), (0.0, 0.0, 0.0)),
+            normal=tuple(v / length for v in normal), thickness=thickness, friction=friction,
+            display_size=t.take("display_size", real(0.0, lo_open=True), 10.0),
+        )
+    else:
+        radius = t.take("radius", real(0.0, lo_open=True))
+        if "centre" in t.data and "path" in t.data:
+            raise t.error("path", "give either centre (a still sphere) or path (a moving one), not both")
+        if "path" in t.data:
+            keys = t.take("path", _read_path)
+        else:
+            keys = ((0.0, t.take("centre", vector(3, _any_real), (0.0, 0.0, 0.0))),)
+        collider = SphereCollider(name=name, radius=radius, keyframes=keys, thickness=thickness, friction=friction)
+    t.finish()
+    return collider
+
+
+def _read_path(value: Any, key: str) -> tuple[tuple[float, tuple[float, float, float]], ...]:
+    if not isinstance(value, list) or not value:
+        raise _Invalid(f"expected an array of [time, x, y, z] keyframes, got {_describe(value)}")
+    keys = []
+    for i, item in enumerate(value):
+        t, x, y, z = vector(4, _per_element(real()))(item, f"{key}[{i}]")
+        if keys and t <= keys[-1][0]:
+            raise _Invalid(f"keyframe times must increase, got {t} s after {keys[-1][0]} s", f"{key}[{i}][0]")
+        keys.append((t, (x, y, z)))
+    return tuple(keys)
+
+
 def parse_scene(data: dict, file: str = "<scene>", scene_path: Path | None = None) -> Scene:
     """Validate an already-parsed TOML document. ``file`` is used in error messages."""
     scene_path = scene_path or Path(file)
@@ -363,13 +453,20 @@ def parse_scene(data: dict, file: str = "<scene>", scene_path: Path | None = Non
             raise _Invalid("expected one or more [[cloth]] tables")
         return tuple(_read_cloth(file, i, c) for i, c in enumerate(value))
 
+    def colliders(value: Any, key: str) -> tuple:
+        if not isinstance(value, list):
+            raise _Invalid(f"expected [[collider]] tables, got {_describe(value)}")
+        return tuple(_read_collider(file, i, c) for i, c in enumerate(value))
+
     cloth_specs = top.take("cloth", cloths)
+    collider_specs = top.take("collider", colliders, ())
     top.finish()
-    names = [c.name for c in cloth_specs]
-    for i, n in enumerate(names):
-        if n in names[:i]:
-            raise SceneError(file, f"cloth[{i}].name", f"expected a unique name, but {n!r} is used twice")
-    return Scene(source=file, simulation=simulation, output=output, cloths=cloth_specs)
+    for section, items in (("cloth", cloth_specs), ("collider", collider_specs)):
+        names = [c.name for c in items]
+        for i, n in enumerate(names):
+            if n in names[:i]:
+                raise SceneError(file, f"{section}[{i}].name", f"expected a unique name, but {n!r} is used twice")
+    return Scene(source=file, simulation=simulation, output=output, cloths=cloth_specs, colliders=collider_specs)
 
 
 def load_scene(path: str | Path) -> Scene:

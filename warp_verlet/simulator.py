@@ -5,6 +5,8 @@ A substep is
 1. ``verlet_step`` (gravity and wind folded into one acceleration on the host, drag as a scale),
 2. relaxation: ``iterations`` sweeps, each one launch of ``relax_colour`` per colour (Gauss-Seidel across
    colours), or one ``relax_jacobi`` gather plus a copy (Jacobi),
+3. collider clamping, once, after the sweeps: ``collide_spheres`` and ``collide_planes`` for the kinds the
+   scene has (moving spheres are first placed on the device clock),
 
 and nothing else unless the scene asks for it. On CUDA, a frame's fixed-dt substeps are captured once as a
 CUDA graph and replayed, so the host issues one launch per frame.
@@ -20,6 +22,7 @@ import warp as wp
 from warp_verlet.kernels.integrate import verlet_start, verlet_step
 from warp_verlet.kernels.relax import relax_colour, relax_jacobi
 
+from .colliders import Colliders
 from .errors import WarpVerletError
 from .model import Model
 from .scene import Scene
@@ -73,6 +76,7 @@ class Simulator:
             self.delta = wp.empty_like(self.x)
             # Jacobi reads old positions while writing new ones: only it needs a second buffer.
             self._x_scratch = wp.empty_like(self.x) if self.settings.solver == "jacobi" else None
+            self.colliders = Colliders(scene, self.device)
         self.accel = wp.vec3(*(np.add(self.settings.gravity, self.settings.wind)))
         self.time = 0.0
         self.steps = 0
@@ -81,6 +85,8 @@ class Simulator:
         self._use_graph = use_graph and self.device.is_cuda
         self._frame_graph = None
         self._sweep = self._record_relax_launches()
+        with wp.ScopedDevice(self.device):
+            self._clamp = self.colliders.record(self.x, self.x_inertial, self.delta, self.model.inv_mass)
 
     # ------------------------------------------------------------------ what a substep launches
     def launch_plan(self) -> list[str]:
@@ -90,7 +96,7 @@ class Simulator:
             plan += ["relax_colour"] * (self.model.colour_count * self.settings.iterations)
         elif self.model.stick_count:
             plan += ["relax_jacobi", "copy"] * self.settings.iterations
-        return plan
+        return plan + self.colliders.launch_plan()
 
     # ------------------------------------------------------------------ stepping
     def step(self, dt: float | None = None) -> None:
@@ -115,6 +121,9 @@ class Simulator:
                       inputs=[self.x, self.x_inertial, self.delta, self.model.inv_mass, self.settings.drag * ratio,
                               accel_offset])
         self._relax()
+        self.colliders.tick(dt)
+        for launch in self._clamp:
+            launch.launch()
         self._dt_prev = dt
         self.time += dt
         self.steps += 1

@@ -1,0 +1,118 @@
+"""Collider clamping: particles are projected out of planes and spheres after the relaxation sweeps.
+
+Clamping last, once per substep, means no stick correction can push a particle back through a surface in
+the same substep (the seed article's pitfall about shifting particles through boundaries). Verlet turns
+the projection into a velocity change by itself: the move is part of x - x_prev.
+
+Friction scales the tangential part of the implicit velocity v = x - x_prev of a particle in contact by
+(1 - friction). In the summed-form state (integrate.py), x_prev = x_inertial - delta, so removing
+friction * v_t from v means subtracting it from delta.
+
+A collider's thickness is added to its surface: the cloth rests that far outside the render-visible
+sphere or plane, so the two never z-fight.
+"""
+
+import warp as wp
+
+
+@wp.func
+def project_out(
+    i: int,
+    xi: wp.vec3,
+    normal: wp.vec3,
+    depth: float,
+    friction: float,
+    x_inertial: wp.array(dtype=wp.vec3),
+    delta: wp.array(dtype=wp.vec3),
+):
+    """Move xi out by depth along normal, apply friction to its implicit velocity, return the new position."""
+    xi = xi + normal * depth
+    if friction > 0.0:
+        v = xi - (x_inertial[i] - delta[i])
+        tangential = v - normal * wp.dot(v, normal)
+        delta[i] = delta[i] - tangential * friction
+    return xi
+
+
+@wp.kernel
+def collide_planes(
+    x: wp.array(dtype=wp.vec3),
+    x_inertial: wp.array(dtype=wp.vec3),
+    delta: wp.array(dtype=wp.vec3),
+    inv_mass: wp.array(dtype=float),
+    points: wp.array(dtype=wp.vec3),
+    normals: wp.array(dtype=wp.vec3),
+    thickness: wp.array(dtype=float),
+    friction: wp.array(dtype=float),
+):
+    i = wp.tid()
+    if inv_mass[i] == 0.0:
+        return  # pins are where the user put them
+    xi = x[i]
+    for p in range(points.shape[0]):
+        n = normals[p]
+        depth = thickness[p] - wp.dot(xi - points[p], n)
+        if depth > 0.0:
+            xi = project_out(i, xi, n, depth, friction[p], x_inertial, delta)
+    x[i] = xi
+
+
+@wp.kernel
+def collide_spheres(
+    x: wp.array(dtype=wp.vec3),
+    x_inertial: wp.array(dtype=wp.vec3),
+    delta: wp.array(dtype=wp.vec3),
+    inv_mass: wp.array(dtype=float),
+    centres: wp.array(dtype=wp.vec3),
+    radii: wp.array(dtype=float),
+    friction: wp.array(dtype=float),
+):
+    """``radii`` already include each sphere's thickness."""
+    i = wp.tid()
+    if inv_mass[i] == 0.0:
+        return
+    xi = x[i]
+    for s in range(centres.shape[0]):
+        d = xi - centres[s]
+        distance = wp.length(d)
+        depth = radii[s] - distance
+        if depth > 0.0:
+            # A particle exactly at the centre has no outward direction: push it up (+Y), a fixed choice so
+            # that the result stays deterministic.
+            n = wp.vec3(0.0, 1.0, 0.0)
+            if distance > 1.0e-12:
+                n = d / distance
+            xi = project_out(i, xi, n, depth, friction[s], x_inertial, delta)
+    x[i] = xi
+
+
+@wp.kernel
+def advance_clock(clock: wp.array(dtype=wp.float64), dt: wp.float64):
+    """Simulated time on the device, so that a captured CUDA graph replays moving colliders correctly."""
+    clock[0] = clock[0] + dt
+
+
+@wp.kernel
+def place_spheres(
+    clock: wp.array(dtype=wp.float64),
+    key_start: wp.array(dtype=int),
+    key_times: wp.array(dtype=float),
+    key_centres: wp.array(dtype=wp.vec3),
+    centres: wp.array(dtype=wp.vec3),
+):
+    """Centre of sphere s at the current time: linear between keyframes, held before the first and after
+    the last."""
+    s = wp.tid()
+    t = float(clock[0])
+    first = key_start[s]
+    last = key_start[s + 1] - 1
+    c = key_centres[first]
+    if t >= key_times[last]:
+        c = key_centres[last]
+    elif t > key_times[first]:
+        for k in range(first, last):
+            t0 = key_times[k]
+            t1 = key_times[k + 1]
+            if t >= t0 and t < t1:
+                c = wp.lerp(key_centres[k], key_centres[k + 1], (t - t0) / (t1 - t0))
+    centres[s] = c

@@ -1,0 +1,114 @@
+"""Collider clamping: invariants after every substep, friction against a closed form, and leaving out
+what a scene does not use."""
+
+import numpy as np
+import pytest
+
+from warp_verlet.scene import parse_scene
+from warp_verlet.simulator import Simulator
+
+# Clamping is exact up to float32 rounding of the projected position, so after every substep no free
+# particle may be inside a collider by more than TOL.
+TOL = 1e-5
+DROP = {"name": "sheet", "resolution": [16, 16], "size": [1.2, 1.2], "origin": [-0.6, 0.6, -0.6],
+        "orientation": "horizontal", "sticks": {"structural": 1.0, "shear": 1.0, "bend": 0.3}}
+GROUND = {"type": "plane", "name": "ground", "point": [0.0, -0.4, 0.0], "normal": [0.0, 1.0, 0.0], "thickness": 0.01}
+BALL = {"type": "sphere", "name": "ball", "centre": [0.0, 0.0, 0.0], "radius": 0.3, "thickness": 0.02}
+
+
+def scene(cloth, colliders, **simulation):
+    return parse_scene({"simulation": {"fps": 60, "substeps": 4, "iterations": 8, **simulation},
+                        "cloth": [cloth], "collider": colliders}, file="<test>")
+
+
+def assert_outside(sim, positions, free):
+    p = positions[free].astype(np.float64)
+    for plane in sim.scene.planes:
+        height = (p - plane.point) @ np.asarray(plane.normal)
+        assert height.min() >= plane.thickness - TOL, f"{plane.name}: a particle is {plane.thickness - height.min():.2e} m inside"
+    centres = sim.colliders.centres()
+    for sphere, centre in zip(sim.scene.spheres, centres):
+        distance = np.linalg.norm(p - centre, axis=1)
+        reach = sphere.radius + sphere.thickness
+        assert distance.min() >= reach - TOL, f"{sphere.name}: a particle is {reach - distance.min():.2e} m inside"
+
+
+def run_checking(sim, substeps):
+    free = sim.model.inv_mass.numpy() > 0
+    for _ in range(substeps):
+        sim.step()
+        positions = sim.positions()
+        assert np.isfinite(positions).all()
+        assert_outside(sim, positions, free)
+    return sim.positions()
+
+
+def test_cloth_dropped_on_a_sphere_on_the_ground(device):
+    sim = Simulator(scene(DROP, [BALL, GROUND]), device)
+    final = run_checking(sim, 4 * 90)  # 1.5 s
+    # It drapes: the middle rests on top of the ball, the corners hang lower than the top of the ball.
+    middle = final[8 * 16 + 8]
+    assert abs(middle[1] - 0.32) < 0.03
+    assert final[0, 1] < 0.2
+
+
+@pytest.mark.parametrize("start_y, colliders", [(-0.5, [GROUND]), (0.0, [BALL])], ids=["below-ground", "through-ball"])
+def test_cloth_starting_inside_a_collider_is_pushed_out(device, start_y, colliders):
+    # 10 cm under the ground, or cutting through the middle of the ball: one substep clears it, and it
+    # stays clear.
+    sim = Simulator(scene(dict(DROP, origin=[-0.6, start_y, -0.6]), colliders), device)
+    run_checking(sim, 4 * 30)
+
+
+def test_fast_sphere_sweeping_through_a_hanging_cloth(device):
+    hanging = {"name": "curtain", "resolution": [20, 20], "size": [1.0, 1.0], "origin": [-0.5, 1.0, 0.0],
+               "pins": ["top-edge"], "sticks": {"structural": 1.0, "shear": 1.0}}
+    # 10 m/s through the curtain's lower half, i.e. 4 cm per substep against 5 cm between particles.
+    sweep = {"type": "sphere", "name": "ball", "radius": 0.2,
+             "path": [[0.0, 0.0, 0.4, -1.0], [0.2, 0.0, 0.4, 1.0]]}
+    sim = Simulator(scene(hanging, [sweep]), device)
+    mid_sweep = run_checking(sim, 40)  # the ball is at z = 0.7 after 40 substeps
+    assert mid_sweep[:, 2].max() > 0.5  # and has carried the curtain along with it
+    run_checking(sim, 80)  # the curtain swings back; the invariant keeps holding
+
+
+def test_moving_sphere_follows_its_keyframes(device):
+    path = [[0.0, 0.0, 0.0, 0.0], [0.5, 1.0, 0.0, 0.0], [1.0, 1.0, 2.0, 0.0]]
+    sim = Simulator(scene(DROP, [{"type": "sphere", "radius": 0.1, "path": path}], gravity=[0.0, 0.0, 0.0]), device)
+    sphere = sim.scene.spheres[0]
+    for frame in range(1, 80):
+        sim.step_frame()
+        expected = sphere.centre_at(frame / 60.0)
+        np.testing.assert_allclose(sim.colliders.centres()[0], expected, atol=1e-5)
+    np.testing.assert_allclose(sim.colliders.centres()[0], [1.0, 2.0, 0.0], atol=1e-6)  # held after the last key
+
+
+@pytest.mark.parametrize("friction", [0.0, 0.5, 1.0])
+def test_friction_scales_tangential_velocity_in_contact(device, friction):
+    # A flat cloth resting on the ground, sliding at 1 m/s along x. Gravity presses it into the plane every
+    # substep, so it is in contact every substep and its x-velocity is multiplied by (1 - friction) each
+    # time: after n substeps it has moved v dt * sum_{k<n} (1 - friction)^k.
+    cloth = dict(DROP, origin=[0.0, 0.0, 0.0])
+    ground = {"type": "plane", "point": [0.0, 0.0, 0.0], "friction": friction}
+    sim = Simulator(scene(cloth, [ground], iterations=2), device)
+    dt, v, n = sim.settings.dt, 1.0, 40
+    sim.step()
+    sim.delta.assign(np.tile(np.array([v * dt, -9.81 * dt * dt, 0.0], np.float32), (256, 1)))
+    start = sim.positions()[:, 0]
+    for _ in range(n):
+        sim.step()
+    expected = v * dt * sum((1 - friction) ** k for k in range(n))
+    np.testing.assert_allclose(sim.positions()[:, 0] - start, expected, atol=2e-5)
+    assert np.abs(sim.positions()[:, 1]).max() < TOL  # and it stays on the plane
+
+
+def test_only_the_collider_kinds_present_are_launched_and_allocated():
+    plane_only = Simulator(scene(DROP, [GROUND]), "cpu")
+    assert plane_only.launch_plan()[-1:] == ["collide_planes"]
+    assert "collide_spheres" not in plane_only.launch_plan()
+    assert not hasattr(plane_only.colliders, "sphere_centres")
+    still_ball = Simulator(scene(DROP, [BALL]), "cpu")
+    assert still_ball.launch_plan()[-1:] == ["collide_spheres"]
+    assert not hasattr(still_ball.colliders, "clock")  # no moving sphere: no clock, no placing kernel
+    nothing = Simulator(scene(DROP, []), "cpu")
+    assert not any(name.startswith(("collide", "place", "advance")) for name in nothing.launch_plan())
