@@ -112,3 +112,38 @@ def test_only_the_collider_kinds_present_are_launched_and_allocated():
     assert not hasattr(still_ball.colliders, "clock")  # no moving sphere: no clock, no placing kernel
     nothing = Simulator(scene(DROP, []), "cpu")
     assert not any(name.startswith(("collide", "place", "advance")) for name in nothing.launch_plan())
+
+
+def test_colliders_are_written_into_the_cache(tmp_path):
+    from pxr import Usd, UsdGeom
+
+    from warp_verlet.runner import run_scene
+    from warp_verlet.usd_writer import validate_cache
+
+    sweep = {"type": "sphere", "name": "ball", "radius": 0.2, "thickness": 0.05,
+             "path": [[0.0, 0.0, 0.4, -1.0], [0.1, 0.0, 0.4, 1.0]]}
+    still = dict(BALL, name="still", centre=[2.0, 0.0, 0.0])
+    out = tmp_path / "colliders.usda"
+    run_scene(scene(DROP, [sweep, still, GROUND], frames=8), output=out, device="cpu")
+    assert validate_cache(out) == []
+    stage = Usd.Stage.Open(str(out))
+    ball = UsdGeom.Sphere(stage.GetPrimAtPath("/World/Colliders/ball"))
+    assert ball.GetRadiusAttr().Get() == pytest.approx(0.2)  # the visible radius: thickness is not drawn
+    translate = ball.GetPrim().GetAttribute("xformOp:translate")
+    assert translate.GetTimeSamples() == list(range(9))
+    np.testing.assert_allclose(translate.Get(3), [0.0, 0.4, -1.0 + 2.0 * (3 / 60) / 0.1], atol=1e-5)
+    still_translate = stage.GetPrimAtPath("/World/Colliders/still").GetAttribute("xformOp:translate")
+    assert still_translate.GetTimeSamples() == [] and tuple(still_translate.Get()) == (2.0, 0.0, 0.0)
+    ground = UsdGeom.Mesh(stage.GetPrimAtPath("/World/Colliders/ground"))
+    corners = np.array(ground.GetPointsAttr().Get())
+    assert np.allclose(corners[:, 1], -0.4) and np.ptp(corners[:, 0]) == pytest.approx(10.0)
+
+
+def test_a_scene_without_colliders_writes_none(tmp_path):
+    from pxr import Usd
+
+    from warp_verlet.runner import run_scene
+
+    out = tmp_path / "plain.usda"
+    run_scene(scene(DROP, [], frames=2), output=out, device="cpu")
+    assert not Usd.Stage.Open(str(out)).GetPrimAtPath("/World/Colliders")

@@ -557,3 +557,29 @@ def test_fuzz_only_scene_errors(tmp_path, doc):
         assert err.problem
     else:
         assert isinstance(scene, Scene)
+
+
+# ---------------------------------------------------------------------------------------------- colliders
+@pytest.mark.parametrize("collider, key, expected", [
+    ('type = "cube"', "collider[0].type", "expected one of 'plane', 'sphere'"),
+    ('type = "sphere"\ncentre = [0.0, 0.0, 0.0]', "collider[0].radius", "required"),
+    ('type = "sphere"\nradius = 0.0', "collider[0].radius", "(0.0, inf)"),
+    ('type = "sphere"\nradius = 1.0\ncentre = [0.0, 0.0, 0.0]\npath = [[0.0, 0.0, 0.0, 0.0]]', "collider[0].path", "not both"),
+    ('type = "sphere"\nradius = 1.0\npath = [[0.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0]]', "collider[0].path[1][0]", "must increase"),
+    ('type = "sphere"\nradius = 1.0\npath = [[0.0, 0.0, 0.0]]', "collider[0].path[0]", "array of 4"),
+    ('type = "plane"\nnormal = [0.0, 0.0, 0.0]', "collider[0].normal", "non-zero"),
+    ('type = "plane"\nfriction = 1.5', "collider[0].friction", "[0.0, 1.0]"),
+    ('type = "plane"\nthickness = -0.1', "collider[0].thickness", "[0.0, inf)"),
+    ('type = "plane"\nbounce = 0.5', "collider[0].bounce", "unknown key"),
+])
+def test_bad_collider(tmp_path, collider, key, expected):
+    check(tmp_path, CLOTH + "\n[[collider]]\n" + collider + "\n", key, expected)
+
+
+def test_collider_defaults_and_normalised_normal(tmp_path):
+    scene = load_scene(write(tmp_path, CLOTH + '\n[[collider]]\ntype = "plane"\nnormal = [0.0, 2.0, 0.0]\n'
+                                        '\n[[collider]]\ntype = "sphere"\nradius = 0.5\n'))
+    plane, sphere = scene.colliders
+    assert plane.normal == (0.0, 1.0, 0.0) and plane.point == (0.0, 0.0, 0.0) and plane.thickness == 0.0
+    assert plane.name == "plane0" and sphere.name == "sphere1"
+    assert sphere.keyframes == ((0.0, (0.0, 0.0, 0.0)),) and not sphere.moving

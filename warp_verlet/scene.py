@@ -434,7 +434,7 @@ def _read_path(value: Any, key: str) -> tuple[tuple[float, tuple[float, float, f
         raise _Invalid(f"expected an array of [time, x, y, z] keyframes, got {_describe(value)}")
     keys = []
     for i, item in enumerate(value):
-        t, x, y, z = vector(4, _per_element(real()))(item, f"{key}[{i}]")
+        t, x, y, z = _per_element(vector(4, _per_element(real())))(item, f"{key}[{i}]")
         if keys and t <= keys[-1][0]:
             raise _Invalid(f"keyframe times must increase, got {t} s after {keys[-1][0]} s", f"{key}[{i}][0]")
         keys.append((t, (x, y, z)))

@@ -4,6 +4,7 @@ Layout of a cache::
 
     /World                 Xform, the stage's defaultPrim
     /World/<cloth>         Mesh (quads, UVs in primvars:st) or, for a rope, linear BasisCurves
+    /World/Colliders/<n>   Sphere (time-sampled translate when it moves) or a large quad Mesh for a plane
 
 Only ``points`` and ``extent`` are time-sampled; a time code is a frame number
 (timeCodesPerSecond == framesPerSecond == fps). Nothing else is authored: no normals (renderers compute
@@ -44,6 +45,41 @@ class CachedShape:
     @property
     def is_rope(self) -> bool:
         return len(self.faces) == 0
+
+
+@dataclass(frozen=True)
+class CachedSphere:
+    """A sphere collider: its render-visible radius (thickness excluded) and where it starts."""
+
+    name: str
+    radius: float
+    centre: tuple[float, float, float]
+    moving: bool = False
+
+
+@dataclass(frozen=True)
+class CachedPlane:
+    """A plane collider, drawn as a square of side ``size`` centred on ``point``."""
+
+    name: str
+    point: tuple[float, float, float]
+    normal: tuple[float, float, float]
+    size: float
+
+
+COLLIDERS_PATH = WORLD_PATH.AppendChild("Colliders")
+
+
+def _plane_corners(plane: CachedPlane) -> np.ndarray:
+    """The square's corners, counter-clockwise seen from the normal's side."""
+    n = np.asarray(plane.normal, dtype=np.float64)
+    helper = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 0.0, 1.0])
+    u = np.cross(n, helper)
+    u /= np.linalg.norm(u)
+    v = np.cross(n, u)
+    h = plane.size / 2
+    p = np.asarray(plane.point, dtype=np.float64)
+    return np.array([p - h * u - h * v, p + h * u - h * v, p + h * u + h * v, p - h * u + h * v], np.float32)
 
 
 def _check_shapes(shapes: Sequence[CachedShape]) -> None:
@@ -98,7 +134,7 @@ class PointCacheWriter:
 
     def __init__(self, path: str | os.PathLike[str], shapes: Sequence[CachedShape], fps: float, *,
                  up_axis: str = "Y", meters_per_unit: float = 1.0, save_every: int = 10, start_frame: int = 0,
-                 metadata: dict[str, str] | None = None):
+                 metadata: dict[str, str] | None = None, colliders: Sequence[CachedSphere | CachedPlane] = ()):
         _check_shapes(shapes)
         if not (np.isfinite(fps) and fps > 0):
             raise ValueError(f"fps must be a positive number, got {fps}")
@@ -137,6 +173,31 @@ class PointCacheWriter:
                 self._prims.append(self._define_rope(stage, prim_path, shape, rope_width))
             else:
                 self._prims.append(self._define_mesh(stage, prim_path, shape))
+        self.colliders = tuple(colliders)
+        self._moving: list[UsdGeom.XformOp] = []  # translate ops of moving spheres, in collider order
+        if self.colliders:
+            UsdGeom.Scope.Define(stage, COLLIDERS_PATH)
+        for collider in self.colliders:
+            prim_path = COLLIDERS_PATH.AppendChild(collider.name)
+            if isinstance(collider, CachedSphere):
+                sphere = UsdGeom.Sphere.Define(stage, prim_path)
+                sphere.CreateRadiusAttr(float(collider.radius))
+                r = float(collider.radius)
+                sphere.CreateExtentAttr(Vt.Vec3fArray([(-r, -r, -r), (r, r, r)]))
+                op = sphere.AddTranslateOp()
+                if collider.moving:
+                    self._moving.append(op)  # sampled per frame in write_frame
+                else:
+                    op.Set(tuple(float(c) for c in collider.centre))
+            else:
+                plane = UsdGeom.Mesh.Define(stage, prim_path)
+                corners = _plane_corners(collider)
+                plane.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(corners))
+                plane.CreateExtentAttr(UsdGeom.PointBased.ComputeExtent(Vt.Vec3fArray.FromNumpy(corners)))
+                plane.CreateFaceVertexCountsAttr(Vt.IntArray([4]))
+                plane.CreateFaceVertexIndicesAttr(Vt.IntArray([0, 1, 2, 3]))
+                plane.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+                plane.CreateDoubleSidedAttr(True)
         # Curves pad their extent by half the width; keep the width array to compute it per frame.
         self._rope_widths = Vt.FloatArray([rope_width])
         self._save()  # the topology is on disk before the first frame, and write errors surface here
@@ -166,8 +227,9 @@ class PointCacheWriter:
         curves.SetWidthsInterpolation(UsdGeom.Tokens.constant)
         return curves
 
-    def write_frame(self, frame: int, points: Sequence[np.ndarray]) -> None:
-        """Author ``points`` and ``extent`` of every shape at time code ``frame``."""
+    def write_frame(self, frame: int, points: Sequence[np.ndarray], moving_centres: np.ndarray | None = None) -> None:
+        """Author ``points`` and ``extent`` of every shape at time code ``frame``, and the translate of every
+        moving sphere (``moving_centres``: one row per moving sphere, in collider order)."""
         if self._stage is None:
             raise RuntimeError(f"the point cache {self.path} is closed")
         if frame < self.start_frame:
@@ -183,8 +245,13 @@ class PointCacheWriter:
             if a.shape != (shape.point_count, 3):
                 raise ValueError(f"shape {shape.name!r}: points must be ({shape.point_count}, 3), got {a.shape}")
             arrays.append(a)
+        centres = np.zeros((0, 3)) if moving_centres is None else np.asarray(moving_centres, np.float64)
+        if centres.shape != (len(self._moving), 3):
+            raise ValueError(f"expected ({len(self._moving)}, 3) moving sphere centres, got {centres.shape}")
 
         time = Usd.TimeCode(frame)
+        for op, centre in zip(self._moving, centres):
+            op.Set(tuple(float(c) for c in centre), time)
         for shape, prim, a in zip(self.shapes, self._prims, arrays):
             vt_points = Vt.Vec3fArray.FromNumpy(a)
             if shape.is_rope:
