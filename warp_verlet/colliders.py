@@ -35,9 +35,6 @@ class Colliders:
                 self.key_centres = wp.array([c for s in self.spheres for _, c in s.keyframes], dtype=wp.vec3)
                 self.clock = wp.zeros(1, dtype=wp.float64)
 
-    def __bool__(self) -> bool:
-        return bool(self.planes or self.spheres)
-
     def launch_plan(self) -> list[str]:
         plan = ["advance_clock", "place_spheres"] if self.moving else []
         plan += ["collide_spheres"] if self.spheres else []
@@ -69,3 +66,10 @@ class Colliders:
     def centres(self) -> np.ndarray:
         """Sphere centres now, (spheres, 3), on the host."""
         return self.sphere_centres.numpy() if self.spheres else np.zeros((0, 3), np.float32)
+
+    def moving_centres(self) -> np.ndarray:
+        """Centres of the moving spheres only, in scene order: what the cache samples per frame. Costs no
+        device copy when nothing moves."""
+        if not self.moving:
+            return np.zeros((0, 3), np.float32)
+        return self.centres()[[s.moving for s in self.spheres]]

@@ -82,7 +82,6 @@ def run_scene(
     shapes = [CachedShape(s.name, s.topology.faces, s.topology.uvs, s.count) for s in model.cloths]
     colliders = [CachedSphere(s.name, s.radius, s.keyframes[0][1], s.moving) for s in scene.spheres]
     colliders += [CachedPlane(p.name, p.point, p.normal, p.display_size) for p in scene.planes]
-    moving = np.array([s.moving for s in scene.spheres], dtype=bool)
     writer = PointCacheWriter(
         output, shapes, fps=settings.fps, up_axis=scene.output.up_axis,
         meters_per_unit=scene.output.meters_per_unit, save_every=scene.output.save_every,
@@ -92,7 +91,7 @@ def run_scene(
     start = time.perf_counter()
     points = sim.positions()
     with writer:
-        writer.write_frame(0, model.split(points), sim.colliders.centres()[moving])
+        writer.write_frame(0, model.split(points), sim.colliders.moving_centres())
         for frame in range(1, settings.frames + 1):
             sim.step_frame()
             points = sim.positions()  # the one host copy per frame, which the writer needs anyway
@@ -101,7 +100,7 @@ def run_scene(
                 particle, reason = bad
                 slot = next(s for s in model.cloths if s.first <= particle < s.first + s.count)
                 raise DivergenceError(frame, slot.name, particle - slot.first, points[particle], reason)
-            writer.write_frame(frame, model.split(points), sim.colliders.centres()[moving])
+            writer.write_frame(frame, model.split(points), sim.colliders.moving_centres())
             if progress is not None:
                 progress(frame)
     wall = time.perf_counter() - start
