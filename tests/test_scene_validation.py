@@ -138,6 +138,7 @@ def test_unknown_stick_family(tmp_path):
         (CLOTH + "pins = [[1, 2, 3]]\n", "cloth[0].pins[0]", ["[row, col] pair", "an array of 3"]),
         (CLOTH + "pins = [[1, 2.0]]\n", "cloth[0].pins[0]", ["[row, col] pair"]),
         (CLOTH + "sticks = { shear = '0.5' }\n", "cloth[0].sticks.shear", ["expected a number"]),
+        (CLOTH + "tear_threshold = true\n", "cloth[0].tear_threshold", ["expected a number"]),
     ],
 )
 def test_wrong_type(tmp_path, text, key, expected):
@@ -160,6 +161,9 @@ def test_wrong_type(tmp_path, text, key, expected):
         (CLOTH + "sticks = { structural = 1.0, bend = -0.1 }\n", "cloth[0].sticks.bend", ["[0.0, 1.0]", "got -0.1"]),
         (CLOTH + "sticks = { structural = nan }\n", "cloth[0].sticks.structural", ["finite"]),
         (CLOTH + "sticks = { structural = 0.0, shear = 0 }\n", "cloth[0].sticks", ["at least one family"]),
+        (CLOTH + "tear_threshold = 1.0\n", "cloth[0].tear_threshold", ["(1.0, inf)", "got 1.0"]),
+        (CLOTH + "tear_threshold = 0.5\n", "cloth[0].tear_threshold", ["(1.0, inf)", "got 0.5"]),
+        (CLOTH + "tear_threshold = inf\n", "cloth[0].tear_threshold", ["finite"]),
         ("[simulation]\nfps = 0\n" + CLOTH, "simulation.fps", ["(0.0, inf)", "got 0.0"]),
         ("[simulation]\nfps = -60.0\n" + CLOTH, "simulation.fps", ["(0.0, inf)", "got -60.0"]),
         ("[simulation]\nfps = nan\n" + CLOTH, "simulation.fps", ["expected a finite number", "nan"]),

@@ -5,6 +5,7 @@ from __future__ import annotations
 import subprocess
 import sys
 import textwrap
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -279,3 +280,47 @@ def test_bad_frames_raise_value_error(tmp_path):
 def test_writer_does_not_import_warp():
     code = "import sys, warp_verlet.usd_writer; sys.exit('warp' in sys.modules)"
     assert subprocess.run([sys.executable, "-c", code]).returncode == 0
+
+
+def test_hole_indices_are_sampled_only_when_the_hidden_set_changes(tmp_path):
+    path = tmp_path / "torn.usda"
+    torn = replace(grid_shape("torn"), tears=True)
+    shapes = [torn, grid_shape("calm")]
+    frames = random_frames(np.random.default_rng(5), shapes, 5)
+    hidden_per_frame = [None, [], [2, 0], [0, 2, 2], None]  # unchanged, unchanged, change, same set, unchanged
+    with PointCacheWriter(path, shapes, fps=24.0) as w:
+        for f, (pts, hidden) in enumerate(zip(frames, hidden_per_frame)):
+            w.write_frame(f, pts, hidden_faces=[hidden, None])
+    assert validate_cache(path) == []
+
+    stage = Usd.Stage.Open(str(path))
+    holes = UsdGeom.Mesh.Get(stage, "/World/torn").GetHoleIndicesAttr()
+    assert samples(holes) == [0.0, 2.0]
+    assert list(holes.Get(0)) == [] and list(holes.Get(1)) == [] and list(holes.Get(4)) == [0, 2]
+    assert not UsdGeom.Mesh.Get(stage, "/World/calm").GetHoleIndicesAttr().HasAuthoredValue()
+
+
+def test_bad_hidden_faces_are_rejected_before_anything_is_authored(tmp_path):
+    torn = replace(grid_shape("torn"), tears=True)
+    shapes = [torn, grid_shape("calm")]
+    pts = random_frames(np.random.default_rng(6), shapes, 1)[0]
+    with PointCacheWriter(tmp_path / "c.usdc", shapes, fps=24.0) as w:
+        n_faces = len(torn.faces)
+        with pytest.raises(ValueError, match=r"hidden face indices must lie in \[0, 6\)"):
+            w.write_frame(0, pts, hidden_faces=[[n_faces], None])
+        with pytest.raises(ValueError, match="does not tear"):
+            w.write_frame(0, pts, hidden_faces=[None, [1]])
+        assert w.frames_written == 0
+        w.write_frame(0, pts, hidden_faces=[[1], None])
+
+
+def test_validate_cache_finds_hole_indices_outside_the_mesh(tmp_path):
+    path = tmp_path / "cache.usdc"
+    shapes = [grid_shape()]
+    with PointCacheWriter(path, shapes, fps=30.0) as w:
+        w.write_frame(0, random_frames(np.random.default_rng(7), shapes, 1)[0])
+    stage = Usd.Stage.Open(str(path))
+    UsdGeom.Mesh.Get(stage, "/World/cloth").CreateHoleIndicesAttr().Set(Vt.IntArray([0, 99]), 0)
+    stage.GetRootLayer().Save()
+    del stage
+    assert any("holeIndices" in p for p in validate_cache(path))

@@ -5,7 +5,8 @@ cloth. Colour ``c`` of one cloth and colour ``c`` of another touch disjoint part
 still a valid colour: a step costs as many launches as the most-coloured cloth, not the sum.
 
 Only what the scene's solver needs is allocated: the coloured solver gets per-colour contiguous stick
-arrays; the Jacobi solver gets a per-particle neighbour list (CSR) instead.
+arrays; the Jacobi solver gets a per-particle neighbour list (CSR) instead. Tear lengths exist only when a
+cloth can tear.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ import warp as wp
 
 from .colouring import Colouring, check_partition, graph_colouring, grid_colouring
 from .scene import Scene
-from .topology import STRUCT_H, STRUCT_V, ClothTopology, build_cloth
+from .topology import STRUCT_H, STRUCT_V, ClothTopology, build_cloth, faces_beside_sticks
 
 
 @dataclass(frozen=True)
@@ -71,20 +72,29 @@ class Model:
             np.concatenate([s.topology.stiffness for s in slots]), scene.simulation.iterations
         )
         grid_class = np.concatenate([s.topology.grid_class for s in slots])
+        anchor = np.concatenate([s.topology.anchor for s in slots])
+        owner = np.repeat(np.arange(len(slots), dtype=np.int32), [len(s.topology.sticks) for s in slots])
+        # A stick of a cloth that cannot tear gets an infinite tear length: one kernel serves every cloth.
+        tear_length = np.concatenate([
+            s.topology.rest_length * np.float32(spec.tear_threshold) if spec.tear_threshold
+            else np.full(len(s.topology.rest_length), np.inf, np.float32)
+            for s, spec in zip(slots, scene.cloths)
+        ]).astype(np.float32)
         self.stick_count = len(sticks)
 
         self.inv_mass = wp.array(inv_mass, dtype=float, device=device)
         self.has_free_particles = bool((inv_mass > 0).any())
 
+        csr_stick = csr_ends = None  # Jacobi only
         if self.solver == "coloured":
             if colouring == "graph":
                 self.colouring: Colouring | None = graph_colouring(sticks)
             else:
-                anchor = np.concatenate([s.topology.anchor for s in slots])
                 self.colouring = grid_colouring(grid_class, anchor)
             check_partition(sticks, self.colouring.colour)  # cheap, and a wrong colouring is a silent race
             order = np.argsort(self.colouring.colour, kind="stable")
-            sticks, rest, stiffness, grid_class = sticks[order], rest[order], stiffness[order], grid_class[order]
+            sticks, rest, stiffness = sticks[order], rest[order], stiffness[order]
+            grid_class, anchor, owner, tear_length = grid_class[order], anchor[order], owner[order], tear_length[order]
             sizes = self.colouring.sizes
             self.colour_ranges = [(int(a), int(n)) for a, n in zip(np.r_[0, np.cumsum(sizes)[:-1]], sizes) if n > 0]
             self.stick_ends = wp.array(sticks, dtype=wp.vec2i, device=device)
@@ -93,15 +103,45 @@ class Model:
         else:
             self.colouring = None
             self.colour_ranges = []
-            self._build_neighbours(sticks, rest, stiffness, device)
+            csr_stick, csr_ends = self._build_neighbours(sticks, rest, stiffness, device)
 
         # Kept on the host for metrics (stretch over structural sticks) in the device order.
         self.host_sticks = sticks
         self.host_rest = rest
         self.structural = np.isin(grid_class, (STRUCT_H, STRUCT_V))
+        self.tears = scene.tears
+        if self.tears:
+            self._build_tearing(tear_length, grid_class, anchor, owner, device, csr_stick, csr_ends)
 
-    def _build_neighbours(self, sticks, rest, stiffness, device) -> None:
-        """CSR list of (neighbour, rest, stiffness) per particle for the gather-form Jacobi solver."""
+    def _build_tearing(self, tear_length, grid_class, anchor, owner, device, csr_stick=None, csr_ends=None) -> None:
+        """What ``tear_sticks`` reads (its sticks, their tear lengths and the stiffness it zeroes) and, on the
+        host, which faces each structural stick borders, to hide them when it tears.
+
+        The coloured solver's stiffness belongs to the sticks themselves. The Jacobi solver keeps a copy per
+        stick end (one per CSR entry), so its tear kernel runs over those entries: both ends of a stick see
+        the same length (x_j - x_i and x_i - x_j differ only in sign, exactly) and tear together."""
+        if csr_stick is None:
+            self.tear_ends = self.stick_ends
+            self.tear_stiffness = self.stick_stiffness
+            self._tear_entry_stick = np.arange(self.stick_count)
+            entry_length = tear_length
+        else:
+            self.tear_ends = wp.array(csr_ends, dtype=wp.vec2i, device=device)
+            self.tear_stiffness = self.neighbour_stiffness
+            self._tear_entry_stick = csr_stick
+            entry_length = tear_length[csr_stick]
+        self.tear_length = wp.array(entry_length, dtype=float, device=device)
+        self.tear_entries_per_stick = 1 if csr_stick is None else 2
+        self.stick_cloth = owner
+        self.stick_faces = np.full((self.stick_count, 2), -1, np.int32)
+        for k, slot in enumerate(self.cloths):
+            mine = owner == k
+            self.stick_faces[mine] = faces_beside_sticks(slot.topology.rows, slot.topology.cols,
+                                                         grid_class[mine], anchor[mine])
+
+    def _build_neighbours(self, sticks, rest, stiffness, device) -> tuple[np.ndarray, np.ndarray]:
+        """CSR list of (neighbour, rest, stiffness) per particle for the gather-form Jacobi solver. Returns,
+        per CSR entry, its stick and its (particle, neighbour) pair, which tearing needs."""
         n = self.particle_count
         a = np.concatenate([sticks[:, 0], sticks[:, 1]])
         b = np.concatenate([sticks[:, 1], sticks[:, 0]])
@@ -113,6 +153,7 @@ class Model:
         self.neighbour = wp.array(b[order].astype(np.int32), dtype=int, device=device)
         self.neighbour_rest = wp.array(np.tile(rest, 2)[order], dtype=float, device=device)
         self.neighbour_stiffness = wp.array(np.tile(stiffness, 2)[order], dtype=float, device=device)
+        return order % max(len(sticks), 1), np.stack([a[order], b[order]], axis=1).astype(np.int32)
 
     @property
     def colour_count(self) -> int:
@@ -122,10 +163,28 @@ class Model:
         """Per-cloth views of a (particle_count, 3) array."""
         return [points[s.particles] for s in self.cloths]
 
-    def structural_stretch(self, points: np.ndarray) -> np.ndarray:
-        """|D - L| / L for every structural stick (the cloth's stretch; bend sticks measure bending)."""
-        s = self.host_sticks[self.structural]
-        rest = self.host_rest[self.structural].astype(np.float64)
+    def torn_sticks(self, tear_stiffness: np.ndarray) -> np.ndarray:
+        """Which sticks (in ``host_sticks`` order) are torn, from a host copy of ``tear_stiffness``."""
+        torn = np.zeros(self.stick_count, bool)
+        torn[self._tear_entry_stick[tear_stiffness == 0.0]] = True
+        return torn
+
+    def hidden_faces(self, torn: np.ndarray) -> list[np.ndarray]:
+        """Per cloth, the sorted indices of the faces that border a torn structural stick."""
+        faces = self.stick_faces[torn]
+        owner = self.stick_cloth[torn]
+        out = []
+        for k in range(len(self.cloths)):
+            f = faces[owner == k].ravel()
+            out.append(np.unique(f[f >= 0]).astype(np.int32))
+        return out
+
+    def structural_stretch(self, points: np.ndarray, torn: np.ndarray | None = None) -> np.ndarray:
+        """|D - L| / L for every structural stick (the cloth's stretch; bend sticks measure bending) that is
+        not torn."""
+        keep = self.structural if torn is None else self.structural & ~torn
+        s = self.host_sticks[keep]
+        rest = self.host_rest[keep].astype(np.float64)
         p = points.astype(np.float64)
         length = np.linalg.norm(p[s[:, 1]] - p[s[:, 0]], axis=1)
         return np.abs(length - rest) / rest

@@ -33,11 +33,12 @@ class RunSummary:
     colour_balance: float
     stretch_max: float
     stretch_rms: float
+    torn: int | None = None  # sticks torn by the end; None when no cloth can tear
 
     def format(self) -> str:
         rate = self.frames / self.wall_seconds if self.wall_seconds > 0 else float("inf")
         colours = f"{self.colours} (balance max/min {self.colour_balance:.2f})" if self.colours else "none (jacobi)"
-        return "\n".join([
+        lines = [
             f"scene            {self.scene}",
             f"output           {self.output}",
             f"device           {self.device}",
@@ -48,7 +49,10 @@ class RunSummary:
             f"sticks           {self.sticks}",
             f"colours          {colours}",
             f"stretch |D-L|/L  max {self.stretch_max:.3e}, rms {self.stretch_rms:.3e} (structural sticks, last frame)",
-        ])
+        ]
+        if self.torn is not None:
+            lines.append(f"torn sticks      {self.torn} of {self.sticks}")
+        return "\n".join(lines)
 
 
 def find_divergence(points: np.ndarray, bound: float) -> tuple[int, str] | None:
@@ -79,7 +83,8 @@ def run_scene(
     output = Path(output) if output is not None else scene.output.path
     sim = Simulator(scene, device)
     model = sim.model
-    shapes = [CachedShape(s.name, s.topology.faces, s.topology.uvs, s.count) for s in model.cloths]
+    shapes = [CachedShape(s.name, s.topology.faces, s.topology.uvs, s.count, tears=spec.tear_threshold is not None)
+              for s, spec in zip(model.cloths, scene.cloths)]
     colliders = [CachedSphere(s.name, s.radius, s.keyframes[0][1], s.moving) for s in scene.spheres]
     colliders += [CachedPlane(p.name, p.point, p.normal, p.display_size) for p in scene.planes]
     writer = PointCacheWriter(
@@ -90,6 +95,7 @@ def run_scene(
     )
     start = time.perf_counter()
     points = sim.positions()
+    torn = 0
     with writer:
         writer.write_frame(0, model.split(points), sim.colliders.moving_centres())
         for frame in range(1, settings.frames + 1):
@@ -100,7 +106,11 @@ def run_scene(
                 particle, reason = bad
                 slot = next(s for s in model.cloths if s.first <= particle < s.first + s.count)
                 raise DivergenceError(frame, slot.name, particle - slot.first, points[particle], reason)
-            writer.write_frame(frame, model.split(points), sim.colliders.moving_centres())
+            hidden = None
+            if model.tears and sim.torn_count() != torn:  # one integer per frame; the stick flags only on change
+                torn = sim.torn_count()
+                hidden = model.hidden_faces(sim.torn_sticks())
+            writer.write_frame(frame, model.split(points), sim.colliders.moving_centres(), hidden)
             if progress is not None:
                 progress(frame)
     wall = time.perf_counter() - start
@@ -110,5 +120,5 @@ def run_scene(
         scene=scene.source, output=output, device=str(sim.device), frames=settings.frames,
         simulated_seconds=sim.time, wall_seconds=wall, particles=model.particle_count, sticks=model.stick_count,
         colours=model.colour_count, colour_balance=colouring.balance if colouring else 0.0,
-        stretch_max=stretch.max, stretch_rms=stretch.rms,
+        stretch_max=stretch.max, stretch_rms=stretch.rms, torn=sim.torn_count() if model.tears else None,
     )

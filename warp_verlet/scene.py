@@ -79,6 +79,7 @@ class ClothSpec:
     mass: float = 1.0
     stiffness: dict[str, float] = field(default_factory=lambda: {"structural": 1.0})
     pins: tuple[tuple[int, int], ...] = ()
+    tear_threshold: float | None = None  # a stick tears beyond this multiple of its rest length; None: never
 
     @property
     def particle_count(self) -> int:
@@ -142,6 +143,10 @@ class Scene:
     @property
     def particle_count(self) -> int:
         return sum(c.particle_count for c in self.cloths)
+
+    @property
+    def tears(self) -> bool:
+        return any(c.tear_threshold is not None for c in self.cloths)
 
 
 _REQUIRED = object()
@@ -393,6 +398,7 @@ def _read_cloth(file: str, index: int, data: Any) -> ClothSpec:
         mass=t.take("mass", real(0.0, lo_open=True), 1.0),
         stiffness=t.take("sticks", _read_stiffness, {"structural": 1.0}),
         pins=t.take("pins", lambda v, k: _read_pins(v, k, rows, cols), ()),
+        tear_threshold=t.take("tear_threshold", real(1.0, lo_open=True), None),
     )
     t.finish()
     if not spec.stiffness:

@@ -7,6 +7,7 @@ A substep is
    colours), or one ``relax_jacobi`` gather plus a copy (Jacobi),
 3. collider clamping, once, after the sweeps: ``collide_spheres`` and ``collide_planes`` for the kinds the
    scene has (moving spheres are first placed on the device clock),
+4. ``tear_sticks``, only when a cloth of the scene can tear,
 
 and nothing else unless the scene asks for it. On CUDA, a frame's fixed-dt substeps are captured once as a
 CUDA graph and replayed, so the host issues one launch per frame.
@@ -21,6 +22,7 @@ import warp as wp
 
 from warp_verlet.kernels.integrate import verlet_start, verlet_step
 from warp_verlet.kernels.relax import relax_colour, relax_jacobi
+from warp_verlet.kernels.tear import tear_sticks
 
 from .colliders import Colliders
 from .errors import WarpVerletError
@@ -87,6 +89,15 @@ class Simulator:
         self._sweep = self._record_relax_launches()
         with wp.ScopedDevice(self.device):
             self._clamp = self.colliders.record(self.x, self.x_inertial, self.delta, self.model.inv_mass)
+            self._tear = self._record_tear_launch()
+
+    def _record_tear_launch(self):
+        m = self.model
+        if not m.tears:
+            return None
+        self._torn_entries = wp.zeros(1, dtype=int)  # tear entries zeroed so far (see Model._build_tearing)
+        return wp.launch(tear_sticks, m.tear_ends.shape[0], inputs=[self.x, m.tear_ends, m.tear_length],
+                         outputs=[m.tear_stiffness, self._torn_entries], record_cmd=True)
 
     # ------------------------------------------------------------------ what a substep launches
     def launch_plan(self) -> list[str]:
@@ -96,7 +107,7 @@ class Simulator:
             plan += ["relax_colour"] * (self.model.colour_count * self.settings.iterations)
         elif self.model.stick_count:
             plan += ["relax_jacobi", "copy"] * self.settings.iterations
-        return plan + self.colliders.launch_plan()
+        return plan + self.colliders.launch_plan() + (["tear_sticks"] if self._tear else [])
 
     # ------------------------------------------------------------------ stepping
     def step(self, dt: float | None = None) -> None:
@@ -124,6 +135,8 @@ class Simulator:
         self.colliders.tick(dt)
         for launch in self._clamp:
             launch.launch()
+        if self._tear:
+            self._tear.launch()
         self._dt_prev = dt
         self.time += dt
         self.steps += 1
@@ -209,5 +222,20 @@ class Simulator:
         x, x_prev = self.positions(), self.previous_positions()
         return x_prev + np.float32(alpha) * (x - x_prev)
 
+    def torn_count(self) -> int:
+        """Sticks torn so far: one integer copied from the device, so it is cheap to ask every frame."""
+        if not self._tear:
+            return 0
+        return int(self._torn_entries.numpy()[0]) // self.model.tear_entries_per_stick
+
+    def torn_sticks(self) -> np.ndarray:
+        """Which sticks are torn, a bool per stick in ``model.host_sticks`` order (all False without tearing)."""
+        if not self._tear:
+            return np.zeros(self.model.stick_count, bool)
+        return self.model.torn_sticks(self.model.tear_stiffness.numpy())
+
     def stretch(self, points: np.ndarray | None = None) -> StretchStats:
-        return StretchStats.of(self.model.structural_stretch(self.positions() if points is None else points))
+        """Stretch over the structural sticks that are not torn."""
+        points = self.positions() if points is None else points
+        torn = self.torn_sticks() if self._tear else None
+        return StretchStats.of(self.model.structural_stretch(points, torn))

@@ -135,3 +135,20 @@ def build_cloth(spec: ClothSpec) -> ClothTopology:
         rest_length=rest, stiffness=stiffness_arr, grid_class=grid_class, anchor=anchor, faces=faces,
         uvs=uvs, pinned=pinned,
     )
+
+
+def faces_beside_sticks(rows: int, cols: int, grid_class: np.ndarray, anchor: np.ndarray) -> np.ndarray:
+    """(M, 2) indices of the quads on either side of each structural stick, -1 where there is none (the
+    grid's border, a rope, or a stick that is not structural). Face (r, c) has index r * (cols - 1) + c.
+
+    A horizontal stick (r, c)-(r, c+1) borders faces (r-1, c) and (r, c); a vertical stick (r, c)-(r+1, c)
+    borders faces (r, c-1) and (r, c)."""
+    out = np.full((len(grid_class), 2), -1, np.int32)
+    if rows < 2 or cols < 2:
+        return out
+    r, c = anchor[:, 0].astype(np.int64), anchor[:, 1].astype(np.int64)
+    per_row = cols - 1
+    h, v = grid_class == STRUCT_H, grid_class == STRUCT_V
+    out[:, 0] = np.where(h & (r > 0), (r - 1) * per_row + c, np.where(v & (c > 0), r * per_row + c - 1, -1))
+    out[:, 1] = np.where(h & (r < rows - 1), r * per_row + c, np.where(v & (c < cols - 1), r * per_row + c, -1))
+    return out

@@ -6,9 +6,12 @@ Layout of a cache::
     /World/<cloth>         Mesh (quads, UVs in primvars:st) or, for a rope, linear BasisCurves
     /World/Colliders/<n>   Sphere (time-sampled translate when it moves) or a large quad Mesh for a plane
 
-Only ``points`` and ``extent`` are time-sampled; a time code is a frame number
-(timeCodesPerSecond == framesPerSecond == fps). Nothing else is authored: no normals (renderers compute
-smooth ones), no velocities (they double the file size), no holeIndices (no tearing yet).
+``points`` and ``extent`` are time-sampled every frame; a time code is a frame number
+(timeCodesPerSecond == framesPerSecond == fps). A cloth that can tear also gets a time-sampled
+``holeIndices`` (the faces beside a torn stick): empty on the first frame, then sampled only on frames where
+the set changes, since USD holds an array's value until its next sample. Nothing else is authored: no
+normals (renderers compute smooth ones), no velocities (they double the file size), and no holeIndices on a
+cloth that cannot tear.
 
 This is the only module that imports ``pxr``, and it never imports warp: writing and checking a cache
 must not pull in the simulator.
@@ -41,6 +44,7 @@ class CachedShape:
     faces: np.ndarray  # (F, 4) int32 quads; F == 0 means a rope/strand
     uvs: np.ndarray  # (N, 2) float32
     point_count: int
+    tears: bool = False  # can faces be hidden by tearing (time-sampled holeIndices)?
 
     @property
     def is_rope(self) -> bool:
@@ -151,6 +155,7 @@ class PointCacheWriter:
         self.start_frame = int(start_frame)
         self.frames_written = 0
         self._last_frame: int | None = None
+        self._holes: dict[int, np.ndarray] = {}  # per tearing shape: the hidden faces last authored
         self._stage: Usd.Stage | None = _create_stage(self.path)
 
         stage = self._stage
@@ -227,9 +232,12 @@ class PointCacheWriter:
         curves.SetWidthsInterpolation(UsdGeom.Tokens.constant)
         return curves
 
-    def write_frame(self, frame: int, points: Sequence[np.ndarray], moving_centres: np.ndarray | None = None) -> None:
-        """Author ``points`` and ``extent`` of every shape at time code ``frame``, and the translate of every
-        moving sphere (``moving_centres``: one row per moving sphere, in collider order)."""
+    def write_frame(self, frame: int, points: Sequence[np.ndarray], moving_centres: np.ndarray | None = None,
+                    hidden_faces: Sequence[np.ndarray | None] | None = None) -> None:
+        """Author ``points`` and ``extent`` of every shape at time code ``frame``, the translate of every
+        moving sphere (``moving_centres``: one row per moving sphere, in collider order) and, for shapes that
+        tear, ``hidden_faces`` (one array of face indices per shape, or None where unchanged or not tearing;
+        holeIndices is sampled only when the set differs from the last one written)."""
         if self._stage is None:
             raise RuntimeError(f"the point cache {self.path} is closed")
         if frame < self.start_frame:
@@ -248,6 +256,7 @@ class PointCacheWriter:
         centres = np.zeros((0, 3)) if moving_centres is None else np.asarray(moving_centres, np.float64)
         if centres.shape != (len(self._moving), 3):
             raise ValueError(f"expected ({len(self._moving)}, 3) moving sphere centres, got {centres.shape}")
+        holes = self._changed_holes(hidden_faces)
 
         time = Usd.TimeCode(frame)
         for op, centre in zip(self._moving, centres):
@@ -260,10 +269,36 @@ class PointCacheWriter:
                 extent = UsdGeom.PointBased.ComputeExtent(vt_points)
             prim.GetPointsAttr().Set(vt_points, time)
             prim.GetExtentAttr().Set(extent, time)
+        for k, faces in holes.items():
+            self._prims[k].GetHoleIndicesAttr().Set(Vt.IntArray.FromNumpy(faces), time)
+            self._holes[k] = faces
         self._last_frame = int(frame)
         self.frames_written += 1
         if self.frames_written % self.save_every == 0:
             self._save()
+
+    def _changed_holes(self, hidden_faces: Sequence[np.ndarray | None] | None) -> dict[int, np.ndarray]:
+        """Checked hidden-face sets to author this frame, by shape index: every tearing shape on the first
+        frame (an empty set until something tears), afterwards only the sets that changed."""
+        given = [None] * len(self.shapes) if hidden_faces is None else list(hidden_faces)
+        if len(given) != len(self.shapes):
+            raise ValueError(f"expected {len(self.shapes)} hidden-face arrays (or None), one per shape, got {len(given)}")
+        out = {}
+        for k, (shape, faces) in enumerate(zip(self.shapes, given)):
+            if not shape.tears or shape.is_rope:
+                if faces is not None and len(faces):
+                    raise ValueError(f"shape {shape.name!r} does not tear, so it has no faces to hide")
+                continue
+            if faces is None:
+                if k in self._holes:
+                    continue  # unchanged
+                faces = np.zeros(0, np.int32)
+            faces = np.unique(np.asarray(faces, dtype=np.int32))
+            if len(faces) and (faces[0] < 0 or faces[-1] >= len(shape.faces)):
+                raise ValueError(f"shape {shape.name!r}: hidden face indices must lie in [0, {len(shape.faces)})")
+            if k not in self._holes or not np.array_equal(faces, self._holes[k]):
+                out[k] = faces
+        return out
 
     def _save(self) -> None:
         assert self._stage is not None
@@ -362,6 +397,12 @@ def _check_mesh(mesh: UsdGeom.Mesh, time_range: tuple[float, float]) -> list[str
         problems.append(f"{name}: subdivisionScheme is not 'none', so renderers would smooth the cloth")
     if st_values is not None and len(st_values) != n_points:
         problems.append(f"{name}: primvars:st has {len(st_values)} values for {n_points} points")
+    holes = mesh.GetHoleIndicesAttr()
+    n_faces = len(counts) if counts else 0
+    for t in holes.GetTimeSamples():
+        hidden = np.asarray(holes.Get(t), dtype=np.int64)
+        if len(hidden) and (hidden.min() < 0 or hidden.max() >= n_faces):
+            problems.append(f"{name}: holeIndices at time {t} names a face outside [0, {n_faces})")
     return problems + _check_points(mesh, n_points, time_range)
 
 
