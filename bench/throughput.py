@@ -2,34 +2,98 @@
 
     python bench/throughput.py --device cpu --sizes 64 128 256
     python bench/throughput.py --device cuda --sizes 64 256 1024 2048 --out bench/results/h100
+    python bench/throughput.py --device cpu --sizes 64 --colliders --tear 1.5   # every stage present
 
 Each grid simulates the same 60 frames (1 s at 60 fps, 4 substeps x 8 iterations). Frames 1-2 are a
 warm-up that keeps compilation and graph capture out; frames 3-60 are timed in ``--repeats`` equal batches
 and the median batch gives ms per frame (the spread is half the range). Reported beside it: stick
-projections per second, colour count, device memory per particle, and the error that speed bought: RMS
-and max relative stretch |D - L|/L over structural sticks at frame 60.
+projections per second, colour count, device memory per particle and per stick, and the error that speed
+bought: RMS and max relative stretch |D - L|/L over structural sticks at frame 60.
+
+A second table breaks a frame down by stage (integrate, relax, collide, tear, USD write): each stage of
+the simulator's ``stages()`` is run on its own for 12 substeps with a device synchronisation around it (so
+on CUDA these are launch-by-launch figures, without graph replay), scaled to one frame. A stage the scene
+does not have is never run and shows 0. ``USD write`` is the host copy plus one ``write_frame`` into a
+temporary .usdc.
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
+import tempfile
+import time
+from dataclasses import replace
 from datetime import date
 from pathlib import Path
 
 import warp as wp
 
 sys.path.insert(0, str(Path(__file__).parent))
-from common import copy_bandwidth, device_bytes, hanging_cloth, machine, median_spread, time_frames, write_table  # noqa: E402
+from common import copy_bandwidth, hanging_cloth, machine, median_spread, time_frames, write_table  # noqa: E402
 
+from warp_verlet.scene import PlaneCollider, SphereCollider  # noqa: E402
 from warp_verlet.simulator import Simulator  # noqa: E402
 
 
 FRAMES, WARM_UP = 60, 2
+STAGES = ("integrate", "relax", "collide", "tear", "USD write")
+STAGE_SUBSTEPS = 12
 
 
-def measure(n: int, device: str, repeats: int, use_graph: bool, substeps: int, iterations: int) -> dict:
+def bench_scene(n: int, substeps: int, iterations: int, colliders: bool, tear: float | None):
+    """The hanging cloth, optionally with a ball it drapes over and a ground plane, and a tear threshold."""
     scene = hanging_cloth(n, substeps, iterations)
+    if colliders:
+        scene = replace(scene, colliders=(
+            SphereCollider("ball", 0.15, ((0.0, (0.0, 0.5, 0.1)),), thickness=0.005, friction=0.3),
+            PlaneCollider("ground", (0.0, 0.0, 0.0), (0.0, 1.0, 0.0), friction=0.5),
+        ))
+    if tear is not None:
+        scene = replace(scene, cloths=tuple(replace(c, tear_threshold=tear) for c in scene.cloths))
+    return scene
+
+
+def stage_breakdown(sim: Simulator) -> dict[str, float]:
+    """ms per frame spent in each stage, run one stage at a time (see the module docstring)."""
+    from warp_verlet.usd_writer import CachedShape, PointCacheWriter
+
+    seconds = dict.fromkeys(STAGES, 0.0)
+    dt = sim.settings.dt
+    with wp.ScopedDevice(sim.device):
+        for _ in range(STAGE_SUBSTEPS):
+            for name, run in sim.stages():
+                wp.synchronize_device(sim.device)
+                start = time.perf_counter()
+                run(dt)
+                wp.synchronize_device(sim.device)
+                seconds[name] += time.perf_counter() - start
+    per_frame = {k: v / STAGE_SUBSTEPS * sim.settings.substeps for k, v in seconds.items()}
+    shapes = [CachedShape(s.name, s.topology.faces, s.topology.uvs, s.count) for s in sim.model.cloths]
+    with tempfile.TemporaryDirectory() as tmp:
+        with PointCacheWriter(Path(tmp) / "stage.usdc", shapes, fps=sim.settings.fps, save_every=10**9) as writer:
+            writes = 3
+            start = time.perf_counter()
+            for frame in range(writes):
+                writer.write_frame(frame, sim.model.split(sim.positions()))
+            per_frame["USD write"] = (time.perf_counter() - start) / writes
+    return {k: round(v * 1e3, 3) for k, v in per_frame.items()}
+
+
+def array_bytes(sim: Simulator) -> tuple[int, int]:
+    """Device bytes held in per-particle arrays and in all other arrays (the per-stick ones, and a few
+    bytes of colliders and counters). An array that two attributes share (tearing reuses the stick arrays)
+    counts once."""
+    m = sim.model
+    arrays = {v.ptr: v for v in list(vars(sim).values()) + list(vars(m).values()) + list(vars(sim.colliders).values())
+              if isinstance(v, wp.array)}.values()
+    particle = sum(a.capacity for a in arrays if a.shape[0] in (m.particle_count, m.particle_count + 1))
+    return particle, sum(a.capacity for a in arrays) - particle
+
+
+def measure(n: int, device: str, repeats: int, use_graph: bool, substeps: int, iterations: int,
+            colliders: bool = False, tear: float | None = None) -> tuple[dict, dict]:
+    scene = bench_scene(n, substeps, iterations, colliders, tear)
     sim = Simulator(scene, device, use_graph=use_graph)
     sim.step_frame()  # warm-up: compiles kernels, initialises the Verlet state
     sim.step_frame()  # on CUDA: captures the frame graph
@@ -39,7 +103,8 @@ def measure(n: int, device: str, repeats: int, use_graph: bool, substeps: int, i
         sim.step_frame()  # so that the error is always read at frame 60
     projections = sim.model.stick_count * substeps * iterations
     stretch = sim.stretch()
-    return {
+    particle_bytes, stick_bytes = array_bytes(sim)
+    row = {
         "grid": f"{n}x{n}",
         "particles": sim.model.particle_count,
         "sticks": sim.model.stick_count,
@@ -47,11 +112,29 @@ def measure(n: int, device: str, repeats: int, use_graph: bool, substeps: int, i
         "ms/frame": f"{per_frame * 1e3:.3f}",
         "spread": f"±{spread * 100:.1f}%",
         "Mproj/s": f"{projections / per_frame / 1e6:.1f}",
-        "bytes/particle": f"{device_bytes(sim) / sim.model.particle_count:.0f}",
+        "ns/proj": f"{per_frame / projections * 1e9:.2f}",
+        "bytes/particle": f"{(particle_bytes + stick_bytes) / sim.model.particle_count:.0f}",
+        "B/particle arrays": f"{particle_bytes / sim.model.particle_count:.0f}",
+        "B/stick arrays": f"{stick_bytes / max(sim.model.stick_count, 1):.0f}",
         "stretch rms": f"{stretch.rms:.2e}",
         "stretch max": f"{stretch.max:.2e}",
         "frames timed": batch * repeats,
     }
+    if tear is not None:
+        row["torn"] = sim.torn_count()
+    stages = {"grid": f"{n}x{n}", **stage_breakdown(sim)}
+    return row, stages
+
+
+def launch_bound_below(rows: list[dict]) -> str:
+    """The smallest grid whose cost per projection is within 1.5x of the best: below it, launch overhead
+    (a fixed cost per launch) dominates; from it on, the work does."""
+    best = min(float(r["ns/proj"]) for r in rows)
+    for r in rows:
+        if float(r["ns/proj"]) <= 1.5 * best:
+            return (f"launch overhead stops dominating at {r['grid']} ({r['ns/proj']} ns per projection, "
+                    f"best {best:.2f})")
+    return ""
 
 
 def main(argv=None) -> int:
@@ -62,19 +145,32 @@ def main(argv=None) -> int:
     p.add_argument("--substeps", type=int, default=4)
     p.add_argument("--iterations", type=int, default=8)
     p.add_argument("--no-graph", action="store_true", help="CUDA: launch kernels one by one, no graph replay")
+    p.add_argument("--colliders", action="store_true", help="add a ball and a ground plane to the scene")
+    p.add_argument("--tear", type=float, default=None, metavar="RATIO", help="give the cloth this tear_threshold")
     p.add_argument("--out", type=Path, default=None, help="write throughput.md/.csv here")
     args = p.parse_args(argv)
     wp.config.quiet = True
     device = wp.get_device(args.device) if args.device else wp.get_device()
-    rows = []
+    rows, stage_rows = [], []
     for n in args.sizes:
-        rows.append(measure(n, str(device), args.repeats, not args.no_graph, args.substeps, args.iterations))
-        print(rows[-1], flush=True)
-    title = (f"Hanging cloth at 1 s, {args.substeps} substeps x {args.iterations} iterations, coloured Gauss-Seidel"
-             f"{'' if device.is_cpu or not args.no_graph else ', no graph capture'}: {machine(device)}, {date.today()}")
+        row, stages = measure(n, str(device), args.repeats, not args.no_graph, args.substeps, args.iterations,
+                              args.colliders, args.tear)
+        rows.append(row)
+        stage_rows.append(stages)
+        print(row, flush=True)
+    extras = (" + ball and ground" if args.colliders else "") + (f", tear_threshold {args.tear}" if args.tear else "")
+    title = (f"Hanging cloth{extras} at 1 s, {args.substeps} substeps x {args.iterations} iterations, coloured "
+             f"Gauss-Seidel{'' if device.is_cpu or not args.no_graph else ', no graph capture'}: {machine(device)}, "
+             f"{date.today()}")
     if device.is_cuda:
         title += f"; device copy {copy_bandwidth(device):.0f} GB/s (read + write)"
-    write_table(rows, args.out, "throughput" + ("-nograph" if args.no_graph and device.is_cuda else ""), title)
+    stem = "throughput" + ("-nograph" if args.no_graph and device.is_cuda else "")
+    stem += ("-colliders" if args.colliders else "") + ("-tear" if args.tear else "")
+    write_table(rows, args.out, stem, title)
+    if len(rows) > 1:
+        print(launch_bound_below(rows) + "\n")
+    write_table(stage_rows, args.out, stem + "-stages", "ms per frame by stage, each stage run on its own "
+                f"({STAGE_SUBSTEPS} substeps, synchronised)")
     return 0
 
 

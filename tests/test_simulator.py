@@ -74,6 +74,10 @@ def test_a_step_launches_only_what_the_scene_uses():
 
     jacobi = Simulator(make_scene({"iterations": k, "solver": "jacobi"}, resolution=[8, 8]), "cpu")
     assert jacobi.launch_plan() == ["verlet_step"] + ["relax_jacobi", "copy"] * k
+    # The stages a substep runs (and the throughput benchmark times): no collide or tear stage here.
+    assert [name for name, _ in jacobi.stages()] == ["integrate", "relax"]
+    unsolved = Simulator(make_scene({"iterations": 0}, resolution=[8, 8]), "cpu")
+    assert [name for name, _ in unsolved.stages()] == ["integrate"]
 
 
 def test_arrays_are_allocated_only_for_the_solver_in_use():

@@ -149,6 +149,8 @@ def test_only_tearing_scenes_launch_and_allocate_the_tear_kernel():
     assert "tear_sticks" not in plain.launch_plan() and not hasattr(plain.model, "tear_length")
     tearing = Simulator(make_scene(resolution=[8, 8], tear_threshold=1.5), "cpu")
     assert tearing.launch_plan()[-1] == "tear_sticks" and tearing.launch_plan().count("tear_sticks") == 1
+    assert [name for name, _ in plain.stages()] == ["integrate", "relax"]
+    assert [name for name, _ in tearing.stages()] == ["integrate", "relax", "tear"]
 
 
 def torn_edge_faces(rows: int, cols: int, sticks: np.ndarray, torn: np.ndarray) -> set[int]:

@@ -16,6 +16,7 @@ CUDA graph and replayed, so the host issues one launch per frame.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 import warp as wp
@@ -90,6 +91,7 @@ class Simulator:
         with wp.ScopedDevice(self.device):
             self._clamp = self.colliders.record(self.x, self.x_inertial, self.delta, self.model.inv_mass)
             self._tear = self._record_tear_launch()
+        self._stages = self.stages()
 
     def _record_tear_launch(self):
         m = self.model
@@ -100,6 +102,20 @@ class Simulator:
                          outputs=[m.tear_stiffness, self._torn_entries], record_cmd=True)
 
     # ------------------------------------------------------------------ what a substep launches
+    def stages(self) -> list[tuple[str, Callable[[float], None]]]:
+        """The stages of one substep, in order, as (name, run(dt)): only those the scene uses. ``_substep``
+        runs exactly these; ``bench/throughput.py`` times them one by one."""
+        stages: list[tuple[str, Callable[[float], None]]] = []
+        if self.model.has_free_particles:
+            stages.append(("integrate", self._integrate))
+        if self._sweep and self.settings.iterations:
+            stages.append(("relax", self._relax))
+        if self._clamp:
+            stages.append(("collide", self._collide))
+        if self._tear:
+            stages.append(("tear", lambda dt: self._tear.launch()))
+        return stages
+
     def launch_plan(self) -> list[str]:
         """The kernel launches of one substep, in order (after the first, which also runs verlet_start)."""
         plan = ["verlet_step"] if self.model.has_free_particles else []
@@ -125,21 +141,23 @@ class Simulator:
                       inputs=[self.x, self.model.inv_mass, wp.vec3(0.0), self.accel, dt],
                       outputs=[self.x_inertial, self.delta])
             self._dt_prev = dt
-        if self.model.has_free_particles:
-            ratio = min(dt / self._dt_prev, self.settings.max_dt_ratio)
-            accel_offset = self.accel * (dt * (dt + self._dt_prev) * 0.5)
-            wp.launch(verlet_step, self.model.particle_count,
-                      inputs=[self.x, self.x_inertial, self.delta, self.model.inv_mass, self.settings.drag * ratio,
-                              accel_offset])
-        self._relax()
-        self.colliders.tick(dt)
-        for launch in self._clamp:
-            launch.launch()
-        if self._tear:
-            self._tear.launch()
+        for _, run in self._stages:
+            run(dt)
         self._dt_prev = dt
         self.time += dt
         self.steps += 1
+
+    def _integrate(self, dt: float) -> None:
+        ratio = min(dt / self._dt_prev, self.settings.max_dt_ratio)
+        accel_offset = self.accel * (dt * (dt + self._dt_prev) * 0.5)
+        wp.launch(verlet_step, self.model.particle_count,
+                  inputs=[self.x, self.x_inertial, self.delta, self.model.inv_mass, self.settings.drag * ratio,
+                          accel_offset])
+
+    def _collide(self, dt: float) -> None:
+        self.colliders.tick(dt)
+        for launch in self._clamp:
+            launch.launch()
 
     def _record_relax_launches(self) -> list:
         """One sweep's launches, recorded once: replaying a recorded ``wp.Launch`` skips the argument packing
@@ -160,7 +178,7 @@ class Simulator:
                                   outputs=[self._x_scratch], record_cmd=True)]
             return []
 
-    def _relax(self) -> None:
+    def _relax(self, dt: float = 0.0) -> None:
         jacobi = self.settings.solver == "jacobi"
         for _ in range(self.settings.iterations):
             for launch in self._sweep:

@@ -1,0 +1,51 @@
+"""bench/throughput.py at tiny sizes: its tables have the promised columns and finite numbers, and the
+stage breakdown shows that a scene without colliders or tearing spends no time in those stages."""
+
+from __future__ import annotations
+
+import csv
+import importlib.util
+import math
+import sys
+from pathlib import Path
+
+BENCH = Path(__file__).resolve().parent.parent / "bench"
+
+
+def _load():
+    sys.path.insert(0, str(BENCH))  # throughput.py imports its sibling common.py
+    spec = importlib.util.spec_from_file_location("bench_throughput", BENCH / "throughput.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+bench = _load()
+
+
+def read(path: Path) -> list[dict]:
+    with open(path) as f:
+        return list(csv.DictReader(f))
+
+
+def test_plain_scene_spends_nothing_in_absent_stages(tmp_path):
+    assert bench.main(["--device", "cpu", "--sizes", "8", "12", "--repeats", "1", "--out", str(tmp_path)]) == 0
+    rows = read(tmp_path / "throughput.csv")
+    assert [r["grid"] for r in rows] == ["8x8", "12x12"]
+    for r in rows:
+        for key in ("ms/frame", "Mproj/s", "ns/proj", "bytes/particle", "stretch rms", "stretch max"):
+            assert math.isfinite(float(r[key])) and float(r[key]) >= 0, key
+        assert int(r["colours"]) == 12
+    stages = read(tmp_path / "throughput-stages.csv")
+    for r in stages:
+        assert float(r["integrate"]) > 0 and float(r["relax"]) > 0 and float(r["USD write"]) > 0
+        assert float(r["collide"]) == 0 and float(r["tear"]) == 0  # never launched, not merely fast
+
+
+def test_colliders_and_tearing_show_up_as_stages(tmp_path):
+    args = ["--device", "cpu", "--sizes", "8", "--repeats", "1", "--colliders", "--tear", "1.5", "--out", str(tmp_path)]
+    assert bench.main(args) == 0
+    (row,) = read(tmp_path / "throughput-colliders-tear.csv")
+    assert int(row["torn"]) >= 0
+    (stages,) = read(tmp_path / "throughput-colliders-tear-stages.csv")
+    assert float(stages["collide"]) > 0 and float(stages["tear"]) > 0
