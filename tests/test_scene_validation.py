@@ -139,6 +139,10 @@ def test_unknown_stick_family(tmp_path):
         (CLOTH + "pins = [[1, 2.0]]\n", "cloth[0].pins[0]", ["[row, col] pair"]),
         (CLOTH + "sticks = { shear = '0.5' }\n", "cloth[0].sticks.shear", ["expected a number"]),
         (CLOTH + "tear_threshold = true\n", "cloth[0].tear_threshold", ["expected a number"]),
+        (CLOTH + "particle_masses = [0, 0, 1.0]\n", "cloth[0].particle_masses[0]", ["[row, col, kg]"]),
+        (CLOTH + "particle_masses = [[0, 0]]\n", "cloth[0].particle_masses[0]", ["[row, col, kg]"]),
+        (CLOTH + "particle_masses = [[0.0, 0, 1.0]]\n", "cloth[0].particle_masses[0][0]", ["integer"]),
+        (CLOTH + "particle_masses = 5\n", "cloth[0].particle_masses", ["array"]),
     ],
 )
 def test_wrong_type(tmp_path, text, key, expected):
@@ -164,6 +168,10 @@ def test_wrong_type(tmp_path, text, key, expected):
         (CLOTH + "tear_threshold = 1.0\n", "cloth[0].tear_threshold", ["(1.0, inf)", "got 1.0"]),
         (CLOTH + "tear_threshold = 0.5\n", "cloth[0].tear_threshold", ["(1.0, inf)", "got 0.5"]),
         (CLOTH + "tear_threshold = inf\n", "cloth[0].tear_threshold", ["finite"]),
+        (CLOTH + "particle_masses = [[0, 0, 0.0]]\n", "cloth[0].particle_masses[0][2]", ["(0.0, inf)", "got 0.0"]),
+        (CLOTH + "particle_masses = [[0, 9, 1.0]]\n", "cloth[0].particle_masses[0][1]", ["[0, 4]", "got 9"]),
+        (CLOTH + "particle_masses = [[-1, 0, 1.0]]\n", "cloth[0].particle_masses[0][0]", ["got -1"]),
+        (CLOTH + "particle_masses = [[1, 1, 2.0], [1, 1, 3.0]]\n", "cloth[0].particle_masses[1]", ["twice"]),
         ("[simulation]\nfps = 0\n" + CLOTH, "simulation.fps", ["(0.0, inf)", "got 0.0"]),
         ("[simulation]\nfps = -60.0\n" + CLOTH, "simulation.fps", ["(0.0, inf)", "got -60.0"]),
         ("[simulation]\nfps = nan\n" + CLOTH, "simulation.fps", ["expected a finite number", "nan"]),

@@ -124,3 +124,20 @@ def test_bad_device_is_one_clear_error():
     if not wp.is_cuda_available():
         with pytest.raises(WarpVerletError, match="no CUDA device"):
             Simulator(make_scene(), "cuda:0")
+
+
+def test_divergence_check_finds_the_lowest_bad_particle(device):
+    sim = Simulator(make_scene({"position_bound": 10.0}, resolution=[4, 4]), device)
+    assert sim.diverged_particle() is None
+    x = sim.positions()
+    x[12] = (np.inf, 0.0, 0.0)
+    x[9] = (0.0, np.nan, 0.0)
+    x[5] = (0.0, 0.0, -10.5)
+    sim.x.assign(x)
+    assert sim.diverged_particle() == 5  # beyond the bound
+    x[5] = (0.0, 0.0, -10.0)  # on the bound is still fine
+    sim.x.assign(x)
+    assert sim.diverged_particle() == 9  # NaN
+    x[9] = 0.0
+    sim.x.assign(x)
+    assert sim.diverged_particle() == 12  # inf

@@ -55,15 +55,8 @@ class RunSummary:
         return "\n".join(lines)
 
 
-def find_divergence(points: np.ndarray, bound: float) -> tuple[int, str] | None:
-    """First particle that is non-finite or farther than ``bound`` from the origin, with the reason."""
-    finite = np.isfinite(points).all(axis=1)
-    if not finite.all():
-        return int(np.argmin(finite)), "not a finite number"
-    far = np.abs(points).max(axis=1) > bound
-    if far.any():
-        return int(np.argmax(far)), f"beyond position_bound = {bound} m"
-    return None
+def divergence_reason(point: np.ndarray, bound: float) -> str:
+    return "not a finite number" if not np.isfinite(point).all() else f"beyond position_bound = {bound} m"
 
 
 def run_scene(
@@ -101,10 +94,10 @@ def run_scene(
         for frame in range(1, settings.frames + 1):
             sim.step_frame()
             points = sim.positions()  # the one host copy per frame, which the writer needs anyway
-            bad = find_divergence(points, settings.position_bound)
-            if bad is not None:
-                particle, reason = bad
+            particle = sim.diverged_particle()  # checked on the device: one integer comes back
+            if particle is not None:
                 slot = next(s for s in model.cloths if s.first <= particle < s.first + s.count)
+                reason = divergence_reason(points[particle], settings.position_bound)
                 raise DivergenceError(frame, slot.name, particle - slot.first, points[particle], reason)
             hidden = None
             if model.tears and sim.torn_count() != torn:  # one integer per frame; the stick flags only on change

@@ -80,6 +80,7 @@ class ClothSpec:
     stiffness: dict[str, float] = field(default_factory=lambda: {"structural": 1.0})
     pins: tuple[tuple[int, int], ...] = ()
     tear_threshold: float | None = None  # a stick tears beyond this multiple of its rest length; None: never
+    particle_masses: tuple[tuple[int, int, float], ...] = ()  # (row, col, kg): overrides of the even share
 
     @property
     def particle_count(self) -> int:
@@ -370,6 +371,23 @@ def _read_pins(value: Any, key: str, rows: int, cols: int) -> tuple[tuple[int, i
     return tuple(sorted(set(pins)))
 
 
+def _read_particle_masses(value: Any, key: str, rows: int, cols: int) -> tuple[tuple[int, int, float], ...]:
+    if not isinstance(value, list):
+        raise _Invalid(f"expected an array of [row, col, kg] triples, got {_describe(value)}")
+    out: dict[tuple[int, int], float] = {}
+    for i, item in enumerate(value):
+        item_key = f"{key}[{i}]"
+        if not (isinstance(item, list) and len(item) == 3):
+            raise _Invalid(f"expected a [row, col, kg] triple, got {_describe(item)}", item_key)
+        r = _per_element(integer(0, rows - 1))(item[0], f"{item_key}[0]")
+        c = _per_element(integer(0, cols - 1))(item[1], f"{item_key}[1]")
+        kg = _per_element(real(0.0, lo_open=True))(item[2], f"{item_key}[2]")
+        if (r, c) in out:
+            raise _Invalid(f"particle [{r}, {c}] is given a mass twice", item_key)
+        out[(r, c)] = kg
+    return tuple((r, c, kg) for (r, c), kg in out.items())
+
+
 def _prim_name(value: Any, key: str) -> str:
     """A USD prim name: the cloth or collider appears under that name in the cache."""
     name = text(value, key)
@@ -399,6 +417,7 @@ def _read_cloth(file: str, index: int, data: Any) -> ClothSpec:
         stiffness=t.take("sticks", _read_stiffness, {"structural": 1.0}),
         pins=t.take("pins", lambda v, k: _read_pins(v, k, rows, cols), ()),
         tear_threshold=t.take("tear_threshold", real(1.0, lo_open=True), None),
+        particle_masses=t.take("particle_masses", lambda v, k: _read_particle_masses(v, k, rows, cols), ()),
     )
     t.finish()
     if not spec.stiffness:

@@ -21,6 +21,7 @@ from typing import Callable
 import numpy as np
 import warp as wp
 
+from warp_verlet.kernels.guard import find_diverged
 from warp_verlet.kernels.integrate import verlet_start, verlet_step
 from warp_verlet.kernels.relax import relax_colour, relax_jacobi
 from warp_verlet.kernels.tear import tear_sticks
@@ -86,6 +87,7 @@ class Simulator:
         self._dt_prev: float | None = None
         self._accumulator = 0.0
         self._use_graph = use_graph and self.device.is_cuda
+        self._first_diverged = None  # allocated by the first divergence check
         self._frame_graph = None
         self._sweep = self._record_relax_launches()
         with wp.ScopedDevice(self.device):
@@ -239,6 +241,18 @@ class Simulator:
         """Positions interpolated between the last two substeps: x_prev + alpha (x - x_prev)."""
         x, x_prev = self.positions(), self.previous_positions()
         return x_prev + np.float32(alpha) * (x - x_prev)
+
+    def diverged_particle(self) -> int | None:
+        """The lowest index of a particle that is not finite or beyond ``position_bound``, or None. Checked on
+        the device; the host reads back one integer, so it is cheap enough to ask once per frame."""
+        n = self.model.particle_count
+        with wp.ScopedDevice(self.device):
+            if self._first_diverged is None:
+                self._first_diverged = wp.empty(1, dtype=int)
+            self._first_diverged.fill_(n)
+            wp.launch(find_diverged, n, inputs=[self.x, self.settings.position_bound], outputs=[self._first_diverged])
+            first = int(self._first_diverged.numpy()[0])
+        return None if first == n else first
 
     def torn_count(self) -> int:
         """Sticks torn so far: one integer copied from the device, so it is cheap to ask every frame."""

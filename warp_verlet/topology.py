@@ -114,6 +114,8 @@ def build_cloth(spec: ClothSpec) -> ClothTopology:
     rest = np.linalg.norm(pos64[sticks[:, 1]] - pos64[sticks[:, 0]], axis=1).astype(np.float32)
 
     inv_mass = np.full(n, n / spec.mass, dtype=np.float32)  # uniform: each particle carries mass/n
+    for r, c, kg in spec.particle_masses:  # then the scene's per-particle overrides
+        inv_mass[r * cols + c] = 1.0 / kg
     pinned = np.array([r * cols + c for r, c in spec.pins], dtype=np.int32)
     inv_mass[pinned] = 0.0
 
