@@ -28,6 +28,7 @@ from warp_verlet.kernels.tear import tear_sticks
 
 from .colliders import Colliders
 from .errors import WarpVerletError
+from .memory import available_host_bytes, check_fits
 from .model import Model
 from .scene import Scene
 
@@ -72,6 +73,9 @@ class Simulator:
         self.scene = scene
         self.settings = scene.simulation
         self.device = resolve_device(device)
+        # Refuse a scene that cannot fit before allocating any of it.
+        self.memory = check_fits(scene, str(self.device), self.device.free_memory if self.device.is_cuda else None,
+                                 available_host_bytes())
         with wp.ScopedDevice(self.device):
             self.model = Model(scene, self.device, colouring)
             self.x = wp.array(self.model.rest_positions, dtype=wp.vec3)
