@@ -1,4 +1,4 @@
-"""bench/throughput.py at tiny sizes: its tables have the promised columns and finite numbers, and the
+"""bench/throughput.py and bench/overlap.py at tiny sizes: its tables have the promised columns and finite numbers, and the
 stage breakdown shows that a scene without colliders or tearing spends no time in those stages."""
 
 from __future__ import annotations
@@ -49,3 +49,14 @@ def test_colliders_and_tearing_show_up_as_stages(tmp_path):
     assert int(row["torn"]) >= 0
     (stages,) = read(tmp_path / "throughput-colliders-tear-stages.csv")
     assert float(stages["collide"]) > 0 and float(stages["tear"]) > 0
+
+
+def test_overlap_bench_reports_the_three_wall_times(tmp_path):
+    spec = importlib.util.spec_from_file_location("bench_overlap", BENCH / "overlap.py")
+    overlap = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(overlap)
+    assert overlap.main(["--device", "cpu", "--sizes", "8", "--frames", "3", "--repeats", "1", "--out", str(tmp_path)]) == 0
+    (row,) = read(tmp_path / "overlap.csv")
+    times = [float(row[f"{k} ms/frame"]) for k in ("simulation only", "sequential", "overlapped")]
+    assert all(math.isfinite(t) and t > 0 for t in times)
+    assert row["hidden"].endswith("%")

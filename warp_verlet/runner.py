@@ -1,8 +1,9 @@
 """Batch runs: scene -> simulator -> USD point cache, one frame at a time, with a divergence guard.
 
 The writer is opened before the first substep, so an unwritable output path fails before any simulation
-time is spent. The cache is closed (saved) on every exit path: an error, a divergence or Ctrl-C leaves a
-valid file holding the frames simulated so far.
+time is spent. Frames are written on a background thread (``background_writer.py``) while the next frame
+is simulated. The cache is closed (saved) on every exit path: an error, a divergence or Ctrl-C leaves a
+valid file holding the frames simulated before it.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ from typing import Callable
 import numpy as np
 
 from . import __version__
+from .background_writer import BackgroundWriter
 from .errors import DivergenceError
 from .scene import Scene
 
@@ -65,8 +67,10 @@ def run_scene(
     device: str | None = None,
     frames: int | None = None,
     progress: Callable[[int], None] | None = None,
+    overlap: bool = True,
 ) -> RunSummary:
-    """Simulate ``scene`` and write its point cache. ``progress(frame)`` is called after each frame."""
+    """Simulate ``scene`` and write its point cache. ``progress(frame)`` is called after each frame.
+    ``overlap=False`` writes each frame before simulating the next (for measuring what overlap saves)."""
     from .simulator import Simulator  # imports warp
     from .usd_writer import CachedPlane, CachedShape, CachedSphere, PointCacheWriter  # imports pxr
 
@@ -88,25 +92,17 @@ def run_scene(
     )
     start = time.perf_counter()
     points = sim.positions()
-    torn = 0
     with writer:
         writer.write_frame(0, model.split(points), sim.colliders.moving_centres())
-        for frame in range(1, settings.frames + 1):
-            sim.step_frame()
-            points = sim.positions()  # the one host copy per frame, which the writer needs anyway
-            particle = sim.diverged_particle()  # checked on the device: one integer comes back
-            if particle is not None:
-                slot = next(s for s in model.cloths if s.first <= particle < s.first + s.count)
-                reason = divergence_reason(points[particle], settings.position_bound)
-                raise DivergenceError(frame, slot.name, particle - slot.first, points[particle], reason)
-            hidden = None
-            if model.tears and sim.torn_count() != torn:  # one integer per frame; the stick flags only on change
-                torn = sim.torn_count()
-                hidden = model.hidden_faces(sim.torn_sticks())
-            writer.write_frame(frame, model.split(points), sim.colliders.moving_centres(), hidden)
-            if progress is not None:
-                progress(frame)
+        background = BackgroundWriter(writer.write_frame) if overlap else None
+        write = background.submit if background else writer.write_frame
+        try:
+            _step_loop(sim, settings, write, progress)
+        finally:
+            if background is not None:
+                background.close()  # the frames already handed over are written before the cache is saved
     wall = time.perf_counter() - start
+    points = sim.positions()
     stretch = sim.stretch(points)
     colouring = model.colouring
     return RunSummary(
@@ -115,3 +111,25 @@ def run_scene(
         colours=model.colour_count, colour_balance=colouring.balance if colouring else 0.0,
         stretch_max=stretch.max, stretch_rms=stretch.rms, torn=sim.torn_count() if model.tears else None,
     )
+
+
+def _step_loop(sim, settings, write: Callable[..., None], progress: Callable[[int], None] | None) -> None:
+    """Simulate frames 1 .. frames, handing each one to ``write`` (frame, points per cloth, moving sphere
+    centres, hidden faces or None)."""
+    model = sim.model
+    torn = 0
+    for frame in range(1, settings.frames + 1):
+        sim.step_frame()
+        points = sim.positions()  # the one host copy per frame, which the writer needs anyway
+        particle = sim.diverged_particle()  # checked on the device: one integer comes back
+        if particle is not None:
+            slot = next(s for s in model.cloths if s.first <= particle < s.first + s.count)
+            reason = divergence_reason(points[particle], settings.position_bound)
+            raise DivergenceError(frame, slot.name, particle - slot.first, points[particle], reason)
+        hidden = None
+        if model.tears and sim.torn_count() != torn:  # one integer per frame; the stick flags only on change
+            torn = sim.torn_count()
+            hidden = model.hidden_faces(sim.torn_sticks())
+        write(frame, model.split(points), sim.colliders.moving_centres(), hidden)
+        if progress is not None:
+            progress(frame)
