@@ -14,7 +14,9 @@ A second table breaks a frame down by stage (integrate, relax, collide, tear, US
 the simulator's ``stages()`` is run on its own for 12 substeps with a device synchronisation around it (so
 on CUDA these are launch-by-launch figures, without graph replay), scaled to one frame. A stage the scene
 does not have is never run and shows 0. ``USD write`` is the host copy plus one ``write_frame`` into a
-temporary .usdc.
+temporary .usdc. "relax GB/s" is the bytes the relaxation must move (RELAX_BYTES_PER_PROJECTION per stick
+projection) over its measured time; on CUDA it is also given as a share of the card's device-to-device
+copy rate, measured in the same run.
 """
 
 from __future__ import annotations
@@ -39,6 +41,10 @@ from warp_verlet.simulator import Simulator  # noqa: E402
 FRAMES, WARM_UP = 60, 2
 STAGES = ("integrate", "relax", "collide", "tear", "USD write")
 STAGE_SUBSTEPS = 12
+# Bytes one stick projection must move in relax_colour: its ends (vec2i), rest and stiffness, both inverse
+# masses, and both positions read and written. Caches can only lower the real traffic (neighbouring sticks
+# share particles), so bytes / time is a lower bound on the bandwidth the kernel reaches.
+RELAX_BYTES_PER_PROJECTION = 8 + 4 + 4 + 2 * 4 + 2 * 12 + 2 * 12
 
 
 def bench_scene(n: int, substeps: int, iterations: int, colliders: bool, tear: float | None):
@@ -92,7 +98,7 @@ def array_bytes(sim: Simulator) -> tuple[int, int]:
 
 
 def measure(n: int, device: str, repeats: int, use_graph: bool, substeps: int, iterations: int,
-            colliders: bool = False, tear: float | None = None) -> tuple[dict, dict]:
+            colliders: bool = False, tear: float | None = None, copy_gbs: float | None = None) -> tuple[dict, dict]:
     scene = bench_scene(n, substeps, iterations, colliders, tear)
     sim = Simulator(scene, device, use_graph=use_graph)
     sim.step_frame()  # warm-up: compiles kernels, initialises the Verlet state
@@ -123,6 +129,10 @@ def measure(n: int, device: str, repeats: int, use_graph: bool, substeps: int, i
     if tear is not None:
         row["torn"] = sim.torn_count()
     stages = {"grid": f"{n}x{n}", **stage_breakdown(sim)}
+    relax_gbs = projections * RELAX_BYTES_PER_PROJECTION / (stages["relax"] * 1e-3) / 1e9 if stages["relax"] else 0.0
+    stages["relax GB/s"] = f"{relax_gbs:.0f}"
+    if copy_gbs:
+        stages["of copy"] = f"{relax_gbs / copy_gbs * 100:.0f}%"
     return row, stages
 
 
@@ -151,10 +161,11 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
     wp.config.quiet = True
     device = wp.get_device(args.device) if args.device else wp.get_device()
+    copy_gbs = copy_bandwidth(device) if device.is_cuda else None
     rows, stage_rows = [], []
     for n in args.sizes:
         row, stages = measure(n, str(device), args.repeats, not args.no_graph, args.substeps, args.iterations,
-                              args.colliders, args.tear)
+                              args.colliders, args.tear, copy_gbs)
         rows.append(row)
         stage_rows.append(stages)
         print(row, flush=True)
@@ -162,15 +173,16 @@ def main(argv=None) -> int:
     title = (f"Hanging cloth{extras} at 1 s, {args.substeps} substeps x {args.iterations} iterations, coloured "
              f"Gauss-Seidel{'' if device.is_cpu or not args.no_graph else ', no graph capture'}: {machine(device)}, "
              f"{date.today()}")
-    if device.is_cuda:
-        title += f"; device copy {copy_bandwidth(device):.0f} GB/s (read + write)"
+    if copy_gbs:
+        title += f"; device copy {copy_gbs:.0f} GB/s (read + write)"
     stem = "throughput" + ("-nograph" if args.no_graph and device.is_cuda else "")
     stem += ("-colliders" if args.colliders else "") + ("-tear" if args.tear else "")
     write_table(rows, args.out, stem, title)
     if len(rows) > 1:
         print(launch_bound_below(rows) + "\n")
     write_table(stage_rows, args.out, stem + "-stages", "ms per frame by stage, each stage run on its own "
-                f"({STAGE_SUBSTEPS} substeps, synchronised)")
+                f"({STAGE_SUBSTEPS} substeps, synchronised); relax GB/s counts {RELAX_BYTES_PER_PROJECTION} B "
+                "per stick projection")
     return 0
 
 
