@@ -1,12 +1,16 @@
-"""Command line: ``warp-verlet run|validate`` (also ``python -m warp_verlet``).
+"""Command line: ``warp-verlet run|validate|preview`` (also ``python -m warp_verlet``).
 
-Exit codes: 0 success, 1 a run failed (divergence, unwritable output, device), 2 invalid scene or
+Exit codes: 0 success, 1 a run failed (divergence, unwritable output, device), 2 invalid scene, cache or
 arguments, 130 interrupted (the cache holds the frames done).
+
+Heavy modules are imported by the command that needs them: validate imports none of warp, pxr and
+matplotlib, and preview imports pxr and matplotlib but never warp.
 """
 
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 from pathlib import Path
 
@@ -25,6 +29,34 @@ def _positive_int(text: str) -> int:
     return value
 
 
+_SLICE_PART = re.compile(r"\s*(-?\d+)?\s*")  # a whole number, or nothing
+
+
+def parse_frame_slice(text: str) -> slice:
+    """``A:B:S`` over frame numbers (any part may be empty), or ``N`` for frame N alone."""
+    parts = [_SLICE_PART.fullmatch(part) for part in text.split(":")]
+    if len(parts) > 3 or not all(parts) or (len(parts) == 1 and parts[0][1] is None):
+        raise argparse.ArgumentTypeError(f"expected A:B:S or N in whole frame numbers (e.g. 0:61:20), got {text!r}")
+    values = [int(m[1]) if m[1] is not None else None for m in parts]
+    if len(values) == 1:
+        return slice(values[0], values[0] + 1)
+    start, stop, step = values + [None] * (3 - len(values))
+    if step is not None and step < 1:
+        raise argparse.ArgumentTypeError(f"the step S must be at least 1, got {step} in {text!r}")
+    return slice(start, stop, step)
+
+
+def parse_size(text: str) -> tuple[int, int]:
+    """``WxH`` in pixels."""
+    match = re.fullmatch(r"\s*(\d+)\s*[xX]\s*(\d+)\s*", text)
+    if not match:
+        raise argparse.ArgumentTypeError(f"expected WxH in pixels (e.g. 800x600), got {text!r}")
+    width, height = int(match[1]), int(match[2])
+    if not (16 <= width <= 8192 and 16 <= height <= 8192):
+        raise argparse.ArgumentTypeError(f"width and height must lie in 16 .. 8192 pixels, got {text!r}")
+    return width, height
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="warp-verlet",
@@ -40,9 +72,29 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--frames", type=_positive_int, help="number of frames (default: the scene's)")
     run.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     run.add_argument("-v", "--verbose", action="store_true", help="show Warp's device and kernel-compilation messages")
+    run.add_argument("--preview", action="store_true",
+                     help="after a successful run, also render <cache stem>.png next to the cache (as "
+                          "`warp-verlet preview CACHE -o <cache stem>.png` would)")
 
     validate = commands.add_parser("validate", help="check a scene file without running it")
     validate.add_argument("scene", type=Path)
+
+    preview = commands.add_parser(
+        "preview", help="render a USD point cache to a PNG or an animated GIF (no simulator needed)",
+        description="Render a point cache headlessly with matplotlib: a .png shows up to 4 frames as panels, "
+                    "a .gif animates the frames. See docs/preview.md.",
+    )
+    preview.add_argument("cache", type=Path, help="point cache (.usd, .usdc or .usda) written by `warp-verlet run`")
+    preview.add_argument("-o", "--output", type=Path, required=True,
+                         help="output image: .png (still) or .gif (animation)")
+    preview.add_argument("--frames", type=parse_frame_slice, metavar="A:B:S",
+                         help="frames to draw, as a Python slice over frame numbers: from A (included) to B "
+                              "(excluded) every S; any part may be left out (A: the first frame, B: one past the "
+                              "last, S: 1); N alone means frame N. Must lie within the cache's frames. "
+                              "Default: all frames. A PNG draws at most 4 of the selected frames (the first, the "
+                              "last and evenly spaced ones between) as panels; a GIF at most 120, evenly spaced")
+    preview.add_argument("--size", type=parse_size, metavar="WxH",
+                         help="image size in pixels (default: 800x800 for a PNG, 480x480 for a GIF)")
     return parser
 
 
@@ -78,13 +130,31 @@ def _run(args) -> int:
         if bar is not None:
             bar.close()
     print(summary.format())
+    if args.preview:
+        from .preview import render_preview  # pxr and matplotlib, only when asked for
+
+        image = render_preview(summary.output, summary.output.with_suffix(".png"))
+        print(f"{'preview':<17}{image}")
+    return 0
+
+
+def _preview(args) -> int:
+    from .preview import PreviewError, render_preview  # pxr and matplotlib; never warp
+
+    try:
+        image = render_preview(args.cache, args.output, frames=args.frames, size=args.size)
+    except PreviewError as exc:  # a bad cache or option: the same exit code as a bad scene
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    print(f"{args.cache}: preview written to {image}")
     return 0
 
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    command = {"run": _run, "validate": _validate, "preview": _preview}[args.command]
     try:
-        return _validate(args) if args.command == "validate" else _run(args)
+        return command(args)
     except SceneError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

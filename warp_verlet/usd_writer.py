@@ -13,7 +13,7 @@ the set changes, since USD holds an array's value until its next sample. Nothing
 normals (renderers compute smooth ones), no velocities (they double the file size), and no holeIndices on a
 cloth that cannot tear.
 
-This is the only module that imports ``pxr``, and it never imports warp: writing and checking a cache
+This module and ``preview.py`` import ``pxr``; neither imports warp: writing, checking and previewing a cache
 must not pull in the simulator.
 """
 

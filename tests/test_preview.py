@@ -1,0 +1,387 @@
+"""warp-verlet preview: caches written by PointCacheWriter (no simulation) rendered to PNG and GIF, the
+polygons it draws (holes, decimation), frame selection, and the command line's answers to bad input."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from PIL import Image
+from pxr import Usd, UsdGeom, Vt
+
+from warp_verlet import preview
+from warp_verlet.cli import main, parse_frame_slice, parse_size
+from warp_verlet.usd_writer import CachedPlane, CachedShape, CachedSphere, PointCacheWriter
+
+FRAMES = 6  # frames 0..6
+
+
+def grid_faces(rows: int, cols: int) -> np.ndarray:
+    # The writer's (and topology.build_cloth's) layout: (r,c) -> (r+1,c) -> (r+1,c+1) -> (r,c+1).
+    r, c = np.meshgrid(np.arange(rows - 1), np.arange(cols - 1), indexing="ij")
+    a = (r * cols + c).ravel()
+    return np.stack([a, a + cols, a + cols + 1, a + 1], axis=1).astype(np.int32)
+
+
+def grid_points(rows: int, cols: int, sag: float = 0.0) -> np.ndarray:
+    """A vertical 1 m cloth in the XY plane, top edge at y = 1, bulging along +z by ``sag``."""
+    r, c = np.meshgrid(np.arange(rows), np.arange(cols), indexing="ij")
+    x, y = c / (cols - 1) - 0.5, 1.0 - r / (rows - 1)
+    z = sag * np.sin(np.pi * c / (cols - 1)) * (1.0 - y)
+    return np.stack([x, y, z], axis=-1).reshape(-1, 3).astype(np.float32)
+
+
+def write_cache(path, rows: int = 3, cols: int = 3, frames: int = FRAMES, colliders=(), up_axis: str = "Y",
+                rope: bool = False):
+    shapes = [CachedShape("cloth", grid_faces(rows, cols), np.zeros((rows * cols, 2), np.float32), rows * cols)]
+    if rope:
+        shapes.append(CachedShape("rope", np.zeros((0, 4), np.int32), np.zeros((4, 2), np.float32), 4))
+    moving = sum(isinstance(c, CachedSphere) and c.moving for c in colliders)
+    with PointCacheWriter(path, shapes, fps=30.0, up_axis=up_axis, colliders=colliders) as writer:
+        for f in range(frames + 1):
+            points = [grid_points(rows, cols, sag=0.05 * f)]
+            if rope:
+                points.append(np.stack([np.full(4, 0.8), np.linspace(1.0, 0.4, 4), np.zeros(4)], -1))
+            writer.write_frame(f, points, np.tile([0.1 * f, 0.5, 0.3], (moving, 1)))
+    return path
+
+
+def set_holes(path, samples: dict[int, list[int]], prim: str = "/World/cloth") -> None:
+    """Author holeIndices as the tearing writer does: sampled only at the frames where the set changes."""
+    stage = Usd.Stage.Open(str(path))
+    attr = UsdGeom.Mesh(stage.GetPrimAtPath(prim)).CreateHoleIndicesAttr()
+    for frame, faces in samples.items():
+        attr.Set(Vt.IntArray(faces), Usd.TimeCode(frame))
+    stage.Save()
+
+
+def as_set(polygons: np.ndarray) -> set:
+    return {tuple(map(tuple, np.round(np.asarray(p, np.float64), 6).tolist())) for p in polygons}
+
+
+@pytest.fixture
+def cache(tmp_path):
+    colliders = [CachedSphere("ball", 0.15, (0.0, 0.5, 0.3), moving=True),
+                 CachedPlane("ground", (0.0, 0.0, 0.0), (0.0, 1.0, 0.0), 1000.0)]
+    return write_cache(tmp_path / "cache.usdc", rows=9, cols=9, colliders=colliders, rope=True)
+
+
+def load_rgb(path) -> np.ndarray:
+    return np.asarray(Image.open(path).convert("RGB"), dtype=np.float64)
+
+
+# ------------------------------------------------------------------------------------------- images
+
+
+def test_png_has_the_requested_size_and_is_not_blank(cache, capsys):
+    out = cache.parent / "p.png"
+    assert main(["preview", str(cache), "-o", str(out), "--size", "320x240"]) == 0
+    assert str(out) in capsys.readouterr().out
+    image = Image.open(out)
+    assert image.format == "PNG" and image.size == (320, 240)
+    pixels = load_rgb(out)
+    assert pixels.std() > 20  # a blank or single-colour canvas has (almost) none
+    # The cloth's red is there: some pixels are clearly redder than they are blue.
+    assert ((pixels[..., 0] - pixels[..., 2]) > 60).sum() > 100
+
+
+def test_png_default_size_and_single_frame(cache):
+    default, single = cache.parent / "d.png", cache.parent / "s.png"
+    assert main(["preview", str(cache), "-o", str(default)]) == 0
+    assert main(["preview", str(cache), "-o", str(single), "--frames", "3"]) == 0
+    assert Image.open(default).size == preview.DEFAULT_SIZE[".png"] == Image.open(single).size
+    assert not np.array_equal(load_rgb(default), load_rgb(single))  # 4 panels vs 1
+
+
+def test_gif_has_one_image_per_frame_that_change(cache):
+    out = cache.parent / "a.gif"
+    assert main(["preview", str(cache), "-o", str(out), "--size", "200x160", "--frames", "0:7:2"]) == 0
+    image = Image.open(out)
+    assert image.format == "GIF" and image.size == (200, 160)
+    assert image.n_frames == 4  # frames 0, 2, 4, 6
+    frames = []
+    for k in range(image.n_frames):
+        image.seek(k)
+        frames.append(np.asarray(image.convert("RGB"), dtype=np.float64))
+    assert all(f.std() > 20 for f in frames)
+    assert not np.array_equal(frames[0], frames[-1])  # the cloth sags and the sphere moves
+
+
+def test_gif_is_thinned_to_at_most_120_frames(tmp_path):
+    path = write_cache(tmp_path / "long.usdc", frames=200)
+    cache = preview.open_cache(path)
+    shown = preview.evenly_spaced(preview.select_frames(None, cache.frames), preview.MAX_GIF_FRAMES)
+    assert len(shown) == 120 and shown[0] == 0 and shown[-1] == 200 and shown == sorted(set(shown))
+
+
+# ---------------------------------------------------------------------------------- what gets drawn
+
+
+def test_hidden_faces_are_not_drawn_and_holes_are_held_between_samples(tmp_path):
+    path = write_cache(tmp_path / "torn.usdc", rows=3, cols=3)  # 2 x 2 faces
+    set_holes(path, {0: [], 3: [1]})
+    cache = preview.open_cache(path)
+    faces = grid_faces(3, 3)
+    every = {f: as_set(grid_points(3, 3, sag=0.05 * f)[faces]) for f in range(FRAMES + 1)}
+    face1 = {f: as_set(grid_points(3, 3, sag=0.05 * f)[faces[[1]]]) for f in range(FRAMES + 1)}
+    for frame in (0, 2):
+        assert as_set(preview.read_frame(cache, frame).cloths[0]) == every[frame]
+    for frame in (3, 5):  # sampled at 3, held at 5
+        drawn = as_set(preview.read_frame(cache, frame).cloths[0])
+        assert len(drawn) == 3 and drawn == every[frame] - face1[frame]
+
+
+def test_a_mesh_that_never_tears_draws_every_face(tmp_path):
+    path = write_cache(tmp_path / "whole.usdc", rows=4, cols=5)
+    cache = preview.open_cache(path)
+    assert not cache.cloths[0].prim.GetHoleIndicesAttr().HasAuthoredValue()
+    assert cache.cloths[0].grid == (4, 5)
+    assert preview.read_frame(cache, 2).cloths[0].shape == (12, 4, 3)
+
+
+def test_decimation_keeps_the_outline_and_caps_the_quads():
+    rows = cols = 1025  # 1024 x 1024 faces
+    faces, points = grid_faces(rows, cols), grid_points(rows, cols, sag=0.2)
+    assert preview.grid_shape(faces, len(points)) == (rows, cols)
+    quads = preview.visible_polygons(points, faces, grid=(rows, cols))
+    assert quads.shape == (64 * 64, 4, 3)
+    fine = points.reshape(rows, cols, 3)
+    # Coarse quad 0 starts at the fine grid's top-left corner and the last one ends at its bottom-right;
+    # the first row's last quad and the last row's first quad reach the other two corners.
+    np.testing.assert_array_equal(quads[0, 0], fine[0, 0])
+    np.testing.assert_array_equal(quads[63, 3], fine[0, -1])
+    np.testing.assert_array_equal(quads[-64, 1], fine[-1, 0])
+    np.testing.assert_array_equal(quads[-1, 2], fine[-1, -1])
+    # A coarse quad is hidden if any fine face under it is: one torn face costs exactly one coarse quad.
+    r, c = 500, 700
+    torn = preview.visible_polygons(points, faces, hidden=[r * (cols - 1) + c], grid=(rows, cols))
+    assert len(torn) == 64 * 64 - 1
+    missing = as_set(quads) - as_set(torn)
+    assert len(missing) == 1
+    (corners,) = [np.array(q) for q in missing]
+    assert corners[:, 0].min() <= fine[r, c, 0] and fine[r, c + 1, 0] <= corners[:, 0].max()
+    assert corners[:, 1].min() <= fine[r + 1, c, 1] and fine[r, c, 1] <= corners[:, 1].max()
+
+
+def test_small_grids_are_drawn_whole_and_other_meshes_face_by_face():
+    faces, points = grid_faces(10, 12), grid_points(10, 12)
+    whole = preview.visible_polygons(points, faces, grid=preview.grid_shape(faces, len(points)))
+    assert as_set(whole) == as_set(points[faces])
+    shuffled = faces[np.random.default_rng(0).permutation(len(faces))]
+    assert preview.grid_shape(shuffled, len(points)) is None
+    assert preview.grid_shape(np.zeros((0, 4), int), 5) is None
+    drawn = preview.visible_polygons(points, shuffled, hidden=[0, 1])
+    assert as_set(drawn) == as_set(points[shuffled[2:]])
+
+
+def test_a_huge_ground_plane_is_clipped_to_the_cloth(cache):
+    c = preview.open_cache(cache)
+    geometries = [preview.read_frame(c, f) for f in c.frames]
+    view, planes = preview.fit_view(geometries, c.up_axis)
+    assert (view.hi - view.lo).max() < 3.0  # the 1000 m ground would have made it 1000
+    assert all(len(p) == 1 for p in planes)
+    ground = planes[0][0]
+    assert np.allclose(ground[:, 1], 0.0)  # still the ground, at its height
+    xs = geometries[0].cloths[0][..., 0]
+    assert ground[:, 0].min() < xs.min() and ground[:, 0].max() > xs.max()  # and it reaches past the cloth
+
+
+def test_y_up_is_drawn_vertical_by_a_rotation():
+    m = preview.to_display(np.eye(3), "Y")  # rows: the images of x, y and z
+    np.testing.assert_array_equal(m[1], [0, 0, 1])  # stage Y is matplotlib's vertical
+    assert np.linalg.det(m) == 1.0  # a rotation, not a mirror: fronts stay fronts
+    np.testing.assert_array_equal(preview.to_display(np.eye(3), "Z"), np.eye(3))
+
+
+# --------------------------------------------------------------------------------- frame selection
+
+
+@pytest.mark.parametrize("text, expected", [
+    ("0:10:2", slice(0, 10, 2)), ("5:", slice(5, None, None)), (":8", slice(None, 8, None)),
+    ("::3", slice(None, None, 3)), (":", slice(None, None, None)), ("7", slice(7, 8, None)),
+    (" 2:4 ", slice(2, 4, None)),
+])
+def test_frame_slice_syntax(text, expected):
+    assert parse_frame_slice(text) == expected
+
+
+@pytest.mark.parametrize("text", ["", "a:b", "1:2:3:4", "1.5:3", "0:10:0", "0:10:-1", "-", "1,2"])
+def test_frame_slice_syntax_errors(text):
+    import argparse
+
+    with pytest.raises(argparse.ArgumentTypeError):
+        parse_frame_slice(text)
+
+
+def test_select_frames_is_a_slice_over_frame_numbers():
+    frames = range(3, 11)  # a cache starting at frame 3
+    assert preview.select_frames(None, frames) == list(frames)
+    assert preview.select_frames(slice(4, 9, 2), frames) == [4, 6, 8]
+    assert preview.select_frames(slice(None, 5, None), frames) == [3, 4]
+    assert preview.select_frames(slice(8, None, None), frames) == [8, 9, 10]
+    assert preview.select_frames(slice(10, 11, None), frames) == [10]
+
+
+@pytest.mark.parametrize("frames, words", [
+    (slice(0, 5, None), "frame 0 is not in the cache"), (slice(11, None, None), "frame 11 is not in the cache"),
+    (slice(3, 12, None), "the end 12 is past the last frame"), (slice(5, 5, None), "selects no frame"),
+])
+def test_select_frames_errors_name_the_option_and_the_range(frames, words):
+    with pytest.raises(preview.PreviewError) as err:
+        preview.select_frames(frames, range(3, 11), "c.usdc")
+    assert str(err.value).startswith("--frames: ") and words in str(err.value)
+    assert "c.usdc holds frames 3 to 10" in str(err.value)
+
+
+def test_evenly_spaced_keeps_both_ends():
+    assert preview.evenly_spaced(range(0, 121), 4) == [0, 40, 80, 120]
+    assert preview.evenly_spaced([2, 5], 4) == [2, 5]
+
+
+def test_size_syntax():
+    import argparse
+
+    assert parse_size("640x480") == (640, 480)
+    for bad in ("640", "640x", "x480", "640*480", "8x8", "640x99999"):
+        with pytest.raises(argparse.ArgumentTypeError):
+            parse_size(bad)
+
+
+# ------------------------------------------------------------------------------------ command line
+
+
+def preview_rc(capsys, *args) -> tuple[int, str]:
+    rc = main(["preview", *map(str, args)])
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and err.count("\n") == 1  # one message, no traceback
+    return rc, err
+
+
+def test_bad_inputs_exit_2_with_one_message_naming_the_file(cache, tmp_path, capsys):
+    out = tmp_path / "p.png"
+    rc, err = preview_rc(capsys, tmp_path / "missing.usdc", "-o", out)
+    assert rc == 2 and "missing.usdc: no such file" in err
+
+    text = tmp_path / "notes.usda"
+    text.write_text("this is not USD\n")
+    rc, err = preview_rc(capsys, text, "-o", out)
+    assert rc == 2 and "notes.usda: not a USD file" in err and "stage.cpp" not in err
+
+    empty = tmp_path / "empty.usda"
+    stage = Usd.Stage.CreateNew(str(empty))
+    stage.DefinePrim("/World", "Xform")
+    stage.Save()
+    del stage
+    rc, err = preview_rc(capsys, empty, "-o", out)
+    assert rc == 2 and "empty.usda: no cloth in the cache" in err
+
+    rc, err = preview_rc(capsys, cache, "-o", tmp_path / "p.jpg")
+    assert rc == 2 and "p.jpg: the preview must be a .png" in err
+
+    rc, err = preview_rc(capsys, cache, "-o", out, "--frames", "0:99")
+    assert rc == 2 and "--frames: the end 99" in err and "cache.usdc holds frames 0 to 6" in err
+    assert not out.exists() and not (tmp_path / "p.jpg").exists()
+
+
+def test_bad_option_syntax_is_an_argparse_error_naming_the_option(cache, capsys):
+    for option, value in (("--frames", "x:y"), ("--size", "big")):
+        with pytest.raises(SystemExit) as exit_:
+            main(["preview", str(cache), "-o", str(cache.parent / "p.png"), option, value])
+        assert exit_.value.code == 2
+        assert f"argument {option}:" in capsys.readouterr().err
+
+
+def test_unwritable_output_exits_1_and_names_the_file(cache, tmp_path, capsys, monkeypatch):
+    rc, err = preview_rc(capsys, cache, "-o", tmp_path / "no" / "dir" / "p.png")
+    assert rc == 1 and "cannot write preview" in err and "p.png" in err and "does not exist" in err
+    rc, err = preview_rc(capsys, cache, "-o", cache / "p.png")  # the "directory" is the cache file
+    assert rc == 1 and "p.png" in err and "is not a directory" in err
+    # Permissions cannot be tested by chmod when the tests run as root, so ask the check itself.
+    monkeypatch.setattr(preview.os, "access", lambda path, mode: False)
+    rc, err = preview_rc(capsys, cache, "-o", tmp_path / "p.png")
+    assert rc == 1 and "p.png" in err and "is not writable" in err
+    assert not (tmp_path / "p.png").exists()
+
+
+def test_a_failed_write_leaves_no_partial_file(cache, tmp_path, capsys, monkeypatch):
+    from matplotlib.figure import Figure
+
+    def fail_halfway(self, fname, **kwargs):
+        with open(fname, "wb") as f:
+            f.write(b"\x89PNG half")
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(Figure, "savefig", fail_halfway)
+    out = tmp_path / "p.png"
+    rc, err = preview_rc(capsys, cache, "-o", out)
+    assert rc == 1 and "cannot write preview" in err and "No space left on device" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cache.usdc"]
+
+
+def test_an_existing_preview_is_replaced_whole(cache, tmp_path, capsys):
+    out = tmp_path / "p.png"
+    out.write_bytes(b"old")
+    assert main(["preview", str(cache), "-o", str(out), "--size", "64x64"]) == 0
+    assert Image.open(out).size == (64, 64)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cache.usdc", "p.png"]
+
+
+RUN_SCENE = """
+[simulation]
+fps = 30
+frames = 3
+substeps = 1
+iterations = 2
+
+[output]
+path = "tiny.usdc"
+
+[[cloth]]
+name = "sheet"
+resolution = [4, 5]
+size = [0.3, 0.4]
+origin = [0.0, 1.0, 0.0]
+pins = ["top-left", "top-right"]
+"""
+
+
+def test_run_with_preview_writes_a_png_next_to_the_cache(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "tiny.toml").write_text(RUN_SCENE)
+    assert main(["run", "tiny.toml", "--device", "cpu", "-q", "--preview"]) == 0
+    out = capsys.readouterr().out
+    png = tmp_path / "tiny.png"
+    assert png.is_file() and "preview" in out and str(png.relative_to(tmp_path)) in out
+    assert Image.open(png).size == preview.DEFAULT_SIZE[".png"] and load_rgb(png).std() > 20
+
+
+def test_without_the_flag_run_writes_no_preview(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "tiny.toml").write_text(RUN_SCENE)
+    assert main(["run", "tiny.toml", "--device", "cpu", "-q"]) == 0
+    assert not (tmp_path / "tiny.png").exists() and "preview" not in capsys.readouterr().out
+
+
+# ------------------------------------------------------------------------------------------ imports
+
+
+def test_preview_needs_no_simulator_and_leaves_pyplot_alone(cache):
+    probe = (
+        "import sys; from warp_verlet.cli import main; "
+        "rc = main(['preview', 'cache.usdc', '-o', 'probe.png', '--size', '64x64']); "
+        "print(rc, *(m in sys.modules for m in ('warp', 'matplotlib.pyplot')))"
+    )
+    out = subprocess.run([sys.executable, "-c", probe], cwd=cache.parent, capture_output=True, text=True, check=True)
+    assert out.stdout.split()[-3:] == ["0", "False", "False"]
+
+
+def test_validate_imports_no_matplotlib(tmp_path):
+    (tmp_path / "tiny.toml").write_text(RUN_SCENE)
+    probe = (
+        "import sys; from warp_verlet.cli import main; rc = main(['validate', 'tiny.toml']); "
+        "print(rc, *(m in sys.modules for m in ('warp', 'pxr', 'matplotlib')))"
+    )
+    out = subprocess.run([sys.executable, "-c", probe], cwd=tmp_path, capture_output=True, text=True, check=True)
+    assert out.stdout.split()[-4:] == ["0", "False", "False", "False"]
