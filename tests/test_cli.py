@@ -113,7 +113,9 @@ def test_divergence_stops_names_the_frame_and_keeps_frames_done(scene_file, caps
 
 def test_validate_command(scene_file, capsys):
     assert main(["validate", str(scene_file)]) == 0
-    assert "valid scene, 2 cloth(s), 47 particles" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "valid scene, 2 cloth(s), 47 particles" in out
+    assert "memory: about 0.00 GiB of device arrays" in out
     assert main(["validate", str(scene_file.parent / "missing.toml")]) == 2
 
 

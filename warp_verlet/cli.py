@@ -104,6 +104,10 @@ def _validate(args) -> int:
     print(f"{args.scene}: valid scene, {len(scene.cloths)} cloth(s), {scene.particle_count} particles, "
           f"{sim.frames} frames at {sim.fps:g} fps, {sim.substeps} substeps x {sim.iterations} iterations, "
           f"solver {sim.solver}")
+    from .memory import estimate  # counts only: no warp
+
+    need = estimate(scene)
+    print(f"memory: {need.describe()}")
     return 0
 
 
