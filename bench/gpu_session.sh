@@ -13,7 +13,7 @@ exec > >(tee "$out/gpu-session.log") 2>&1
 python3 -m pip install -q --no-deps --no-build-isolation -e . 2>&1 | tail -2 \
   || { echo "editable install failed (old setuptools?): using the tree on PYTHONPATH"; ln -sfn ../kernels warp_verlet/kernels; }
 nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv,noheader | tee "$res/gpu.txt"
-python3 -m pytest -q -rs -p no:cacheprovider tests 2>&1 | tail -25 | tee "$res/pytest-cuda.txt"
+python3 -m pytest -q -rs -p no:cacheprovider tests ${PYTEST_ARGS:-} 2>&1 | tail -25 | tee "$res/pytest-cuda.txt"
 python3 bench/throughput.py --device cuda --sizes 64 256 512 1024 2048 --repeats 5 --out "$res"
 python3 bench/throughput.py --device cuda --sizes 64 1024 --repeats 3 --no-graph --out "$res"
 python3 bench/throughput.py --device cuda --sizes 64 1024 --repeats 3 --colliders --tear 1.5 --out "$res"
