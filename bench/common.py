@@ -44,12 +44,6 @@ def median_spread(values: list[float]) -> tuple[float, float]:
     return med, (max(values) - min(values)) / (2 * med) if med else 0.0
 
 
-def device_bytes(sim) -> int:
-    """Bytes of every Warp array the simulator and its model hold on the device."""
-    arrays = [v for v in list(vars(sim).values()) + list(vars(sim.model).values()) if isinstance(v, wp.array)]
-    return sum(a.capacity for a in arrays)
-
-
 def machine(device) -> str:
     if device.is_cuda:
         return f"{device.name} (CUDA), Warp {wp.__version__}"
@@ -85,3 +79,45 @@ def write_table(rows: list[dict], out_dir: Path | None, stem: str, title: str) -
             writer.writeheader()
             writer.writerows(rows)
     return text
+
+
+# ---------------------------------------------------------------- additions for work_precision / cpu_reference
+
+def quiet_warp() -> None:
+    """Silence Warp's banner and module-load lines: ``config.quiet`` up to Warp 1.x, ``log_level`` after."""
+    wp.config.quiet = True
+    if hasattr(wp.config, "log_level") and hasattr(wp, "LOG_WARNING"):
+        wp.config.log_level = wp.LOG_WARNING
+
+
+def cpu_model() -> str:
+    """The CPU's model name from /proc/cpuinfo (Linux), else what the platform module says."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.lower().startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def machine_lines(command: list[str] | None = None) -> list[str]:
+    """Markdown bullet lines describing where and how a CPU benchmark ran."""
+    import os
+    import shlex
+    import sys
+    from datetime import datetime
+
+    try:
+        load = " / ".join(f"{v:.2f}" for v in os.getloadavg())
+    except OSError:
+        load = "n/a"
+    lines = [
+        f"- CPU: {cpu_model()}, {os.cpu_count()} logical CPUs; Warp's CPU backend runs a kernel on 1 thread",
+        f"- load average (1 / 5 / 15 min) at the end: {load}",
+        f"- Warp {wp.__version__}, numpy {np.__version__}, Python {platform.python_version()}, {platform.system()}",
+        f"- date: {datetime.now().isoformat(timespec='seconds')}",
+    ]
+    if command is not None:
+        lines.append(f"- command: `{shlex.join([Path(sys.executable).name] + command)}`")
+    return lines

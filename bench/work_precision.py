@@ -1,0 +1,413 @@
+"""Error against run time: a work-precision sweep over iterations K, substeps S and solver.
+
+    python bench/work_precision.py [SCENE] [--iterations 1 2 4 ...] [--substeps 1 2 4 8 16]
+        [--solvers coloured jacobi] [--seconds 0.5] [--repeats 3] [--resolution N] [--out DIR] [--device cpu]
+
+For every (K, S, solver) point the scene (default scenes/hanging_cloth.toml) is simulated for ``--seconds``
+of simulated time (a whole number of frames at the scene's fps) from its initial state:
+
+- wall time per simulated second: one untimed warm-up run (Warp compiles its kernels in its first frame; it
+  also records the trajectory for the error below), then ``--repeats`` timed runs, each from a fresh
+  simulator at the initial state; the median is reported with the spread (min..max). The repeats must end
+  bit-identical to the warm-up run (the simulator is deterministic); any that do not are listed. (On CUDA
+  each timed run includes its one-off graph capture.)
+- stick projections per second: K * S * sticks * frames / wall.
+- constraint error at the final frame: RMS and max relative stretch |D - L| / L over structural sticks.
+- position error against a converged reference run of the same scene (by default S = 64, K = 128, coloured
+  Gauss-Seidel), as RMS particle distance divided by the cloth size (the largest ``size`` entry), two ways:
+  ``pos_error_traj`` is the RMS over every particle of every frame (the trajectory), ``pos_error`` over the
+  final frame only. A hanging cloth released at rest bounces, and a softer (less converged) cloth bounces at
+  a lower frequency, so the final-frame error depends on where in its bounce each run happens to end and is
+  not monotone in K; the trajectory error averages over the bounce, and the Pareto front uses it.
+  The reference is checked by re-running it at half its K and at half its S; those differences are printed
+  and written: errors near them are not resolved by this reference.
+
+Per-substep parameters: the scene's ``drag`` (velocity kept per substep) and soft stick stiffnesses k < 1
+(error removed per substep) are per-substep quantities, so changing S would change the physics itself
+(drag 0.999 at S = 64 removes 98% of the velocity per second, at S = 4 21%). Unless ``--literal`` is given,
+every point therefore uses drag^(S0/S) and 1 - (1 - k)^(S0/S), with S0 the scene's own substeps: the same
+damping and softness per second (and exactly the scene's values at S = S0), so that all points, and the
+reference, simulate one physical problem. k = 1 sticks are unchanged.
+
+Newton (optional peer): when ``import newton`` works, the same cloth also runs through Newton's VBD solver
+(bench/newton_peer.py) at ``--newton-points`` and its points join the table and plot; otherwise the sweep
+prints "Newton not installed: skipped".
+
+Outputs under ``--out`` (default bench/results/work_precision): work_precision.csv, reference.csv (the reference
+and its half-K / half-S differences), work_precision.md (machine,
+command line, reference and its convergence check, the table, the Pareto front) and work_precision.png
+(log-log, wall time per simulated second against the trajectory error with the Pareto front marked, against the
+final-frame error, and against the final RMS stretch).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import dataclasses
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import warp as wp
+
+try:
+    import tomllib
+except ModuleNotFoundError:  # Python 3.10
+    import tomli as tomllib
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+from common import machine_lines, quiet_warp  # noqa: E402
+import newton_peer  # noqa: E402
+
+from warp_verlet.scene import load_scene, parse_scene  # noqa: E402
+from warp_verlet.simulator import Simulator  # noqa: E402
+
+DEFAULT_SCENE = HERE.parent / "scenes" / "hanging_cloth.toml"
+COLUMNS = ["solver", "substeps", "iterations", "frames", "sticks", "wall_per_sim_s", "wall_min", "wall_max",
+           "Mproj_per_s", "stretch_rms", "stretch_max", "pos_error_traj", "pos_error", "pareto"]
+
+
+# ---------------------------------------------------------------- scenes
+
+def load(path: Path, resolution: int | None = None):
+    """The scene at ``path``; with ``resolution``, every cloth re-gridded to N x N before validation (so that
+    named pins such as "top-right" land on the new grid's corners)."""
+    if resolution is None:
+        return load_scene(path)
+    data = tomllib.loads(Path(path).read_text())
+    for cloth in data.get("cloth", []):
+        cloth["resolution"] = [resolution, resolution]
+    return parse_scene(data, str(path), Path(path))
+
+
+def point_scene(base, substeps: int, iterations: int, solver: str, frames: int, literal: bool = False):
+    """``base`` with S, K and the solver replaced; per-substep drag and soft stiffness rescaled to keep
+    their per-second effect unless ``literal``."""
+    s = base.simulation
+    ratio = s.substeps / substeps
+    settings = dataclasses.replace(s, substeps=substeps, iterations=iterations, solver=solver, frames=frames,
+                                   drag=s.drag if literal else s.drag ** ratio)
+    cloths = base.cloths
+    if not literal:
+        cloths = tuple(dataclasses.replace(c, stiffness={f: k if k >= 1.0 else 1.0 - (1.0 - k) ** ratio
+                                                         for f, k in c.stiffness.items()}) for c in base.cloths)
+    return dataclasses.replace(base, simulation=settings, cloths=cloths)
+
+
+def cloth_size(scene) -> float:
+    return max(max(c.size) for c in scene.cloths)
+
+
+# ---------------------------------------------------------------- runs
+
+def simulate(scene, device: str, frames: int) -> tuple[Simulator, float]:
+    """A fresh simulator run ``frames`` frames from the initial state; the simulator and the wall seconds."""
+    sim = Simulator(scene, device)
+    wp.synchronize_device(sim.device)
+    start = time.perf_counter()
+    for _ in range(frames):
+        sim.step_frame()
+    wp.synchronize_device(sim.device)
+    return sim, time.perf_counter() - start
+
+
+def trajectory(scene, device: str, frames: int) -> tuple[Simulator, np.ndarray]:
+    """An untimed run from the initial state: the simulator and its positions after every frame, (F, N, 3)."""
+    sim = Simulator(scene, device)
+    out = []
+    for _ in range(frames):
+        sim.step_frame()
+        out.append(sim.positions())
+    return sim, np.stack(out)
+
+
+def measure_point(scene, device: str, frames: int, repeats: int) -> dict:
+    """The untimed warm-up run (its trajectory), then ``repeats`` timed runs from the initial state, each of
+    which must end bit-identical to the warm-up run."""
+    sim, traj = trajectory(scene, device, frames)
+    times, identical = [], True
+    for _ in range(repeats):
+        timed, seconds = simulate(scene, device, frames)
+        times.append(seconds)
+        identical &= bool(np.array_equal(timed.positions(), traj[-1]))
+    return {"sim": sim, "trajectory": traj, "times": times, "identical": identical}
+
+
+def rms_distance(a: np.ndarray, b: np.ndarray) -> float:
+    """RMS of the particle distances between two (..., N, 3) position arrays (all frames and particles)."""
+    d = a.astype(np.float64) - b.astype(np.float64)
+    return float(np.sqrt(np.mean(np.sum(d * d, axis=-1))))
+
+
+def pareto(points: list[tuple[float, float]]) -> list[bool]:
+    """True for points no other point beats in both coordinates (lower is better in each)."""
+    out = []
+    for i, (e, t) in enumerate(points):
+        ok = math.isfinite(e) and math.isfinite(t)
+        for j, (e2, t2) in enumerate(points):
+            if j != i and e2 <= e and t2 <= t and (e2 < e or t2 < t):
+                ok = False
+                break
+        out.append(ok)
+    return out
+
+
+def run(scene, iterations, substeps, solvers, seconds=0.5, repeats=3, device="cpu", literal=False,
+        ref_substeps=64, ref_iterations=128, ref_solver="coloured", newton_points=(), log=print) -> dict:
+    fps = scene.simulation.fps
+    frames = max(1, round(seconds * fps))
+    sim_seconds = frames / fps
+    size = cloth_size(scene)
+    started = time.perf_counter()
+
+    # The reference, and its convergence check at half its K and half its S.
+    log(f"reference: S = {ref_substeps}, K = {ref_iterations}, {ref_solver}, {frames} frames "
+        f"({sim_seconds:.3f} s simulated)", flush=True)
+    ref_runs = {}
+    for key, (s_, k_) in {"ref": (ref_substeps, ref_iterations), "half K": (ref_substeps, max(1, ref_iterations // 2)),
+                          "half S": (max(1, ref_substeps // 2), ref_iterations)}.items():
+        t0 = time.perf_counter()
+        sim, traj = trajectory(point_scene(scene, s_, k_, ref_solver, frames, literal), device, frames)
+        ref_runs[key] = {"substeps": s_, "iterations": k_, "trajectory": traj, "stretch": sim.stretch()}
+        log(f"  {key:6s} S = {s_:3d}, K = {k_:4d}: {time.perf_counter() - t0:.1f} s wall, stretch rms "
+            f"{sim.stretch().rms:.3e}", flush=True)
+    traj_ref = ref_runs["ref"]["trajectory"]
+    x_ref = traj_ref[-1]
+    reference = {
+        "substeps": ref_substeps, "iterations": ref_iterations, "solver": ref_solver, "frames": frames,
+        "stretch_rms": ref_runs["ref"]["stretch"].rms, "stretch_max": ref_runs["ref"]["stretch"].max,
+        "half_K": {"iterations": ref_runs["half K"]["iterations"],
+                   "diff": rms_distance(ref_runs["half K"]["trajectory"][-1], x_ref) / size,
+                   "diff_traj": rms_distance(ref_runs["half K"]["trajectory"], traj_ref) / size},
+        "half_S": {"substeps": ref_runs["half S"]["substeps"],
+                   "diff": rms_distance(ref_runs["half S"]["trajectory"][-1], x_ref) / size,
+                   "diff_traj": rms_distance(ref_runs["half S"]["trajectory"], traj_ref) / size},
+    }
+    log(f"  reference vs half K: {reference['half_K']['diff_traj']:.2e} trajectory, {reference['half_K']['diff']:.2e} "
+        f"final frame; vs half S: {reference['half_S']['diff_traj']:.2e}, {reference['half_S']['diff']:.2e} "
+        f"(RMS distance / cloth size)", flush=True)
+
+    rows, total, done, nondeterministic = [], len(iterations) * len(substeps) * len(solvers), 0, []
+    for solver in solvers:
+        for s_ in substeps:
+            for k_ in iterations:
+                done += 1
+                m = measure_point(point_scene(scene, s_, k_, solver, frames, literal), device, frames, repeats)
+                sim, times = m["sim"], m["times"]
+                wall = float(np.median(times))
+                st = sim.stretch(m["trajectory"][-1])
+                row = {"solver": solver, "substeps": s_, "iterations": k_, "frames": frames,
+                       "sticks": sim.model.stick_count, "wall_per_sim_s": wall / sim_seconds,
+                       "wall_min": min(times) / sim_seconds, "wall_max": max(times) / sim_seconds,
+                       "Mproj_per_s": k_ * s_ * sim.model.stick_count * frames / wall / 1e6,
+                       "stretch_rms": st.rms, "stretch_max": st.max,
+                       "pos_error_traj": rms_distance(m["trajectory"], traj_ref) / size,
+                       "pos_error": rms_distance(m["trajectory"][-1], x_ref) / size}
+                rows.append(row)
+                if not m["identical"]:
+                    nondeterministic.append((solver, s_, k_))
+                log(f"[{done:3d}/{total}] {solver:8s} S = {s_:2d}, K = {k_:3d}: {row['wall_per_sim_s']:.4f} s per "
+                    f"simulated s ({row['wall_min']:.4f}..{row['wall_max']:.4f}), {row['Mproj_per_s']:6.1f} M proj/s, "
+                    f"position error {row['pos_error_traj']:.2e} trajectory, {row['pos_error']:.2e} final, "
+                    f"stretch rms {st.rms:.2e} max {st.max:.2e}  "
+                    f"[{time.perf_counter() - started:.0f} s]", flush=True)
+
+    newton_note = None
+    if newton_points:
+        if not newton_peer.available():
+            newton_note = newton_peer.SKIP_MESSAGE
+            log(newton_note)
+        else:
+            probe = Simulator(scene, device="cpu")  # for the stretch metric over the same structural sticks
+            for s_, k_ in newton_points:
+                sc = point_scene(scene, s_, k_, "coloured", frames, literal)
+                r = newton_peer.run(sc, s_, k_, frames, repeats, device)
+                wall = float(np.median(r["times"]))
+                st = probe.stretch(r["trajectory"][-1])
+                rows.append({"solver": "newton-vbd", "substeps": s_, "iterations": k_, "frames": frames,
+                             "sticks": "", "wall_per_sim_s": wall / sim_seconds,
+                             "wall_min": min(r["times"]) / sim_seconds, "wall_max": max(r["times"]) / sim_seconds,
+                             "Mproj_per_s": "", "stretch_rms": st.rms, "stretch_max": st.max,
+                             "pos_error_traj": rms_distance(r["trajectory"], traj_ref) / size,
+                             "pos_error": rms_distance(r["trajectory"][-1], x_ref) / size})
+                log(f"newton-vbd S = {s_:2d}, K = {k_:3d}: {rows[-1]['wall_per_sim_s']:.4f} s per simulated s, "
+                    f"position error {rows[-1]['pos_error_traj']:.2e} trajectory, {rows[-1]['pos_error']:.2e} final, "
+                    f"stretch rms {st.rms:.2e}", flush=True)
+            import newton
+
+            newton_note = (f"Newton {newton.__version__} VBD (tri_ke = tri_ka = {newton_peer.TRI_KE:g}, edge_ke = {newton_peer.EDGE_KE:g}, "
+                           "no drag): a membrane model, not sticks; its position error includes that model difference")
+
+    for row, on in zip(rows, pareto([(r["pos_error_traj"], r["wall_per_sim_s"]) for r in rows])):
+        row["pareto"] = int(on)
+    return {"rows": rows, "reference": reference, "frames": frames, "sim_seconds": sim_seconds, "size": size,
+            "nondeterministic": nondeterministic, "newton": newton_note, "elapsed": time.perf_counter() - started}
+
+
+# ---------------------------------------------------------------- output
+
+def _fmt(v):
+    return f"{v:.1f}" if isinstance(v, float) else str(v)
+
+
+def write_outputs(res: dict, out: Path, title: str, command: list[str], literal: bool, plot: bool = True) -> None:
+    out.mkdir(parents=True, exist_ok=True)
+    rows = res["rows"]
+    with open(out / "work_precision.csv", "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=COLUMNS)
+        writer.writeheader()
+        for r in rows:
+            writer.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
+    ref = res["reference"]
+    with open(out / "reference.csv", "w", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(["run", "solver", "substeps", "iterations", "diff_traj", "diff_final"])
+        writer.writerow(["reference", ref["solver"], ref["substeps"], ref["iterations"], 0.0, 0.0])
+        for key, name in (("half_K", "half K"), ("half_S", "half S")):
+            writer.writerow([name, ref["solver"], ref[key].get("substeps", ref["substeps"]),
+                             ref[key].get("iterations", ref["iterations"]), f"{ref[key]['diff_traj']:.6g}",
+                             f"{ref[key]['diff']:.6g}"])
+    front = sorted((r for r in rows if r["pareto"]), key=lambda r: r["pos_error_traj"])
+    lines = [
+        f"# Work-precision: {title}", "", *machine_lines(command), "",
+        f"Simulated {res['frames']} frames ({res['sim_seconds']:.3f} s) from the initial state per point; wall time is "
+        "the median of the timed repeats (min..max beside it), after an untimed warm-up run. Position error: RMS "
+        f"particle distance to the reference / cloth size ({res['size']:g} m), over all frames (trajectory) and at "
+        "the last frame (final); the Pareto front uses the trajectory error, since the final-frame error depends on "
+        "the phase of the cloth's bounce at that instant. Stretch: |D - L| / L over structural sticks at the last "
+        "frame.",
+        "",
+        ("Per-substep drag and soft stiffness as written in the scene at every S (--literal)." if literal else
+         "Drag and soft stick stiffness rescaled per point to the scene's per-second values (drag^(S0/S), "
+         "1 - (1 - k)^(S0/S)), so every point simulates the same physical problem."),
+        "",
+        f"Reference: S = {ref['substeps']}, K = {ref['iterations']}, {ref['solver']}; stretch RMS "
+        f"{ref['stretch_rms']:.3e}, max {ref['stretch_max']:.3e}. Convergence check (RMS distance / cloth size, "
+        f"trajectory / final frame): vs K = {ref['half_K']['iterations']}: {ref['half_K']['diff_traj']:.2e} / "
+        f"{ref['half_K']['diff']:.2e}; vs S = {ref['half_S']['substeps']}: {ref['half_S']['diff_traj']:.2e} / "
+        f"{ref['half_S']['diff']:.2e}. Position errors near these are not resolved.",
+        "",
+    ]
+    if res["newton"]:
+        lines += [res["newton"], ""]
+    if res["nondeterministic"]:
+        lines += [f"Repeats that did not end bit-identical: {res['nondeterministic']}", ""]
+    lines += ["## Pareto front (no other point is both faster and more accurate)", "",
+              "| solver | S | K | s wall / s simulated | position error, trajectory | final | stretch RMS |",
+              "|---|---|---|---|---|---|---|"]
+    lines += [f"| {r['solver']} | {r['substeps']} | {r['iterations']} | {r['wall_per_sim_s']:.4g} | "
+              f"{r['pos_error_traj']:.3g} | {r['pos_error']:.3g} | {r['stretch_rms']:.3g} |" for r in front]
+    lines += ["", "## All points", "",
+              "| solver | S | K | s wall / s simulated | min..max | M proj/s | position error, trajectory | final | "
+              "stretch RMS | stretch max | Pareto |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+    lines += [f"| {r['solver']} | {r['substeps']} | {r['iterations']} | {r['wall_per_sim_s']:.4g} | "
+              f"{r['wall_min']:.4g}..{r['wall_max']:.4g} | {_fmt(r['Mproj_per_s'])} | "
+              f"{r['pos_error_traj']:.3g} | {r['pos_error']:.3g} | {r['stretch_rms']:.3g} | {r['stretch_max']:.3g} | "
+              f"{'yes' if r['pareto'] else ''} |" for r in rows]
+    if plot:
+        lines += ["", "![work-precision](work_precision.png)"]
+    (out / "work_precision.md").write_text("\n".join(lines) + "\n")
+    if plot:
+        plot_front(res, out / "work_precision.png", title)
+
+
+def plot_front(res: dict, path: Path, title: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = res["rows"]
+    tiny = 1e-12
+    fig, axes = plt.subplots(1, 3, figsize=(20, 6.5), sharey=True)
+    substeps = sorted({r["substeps"] for r in rows})
+    cmap = plt.get_cmap("viridis")
+    colour = {s: cmap(i / max(1, len(substeps) - 1)) for i, s in enumerate(substeps)}
+    style = {"coloured": ("-", "o"), "jacobi": ("--", "s"), "newton-vbd": (":", "^")}
+    for ax, xkey, xlabel in (
+            (axes[0], "pos_error_traj", "position error over the trajectory: RMS distance to reference / cloth size"),
+            (axes[1], "pos_error", "position error at the final frame / cloth size"),
+            (axes[2], "stretch_rms", "RMS structural stretch |D - L| / L at the final frame")):
+        for solver in dict.fromkeys(r["solver"] for r in rows):
+            ls, marker = style.get(solver, ("-.", "x"))
+            for s in substeps:
+                pts = sorted((r for r in rows if r["solver"] == solver and r["substeps"] == s),
+                             key=lambda r: r["iterations"])
+                if not pts:
+                    continue
+                ax.plot([max(p[xkey], tiny) for p in pts], [p["wall_per_sim_s"] for p in pts], ls=ls, marker=marker,
+                        color=colour[s], ms=4, label=f"{solver}, S = {s}")
+        if xkey == "pos_error_traj":
+            front = sorted((r for r in rows if r["pareto"]), key=lambda r: r["pos_error_traj"])
+            xs, ys = [max(r["pos_error_traj"], tiny) for r in front], [r["wall_per_sim_s"] for r in front]
+            ax.step(xs, ys, where="post", color="red", lw=1.5, alpha=0.7, label="Pareto front")
+            ax.scatter(xs, ys, s=90, facecolors="none", edgecolors="red", lw=1.5, zorder=5)
+            for r in front:
+                ax.annotate(f"{r['solver'][0]} S{r['substeps']} K{r['iterations']}", (max(r["pos_error_traj"], tiny),
+                            r["wall_per_sim_s"]), fontsize=6, xytext=(4, 4), textcoords="offset points")
+            for key, ls in (("half_K", ":"), ("half_S", "-.")):
+                ax.axvline(max(res["reference"][key]["diff_traj"], tiny), color="grey", ls=ls, lw=1,
+                           label=f"reference vs its {key.replace('_', ' ')}")
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel(xlabel)
+        ax.grid(True, which="both", alpha=0.3)
+    axes[0].set_ylabel("wall seconds per simulated second")
+    axes[0].legend(fontsize=6, ncol=2)
+    fig.suptitle(title, fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+# ---------------------------------------------------------------- command line
+
+def _points(text: str) -> tuple[int, int]:
+    s, k = text.lower().split("x")
+    return int(s), int(k)
+
+
+def main(argv=None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("scene", nargs="?", type=Path, default=DEFAULT_SCENE)
+    p.add_argument("--iterations", type=int, nargs="+", default=[1, 2, 4, 8, 16, 32, 64])
+    p.add_argument("--substeps", type=int, nargs="+", default=[1, 2, 4, 8, 16])
+    p.add_argument("--solvers", nargs="+", choices=["coloured", "jacobi"], default=["coloured", "jacobi"])
+    p.add_argument("--seconds", type=float, default=0.5, help="simulated time per point (whole frames)")
+    p.add_argument("--repeats", type=int, default=3)
+    p.add_argument("--resolution", type=int, default=None, help="re-grid every cloth to N x N")
+    p.add_argument("--device", default="cpu")
+    p.add_argument("--ref-substeps", type=int, default=64)
+    p.add_argument("--ref-iterations", type=int, default=128)
+    p.add_argument("--ref-solver", choices=["coloured", "jacobi"], default="coloured")
+    p.add_argument("--literal", action="store_true", help="keep the scene's per-substep drag and stiffness at every S")
+    p.add_argument("--newton-points", type=_points, nargs="*", default=[(4, 2), (4, 8)], metavar="SxK",
+                   help="Newton VBD points (substeps x iterations), run when `import newton` works")
+    p.add_argument("--no-plot", action="store_true")
+    p.add_argument("--out", type=Path, default=HERE / "results" / "work_precision")
+    args = p.parse_args(argv)
+    quiet_warp()
+    scene = load(args.scene, args.resolution)
+    res = run(scene, args.iterations, args.substeps, args.solvers, args.seconds, args.repeats, args.device,
+              args.literal, args.ref_substeps, args.ref_iterations, args.ref_solver, args.newton_points)
+    grid = " + ".join(f"{c.resolution[0]}x{c.resolution[1]}" for c in scene.cloths)
+    title = (f"{args.scene.name} ({grid}), {res['sim_seconds']:.3f} s simulated, device {args.device}, "
+             f"reference S = {args.ref_substeps}, K = {args.ref_iterations} {args.ref_solver}")
+    write_outputs(res, args.out, title, ["bench/work_precision.py", *argv], args.literal, plot=not args.no_plot)
+    front = [r for r in res["rows"] if r["pareto"]]
+    print(f"Pareto front ({len(front)} points):")
+    for r in sorted(front, key=lambda r: r["pos_error_traj"]):
+        print(f"  {r['solver']:10s} S = {r['substeps']:2d}, K = {r['iterations']:3d}: {r['wall_per_sim_s']:.4f} s per "
+              f"simulated s, position error {r['pos_error_traj']:.2e} trajectory ({r['pos_error']:.2e} final), "
+              f"stretch rms {r['stretch_rms']:.2e}")
+    print(f"wrote {args.out}/work_precision.csv, .md, .png in {res['elapsed']:.0f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
