@@ -98,6 +98,28 @@ class Simulator:
             self._clamp = self.colliders.record(self.x, self.x_inertial, self.delta, self.model.inv_mass)
             self._tear = self._record_tear_launch()
         self._stages = self.stages()
+        self._relaxes = "relax" in dict(self._stages)
+        self.min_dt = self._smallest_resolved_dt()
+        if self.settings.dt < self.min_dt:
+            raise WarpVerletError(self._too_small(self.settings.dt) + " (raise it with fewer simulation.substeps)")
+
+    def _smallest_resolved_dt(self) -> float:
+        """The smallest dt whose gravity-and-wind step |a| dt^2 is at least 4 float32 spacings of the scene's
+        coordinates. Below it, x + step rounds back to x, the relaxation corrects the rounding-level stick
+        errors, and that correction enters the implicit velocity and cancels the acceleration: a cloth at
+        dt = 1e-5 s does not fall at all, at 1e-4 s (|a| dt^2 below one spacing) it falls 1.8% short. Without
+        relaxation nothing feeds rounding back into velocity, so there is no limit."""
+        a = float(np.linalg.norm(np.add(self.settings.gravity, self.settings.wind)))
+        if not self._relaxes or a == 0.0:
+            return 0.0
+        scale = float(np.abs(self.model.rest_positions).max()) if self.model.particle_count else 1.0
+        return float(np.sqrt(4.0 * np.spacing(np.float32(max(scale, 1e-3))) / a))
+
+    def _too_small(self, dt: float) -> str:
+        return (f"dt = {dt:.3g} s is too small for float32 positions: one step's acceleration moves a particle by "
+                f"|a| dt^2 = {np.linalg.norm(np.add(self.settings.gravity, self.settings.wind)) * dt * dt:.2g} m, "
+                f"under 4 float32 spacings of this scene's coordinates, so the relaxation's rounding would cancel "
+                f"it; the smallest dt resolved here is {self.min_dt:.3g} s")
 
     def _record_tear_launch(self):
         m = self.model
@@ -137,6 +159,17 @@ class Simulator:
         dt = self.settings.dt if dt is None else float(dt)
         if not (dt > 0.0 and np.isfinite(dt)):
             raise ValueError(f"dt must be a positive finite number of seconds, got {dt}")
+        if dt < self.min_dt:
+            raise WarpVerletError(self._too_small(dt))
+        if self._relaxes and self._dt_prev is not None and dt * self.settings.max_dt_ratio < self._dt_prev:
+            # The relaxation leaves a residual stretch after each step; a much shorter step removes it within
+            # that step, and Verlet turns the move into velocity residual / dt: energy from nowhere (a drop
+            # from 1/240 s to 1e-5 s gave a hanging cloth 10x the kinetic energy gravity had released).
+            # Without relaxation there is no residual, and any sequence of steps is exact (test_integrate).
+            raise WarpVerletError(
+                f"dt fell from {self._dt_prev:.3g} s to {dt:.3g} s in one step; a step may shrink by at most a "
+                f"factor max_dt_ratio = {self.settings.max_dt_ratio:g} (shrink it over several steps), or the "
+                "relaxation's residual stretch would turn into spurious velocity")
         with wp.ScopedDevice(self.device):
             self._substep(dt)
 

@@ -1,0 +1,640 @@
+"""Loader fuzzing beyond tests/test_scene_validation.py.
+
+That file fuzzes one-line-per-key documents (every table inline), nearly valid scenes with random values
+written over them, and random or spliced bytes of one shipped scene; it checks only that nothing but
+SceneError escapes. Here, with hypothesis and a small TOML serialiser that writes real ``[table]`` and
+``[[array]]`` headers (checked to round-trip through tomllib first):
+
+- random structured documents, weighted to the real section and key names, raise only SceneError;
+- every known key, given a value of a wrong type, raises SceneError naming that key (or an element of it);
+- every numeric key, given huge, tiny, negative or zero numbers, either loads with exactly that value inside
+  its documented range or raises SceneError naming the key: the loader never accepts an out-of-range value;
+- unknown unicode keys are reported as unknown under their own dotted path; unicode names, choices and pin
+  names are refused unless valid, and a unicode output path loads unchanged;
+- any subset of sections and keys left out: loads with the documented defaults, or, when a required key is
+  missing, raises SceneError saying so for one of the missing required keys;
+- every shipped scene truncated at every byte offset: SceneError or a valid Scene, never anything else;
+- random valid scenes (every key, drawn inside its documented range) load and read back what was written.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import sys
+from pathlib import Path
+
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from warp_verlet.errors import SceneError
+from warp_verlet.scene import (NAMED_PINS, ClothSpec, OutputSettings, PlaneCollider, Scene, SimulationSettings,
+                               SphereCollider, load_scene)
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+SCENES = Path(__file__).resolve().parent.parent / "scenes"
+FUZZ = settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+
+# ---------------------------------------------------------------------------------------------- a TOML serialiser
+
+_ESCAPES = {'"': '\\"', "\\": "\\\\", "\b": "\\b", "\t": "\\t", "\n": "\\n", "\f": "\\f", "\r": "\\r"}
+_BARE_KEY = re.compile(r"[A-Za-z0-9_-]+")
+
+
+def toml_string(s: str) -> str:
+    out = []
+    for ch in s:
+        if ch in _ESCAPES:
+            out.append(_ESCAPES[ch])
+        elif ord(ch) < 0x20 or ord(ch) == 0x7F:
+            out.append(f"\\u{ord(ch):04X}")
+        else:
+            out.append(ch)
+    return '"' + "".join(out) + '"'
+
+
+def toml_key(k: str) -> str:
+    return k if _BARE_KEY.fullmatch(k) else toml_string(k)  # not match: "$" accepts a final newline
+
+
+def toml_value(v) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, int):
+        # decimal str() of a huge int hits Python's 4300-digit limit; TOML has no negative hex
+        return hex(v) if v > 0 and v.bit_length() > 1024 else str(v)
+    if isinstance(v, float):
+        if math.isnan(v):
+            return "nan"
+        if math.isinf(v):
+            return "inf" if v > 0 else "-inf"
+        return repr(v)
+    if isinstance(v, str):
+        return toml_string(v)
+    if isinstance(v, list):
+        return "[" + ", ".join(toml_value(x) for x in v) + "]"
+    if isinstance(v, dict):
+        return "{ " + ", ".join(f"{toml_key(k)} = {toml_value(x)}" for k, x in v.items()) + " }"
+    raise TypeError(type(v))
+
+
+def _is_table_array(v) -> bool:
+    return isinstance(v, list) and bool(v) and all(isinstance(x, dict) for x in v)
+
+
+def dump(doc: dict, path: tuple[str, ...] = ()) -> str:
+    """A document in block form: plain keys first, then each sub-table under a ``[a.b]`` header and each
+    non-empty array of tables as ``[[a.b]]`` blocks (their own sub-tables nested under them)."""
+    lines = []
+    for k, v in doc.items():
+        if not isinstance(v, dict) and not _is_table_array(v):
+            lines.append(f"{toml_key(k)} = {toml_value(v)}")
+    blocks = []
+    for k, v in doc.items():
+        header = ".".join(toml_key(p) for p in (*path, k))
+        if isinstance(v, dict):
+            blocks.append(f"[{header}]\n" + dump(v, (*path, k)))
+        elif _is_table_array(v):
+            for item in v:
+                blocks.append(f"[[{header}]]\n" + dump(item, (*path, k)))
+    return "\n".join(lines) + ("\n" if lines else "") + "".join("\n" + b for b in blocks)
+
+
+def same(a, b) -> bool:
+    """Equality that treats NaN as equal to NaN and keeps int and float apart."""
+    if isinstance(a, float) and isinstance(b, float) and math.isnan(a) and math.isnan(b):
+        return True
+    if type(a) is not type(b):
+        return False
+    if isinstance(a, dict):
+        return a.keys() == b.keys() and all(same(a[k], b[k]) for k in a)
+    if isinstance(a, list):
+        return len(a) == len(b) and all(same(x, y) for x, y in zip(a, b))
+    return a == b
+
+
+def load_text(tmp_path: Path, text: str | bytes, name: str = "fuzz.toml") -> Scene:
+    path = tmp_path / name
+    path.write_bytes(text if isinstance(text, bytes) else text.encode("utf-8"))
+    return load_scene(path)
+
+
+def load_doc(tmp_path: Path, doc: dict) -> Scene:
+    return load_text(tmp_path, dump(doc))
+
+
+def scene_error(tmp_path: Path, doc: dict) -> SceneError:
+    with pytest.raises(SceneError) as info:
+        load_doc(tmp_path, doc)
+    return info.value
+
+
+# ---------------------------------------------------------------------------------------------- strategies
+
+text = st.text(st.characters(codec="utf-8"), max_size=12)
+keys = text
+finite = st.floats(allow_nan=False, allow_infinity=False)
+scalars = st.one_of(
+    st.booleans(),
+    st.integers(min_value=-(2**63), max_value=2**63 - 1),
+    st.floats(),
+    text,
+)
+values = st.recursive(scalars, lambda c: st.lists(c, max_size=3) | st.dictionaries(keys, c, max_size=3), max_leaves=8)
+
+# Wrong-type value pools: each known key accepts one kind; the others are wrong for it.
+KINDS = {
+    "bool": st.booleans(),
+    "int": st.integers(min_value=-(2**70), max_value=2**70),
+    "float": st.floats().filter(lambda x: not x.is_integer() if math.isfinite(x) else True),
+    "string": text,
+    "array": st.lists(scalars, max_size=3),
+    "table": st.dictionaries(keys, scalars, max_size=3),
+}
+# What each key accepts: number = int or float; vector = array; table; string (choices and names).
+ACCEPTS = {"number": {"int", "float"}, "integer": {"int"}, "string": {"string"}, "array": {"array"},
+           "table": {"table"}}
+
+SIM_KEYS = {"fps": "number", "frames": "integer", "substeps": "integer", "iterations": "integer",
+            "gravity": "array", "wind": "array", "drag": "number", "solver": "string", "max_dt_ratio": "number",
+            "max_frame_time": "number", "position_bound": "number"}
+OUT_KEYS = {"path": "string", "save_every": "integer", "up_axis": "string", "meters_per_unit": "number"}
+CLOTH_KEYS = {"name": "string", "resolution": "array", "size": "array", "origin": "array", "orientation": "string",
+              "mass": "number", "sticks": "table", "pins": "array", "tear_threshold": "number",
+              "particle_masses": "array"}
+STICK_KEYS = {"structural": "number", "shear": "number", "bend": "number"}
+PLANE_KEYS = {"type": "string", "name": "string", "thickness": "number", "friction": "number", "normal": "array",
+              "point": "array", "display_size": "number"}
+SPHERE_KEYS = {"type": "string", "name": "string", "thickness": "number", "friction": "number", "radius": "number",
+               "centre": "array"}
+
+
+def full_scene() -> dict:
+    """A valid scene that gives every key (a moving sphere is a separate case: ``path`` excludes ``centre``).
+    Its pins and particle masses stay on row 0, so that any row count keeps them valid."""
+    return {
+        "simulation": {"fps": 60.0, "frames": 10, "substeps": 2, "iterations": 4, "gravity": [0.0, -9.81, 0.0],
+                       "wind": [1.0, 0.0, 0.5], "drag": 0.99, "solver": "coloured", "max_dt_ratio": 2.0,
+                       "max_frame_time": 0.1, "position_bound": 100.0},
+        "output": {"path": "fuzz.usdc", "save_every": 5, "up_axis": "Y", "meters_per_unit": 1.0},
+        "cloth": [{"name": "sheet", "resolution": [3, 4], "size": [0.5, 0.6], "origin": [0.0, 1.0, 0.0],
+                   "orientation": "vertical", "mass": 0.2, "sticks": {"structural": 1.0, "shear": 0.5, "bend": 0.1},
+                   "pins": ["top-left", 3, [0, 2]], "tear_threshold": 1.5, "particle_masses": [[0, 1, 0.05]]}],
+        "collider": [{"type": "plane", "name": "ground", "thickness": 0.01, "friction": 0.2, "normal": [0.0, 1.0, 0.0],
+                      "point": [0.0, -1.0, 0.0], "display_size": 4.0},
+                     {"type": "sphere", "name": "ball", "thickness": 0.0, "friction": 0.0, "radius": 0.2,
+                      "centre": [0.0, 0.5, 0.3]}],
+    }
+
+
+def known_key_paths() -> list[tuple[str, tuple, str]]:
+    """(dotted key as the loader names it, path into full_scene(), kind) for every known key."""
+    out = [("simulation", ("simulation",), "table"), ("output", ("output",), "table")]
+    out += [(f"simulation.{k}", ("simulation", k), kind) for k, kind in SIM_KEYS.items()]
+    out += [(f"output.{k}", ("output", k), kind) for k, kind in OUT_KEYS.items()]
+    out += [(f"cloth[0].{k}", ("cloth", 0, k), kind) for k, kind in CLOTH_KEYS.items()]
+    out += [(f"cloth[0].sticks.{k}", ("cloth", 0, "sticks", k), kind) for k, kind in STICK_KEYS.items()]
+    out += [(f"collider[0].{k}", ("collider", 0, k), kind) for k, kind in PLANE_KEYS.items()]
+    out += [(f"collider[1].{k}", ("collider", 1, k), kind) for k, kind in SPHERE_KEYS.items()]
+    return out
+
+
+def put(doc, path: tuple, value) -> None:
+    for p in path[:-1]:
+        doc = doc[p]
+    doc[path[-1]] = value
+
+
+def names_key(err: SceneError, key: str) -> bool:
+    return err.key is not None and (err.key == key or err.key.startswith((key + "[", key + ".")))
+
+
+# ---------------------------------------------------------------------------------------------- the serialiser
+
+
+@settings(max_examples=150, deadline=None)
+@given(doc=st.dictionaries(keys, values, max_size=5))
+def test_serialiser_round_trips_through_tomllib(doc):
+    assert same(tomllib.loads(dump(doc)), doc)
+
+
+def test_serialiser_writes_headers_and_full_scene_loads(tmp_path):
+    text = dump(full_scene())
+    assert "[simulation]" in text and "[[cloth]]" in text and "[cloth.sticks]" in text and "[[collider]]" in text
+    scene = load_text(tmp_path, text)
+    assert scene.cloths[0].tear_threshold == 1.5 and len(scene.colliders) == 2
+
+
+# ---------------------------------------------------------------------------------------------- random structure
+
+SECTION = st.sampled_from(["simulation", "output", "cloth", "collider"])
+KNOWN = sorted({*SIM_KEYS, *OUT_KEYS, *CLOTH_KEYS, *STICK_KEYS, *PLANE_KEYS, *SPHERE_KEYS, "path"})
+near_keys = st.one_of(st.sampled_from(KNOWN), keys)
+near_tables = st.dictionaries(near_keys, values, max_size=8)
+documents = st.dictionaries(
+    st.one_of(SECTION, keys),
+    st.one_of(near_tables, st.lists(near_tables, min_size=1, max_size=3), values),
+    max_size=5,
+)
+
+
+@FUZZ
+@given(doc=documents)
+def test_random_structured_documents_raise_only_scene_errors(tmp_path, doc):
+    try:
+        scene = load_doc(tmp_path, doc)
+    except SceneError as err:
+        assert err.problem and str(err).startswith(str(tmp_path / "fuzz.toml"))
+    else:
+        assert isinstance(scene, Scene) and scene.cloths
+
+
+# ---------------------------------------------------------------------------------------------- wrong types
+
+
+@pytest.mark.parametrize("key, path, kind", known_key_paths(), ids=[k for k, _, _ in known_key_paths()])
+@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(data=st.data())
+def test_wrong_type_for_every_known_key(tmp_path, key, path, kind, data):
+    wrong = [k for k in KINDS if k not in ACCEPTS[kind]]
+    value = data.draw(st.sampled_from(wrong).flatmap(lambda k: KINDS[k]), label="value")
+    doc = full_scene()
+    put(doc, path, value)
+    err = scene_error(tmp_path, doc)
+    assert names_key(err, key), f"{key}: {err}"
+
+
+# ---------------------------------------------------------------------------------------------- extreme numbers
+
+# Documented ranges (docs/scenes.md): (low, low_open, high, high_open, integer). None: unbounded.
+RANGES = {
+    ("simulation", "fps"): (0.0, True, None, False, False),
+    ("simulation", "frames"): (1, False, None, False, True),
+    ("simulation", "substeps"): (1, False, 10_000, False, True),
+    ("simulation", "iterations"): (0, False, 100_000, False, True),
+    ("simulation", "drag"): (0.0, False, 1.0, False, False),
+    ("simulation", "max_dt_ratio"): (1.0, False, None, False, False),
+    ("simulation", "max_frame_time"): (0.0, True, None, False, False),
+    ("simulation", "position_bound"): (0.0, True, None, False, False),
+    ("simulation", "gravity", 1): (None, False, None, False, False),
+    ("simulation", "wind", 0): (None, False, None, False, False),
+    ("output", "save_every"): (1, False, None, False, True),
+    ("output", "meters_per_unit"): (0.0, True, None, False, False),
+    ("cloth", 0, "mass"): (0.0, True, None, False, False),
+    ("cloth", 0, "tear_threshold"): (1.0, True, None, False, False),
+    ("cloth", 0, "size", 1): (0.0, True, None, False, False),  # 4 columns: > 0
+    ("cloth", 0, "origin", 2): (None, False, None, False, False),
+    ("cloth", 0, "resolution", 0): (1, False, 32_768, False, True),
+    ("cloth", 0, "sticks", "shear"): (0.0, False, 1.0, False, False),
+    ("cloth", 0, "particle_masses", 0, 2): (0.0, True, None, False, False),
+    ("collider", 0, "thickness"): (0.0, False, None, False, False),
+    ("collider", 0, "friction"): (0.0, False, 1.0, False, False),
+    ("collider", 0, "display_size"): (0.0, True, None, False, False),
+    ("collider", 0, "point", 1): (None, False, None, False, False),
+    ("collider", 1, "radius"): (0.0, True, None, False, False),
+    ("collider", 1, "centre", 0): (None, False, None, False, False),
+}
+
+extreme_numbers = st.one_of(
+    st.sampled_from([0, -0.0, 0.0, 1, -1, 1e-320, -1e-320, 5e-324, 1e308, -1e308, 1.7976931348623157e308,
+                     2**31, 2**63, -(2**63), 2**64, 10**309, -(10**309), 32_768, 32_769, 10_000, 10_001,
+                     100_000, 100_001, 1.0000000000000002, 0.9999999999999999]),
+    st.integers(min_value=-(2**1100), max_value=2**1100),
+    st.integers(min_value=0, max_value=3000).map(lambda b: 2**b),  # up to 900 digits
+    st.floats(allow_nan=False),
+)
+
+
+def dotted(path: tuple) -> str:
+    out = ""
+    for p in path:
+        out += f"[{p}]" if isinstance(p, int) else (f".{p}" if out else p)
+    return out
+
+
+def loaded_value(scene: Scene, path: tuple):
+    section = path[0]
+    if section == "simulation":
+        v = getattr(scene.simulation, path[1])
+        return v[path[2]] if len(path) > 2 else v
+    if section == "output":
+        return getattr(scene.output, path[1])
+    if section == "cloth":
+        spec = scene.cloths[path[1]]
+        name = {"sticks": "stiffness"}.get(path[2], path[2])
+        v = getattr(spec, name)
+        if name == "stiffness":
+            return v.get(path[3], 0.0)
+        if name == "particle_masses":
+            return v[path[3]][path[4]]
+        return v[path[3]] if len(path) > 3 else v
+    collider = scene.colliders[path[1]]
+    if path[2] == "centre":
+        return collider.keyframes[0][1][path[3]]
+    v = getattr(collider, path[2])
+    return v[path[3]] if len(path) > 3 else v
+
+
+@pytest.mark.parametrize("path", list(RANGES), ids=[dotted(p) for p in RANGES])
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(number=extreme_numbers)
+def test_extreme_numbers_load_in_range_or_are_refused(tmp_path, path, number):
+    lo, lo_open, hi, hi_open, integer = RANGES[path]
+    doc = full_scene()
+    put(doc, path, number)
+    key = dotted(path)
+    try:
+        scene = load_doc(tmp_path, doc)
+    except SceneError as err:
+        assert names_key(err, key), f"{key} = {number!r}: {err}"
+        return
+    value = loaded_value(scene, path)
+    # It loaded: the value is the one written (as a float where a number is expected), of the right type,
+    # finite, and inside the documented range.
+    if integer:
+        assert isinstance(value, int) and value == number
+    else:
+        assert isinstance(value, float) and value == float(number) and math.isfinite(value)
+    if lo is not None:
+        assert value > lo if lo_open else value >= lo
+    if hi is not None:
+        assert value < hi if hi_open else value <= hi
+
+
+@pytest.mark.parametrize("path", list(RANGES), ids=[dotted(p) for p in RANGES])
+def test_out_of_range_edges_are_refused(tmp_path, path):
+    """Deterministic companions of the property above: just past each documented end is refused."""
+    lo, lo_open, hi, hi_open, integer = RANGES[path]
+
+    def past(end, is_open, direction):
+        if end is None:
+            return None
+        if is_open:
+            return end
+        return end + direction if integer else math.nextafter(end, direction * math.inf)
+
+    below, above = past(lo, lo_open, -1), past(hi, hi_open, 1)
+    for bad in [v for v in (below, above, math.nan, math.inf, -math.inf) if v is not None]:
+        doc = full_scene()
+        put(doc, path, bad)
+        assert names_key(scene_error(tmp_path, doc), dotted(path)), (path, bad)
+
+
+# ---------------------------------------------------------------------------------------------- unicode
+
+TABLE_PATHS = [((), ""), (("simulation",), "simulation"), (("output",), "output"), (("cloth", 0), "cloth[0]"),
+               (("collider", 0), "collider[0]"), (("collider", 1), "collider[1]")]
+
+
+@FUZZ
+@given(where=st.sampled_from(TABLE_PATHS), key=st.text(st.characters(codec="utf-8"), min_size=1, max_size=10),
+       value=values)
+def test_unknown_unicode_keys_are_named(tmp_path, where, key, value):
+    path, dotted_table = where
+    doc = full_scene()
+    table = doc
+    for p in path:
+        table = table[p]
+    if key in table or key in {"path", "collider", "cloth", "simulation", "output"} or (
+            path == ("collider", 1) and key == "path"):
+        return  # a known key: other tests' business
+    table[key] = value
+    err = scene_error(tmp_path, doc)
+    expected = f"{dotted_table}.{key}" if dotted_table else key
+    assert err.key == expected and "unknown key" in err.problem, str(err)
+
+
+name_like = st.one_of(st.text(st.characters(codec="utf-8"), max_size=10),
+                      st.from_regex(r"[A-Za-z_][A-Za-z0-9_]{0,8}", fullmatch=True))
+
+
+@FUZZ
+@given(name=name_like, which=st.sampled_from([("cloth", 0, "name"), ("collider", 0, "name")]))
+def test_unicode_names(tmp_path, name, which):
+    if name == "ball":
+        return  # the sphere's name: a duplicate, tested in test_scene_validation
+    doc = full_scene()
+    put(doc, which, name)
+    valid = re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", name) is not None
+    if valid:
+        scene = load_doc(tmp_path, doc)
+        assert (scene.cloths[0].name if which[0] == "cloth" else scene.colliders[0].name) == name
+    else:
+        assert names_key(scene_error(tmp_path, doc), dotted(which))
+
+
+@FUZZ
+@given(value=st.text(st.characters(codec="utf-8"), max_size=12),
+       which=st.sampled_from([("simulation", "solver"), ("output", "up_axis"), ("cloth", 0, "orientation"),
+                              ("collider", 0, "type"), ("cloth", 0, "pins", 0)]))
+def test_unicode_choices_are_exact(tmp_path, value, which):
+    options = {"solver": {"coloured", "jacobi"}, "up_axis": {"Y", "Z"}, "orientation": {"vertical", "horizontal"},
+               "type": {"plane", "sphere"}, 0: set(NAMED_PINS)}[which[-1]]
+    doc = full_scene()
+    put(doc, which, value)
+    if value in options and which[-1] != "type":  # a plane turned sphere would lack a radius
+        load_doc(tmp_path, doc)
+    elif value not in options:
+        assert names_key(scene_error(tmp_path, doc), dotted(which))
+
+
+@FUZZ
+# No "/" in the stem: "a/.usdc" names a dot-file with no suffix, refused (rightly) as not ending in .usdc.
+@given(stem=st.text(st.characters(codec="utf-8", exclude_characters="\0/"), min_size=1, max_size=12),
+       suffix=st.sampled_from([".usd", ".usdc", ".usda"]))
+def test_unicode_output_paths_load_unchanged(tmp_path, stem, suffix):
+    doc = full_scene()
+    doc["output"]["path"] = stem + suffix
+    assert load_doc(tmp_path, doc).output.path == Path(stem + suffix)
+    doc["output"]["path"] = stem + "\0" + suffix
+    assert scene_error(tmp_path, doc).key == "output.path"
+
+
+# ---------------------------------------------------------------------------------------------- missing keys
+
+REQUIRED = {("cloth",), ("cloth", 0, "resolution"), ("cloth", 0, "size"), ("collider", 0, "type"),
+            ("collider", 1, "type"), ("collider", 1, "radius")}
+OPTIONAL = [("simulation",), ("output",), ("collider",)] + [
+    p for _, p, _ in known_key_paths() if p not in REQUIRED and len(p) > 1 and p[-1] != "type"]
+
+
+def default_of(scene: Scene, path: tuple):
+    """(loaded value, documented default) for an optional key that was left out."""
+    if path == ("simulation",):
+        return scene.simulation, SimulationSettings()
+    if path == ("output",):
+        return scene.output, OutputSettings(path=Path("fuzz.usdc"))
+    if path == ("collider",):
+        return scene.colliders, ()
+    if path[0] == "simulation":
+        return getattr(scene.simulation, path[1]), getattr(SimulationSettings(), path[1])
+    if path[0] == "output":
+        return getattr(scene.output, path[1]), {"path": Path("fuzz.usdc"), "save_every": 10, "up_axis": "Y",
+                                                 "meters_per_unit": 1.0}[path[1]]
+    if path[0] == "cloth":
+        spec = scene.cloths[0]
+        if len(path) == 4:  # one family left out of the sticks table: that family is not built
+            return spec.stiffness.get(path[3]), None
+        if path[2] == "sticks":
+            return spec.stiffness, {"structural": 1.0}
+        attribute = path[2]
+        defaults = {"name": "cloth0", "origin": (0.0, 0.0, 0.0), "orientation": "vertical", "mass": 1.0,
+                    "pins": (), "tear_threshold": None, "particle_masses": ()}
+        return getattr(spec, attribute), defaults[attribute]
+    collider = scene.colliders[path[1]]
+    if path[2] == "centre":
+        return collider.keyframes, ((0.0, (0.0, 0.0, 0.0)),)
+    defaults = {"name": f"{'plane' if path[1] == 0 else 'sphere'}{path[1]}", "thickness": 0.0, "friction": 0.0,
+                "normal": (0.0, 1.0, 0.0), "point": (0.0, 0.0, 0.0), "display_size": 10.0}
+    return getattr(collider, path[2]), defaults[path[2]]
+
+
+def drop(doc, path: tuple) -> bool:
+    table = doc
+    for p in path[:-1]:
+        if isinstance(table, dict) and p not in table or isinstance(table, list) and p >= len(table):
+            return False
+        table = table[p]
+    if path[-1] in table:
+        del table[path[-1]]
+        return True
+    return False
+
+
+@FUZZ
+@given(dropped=st.lists(st.sampled_from(OPTIONAL + sorted(REQUIRED)), max_size=6, unique=True))
+def test_missing_sections_and_keys(tmp_path, dropped):
+    doc = full_scene()
+    gone = [p for p in dropped if drop(doc, p)]  # keys inside a dropped section are gone with it
+    # What the loader must report first, in its reading order: the cloth array, then a cloth's required
+    # keys, then a cloth with every stick family left out, then a collider's required keys.
+    cloth_required = [p for p in gone if p in REQUIRED and p[0] == "cloth"]
+    families_gone = {p[3] for p in gone if len(p) == 4 and p[2] == "sticks"}
+    no_family = families_gone == set(STICK_KEYS) and ("cloth", 0, "sticks") not in gone
+    collider_required = [p for p in gone if p in REQUIRED and p[0] == "collider" and ("collider",) not in gone]
+    if cloth_required or (not no_family and collider_required):
+        err = scene_error(tmp_path, doc)
+        assert "is required but missing" in err.problem, str(err)
+        expected = ([("cloth",)] if ("cloth",) in gone else cloth_required) or collider_required
+        assert err.key in {dotted(p) for p in expected}, str(err)
+        return
+    if no_family:
+        err = scene_error(tmp_path, doc)  # sticks = {}: no family at all
+        assert err.key == "cloth[0].sticks" and "at least one family" in err.problem, str(err)
+        return
+    scene = load_doc(tmp_path, doc)
+    for p in gone:
+        if p[0] == "collider" and ("collider",) in gone and p != ("collider",):
+            continue
+        loaded, default = default_of(scene, p)
+        if p[0] == "cloth" and p[2] == "sticks" and len(p) == 4 and ("cloth", 0, "sticks") not in gone:
+            assert loaded is None, (p, loaded)  # the family is not built
+        elif not (p[0] == "cloth" and p[2] == "sticks" and len(p) == 4):
+            assert loaded == default, (p, loaded, default)
+
+
+# ---------------------------------------------------------------------------------------------- truncation
+
+
+@pytest.mark.parametrize("scene_file", sorted(SCENES.glob("*.toml")), ids=lambda p: p.name)
+def test_shipped_scene_truncated_at_every_byte(tmp_path, scene_file):
+    data = scene_file.read_bytes()
+    errors = loaded = 0
+    for cut in range(len(data) + 1):
+        try:
+            scene = load_text(tmp_path, data[:cut])
+        except SceneError as err:
+            assert err.problem and err.file == str(tmp_path / "fuzz.toml")
+            errors += 1
+        else:
+            assert isinstance(scene, Scene) and scene.cloths
+            loaded += 1
+    assert loaded >= 1 and errors >= 1  # the whole file loads; the empty file does not
+
+
+# ---------------------------------------------------------------------------------------------- valid scenes load
+
+unit = st.floats(min_value=0.0, max_value=1.0)
+positive = st.floats(min_value=1e-6, max_value=1e6)
+coordinate = st.floats(min_value=-1e6, max_value=1e6)
+vec3 = st.lists(coordinate, min_size=3, max_size=3)
+name = st.from_regex(r"[A-Za-z_][A-Za-z0-9_]{0,10}", fullmatch=True)
+
+
+@st.composite
+def valid_scenes(draw) -> dict:
+    rows = draw(st.integers(1, 40))
+    cols = draw(st.integers(2 if rows == 1 else 1, 40))
+    sticks = draw(st.dictionaries(st.sampled_from(["structural", "shear", "bend"]), unit, min_size=1))
+    sticks[draw(st.sampled_from(sorted(sticks)))] = draw(st.floats(min_value=0.01, max_value=1.0))
+    cell = st.tuples(st.integers(0, rows - 1), st.integers(0, cols - 1))
+    pins = draw(st.lists(st.one_of(st.sampled_from(sorted(NAMED_PINS)), st.integers(0, rows * cols - 1),
+                                   cell.map(list)), max_size=4))
+    masses = draw(st.dictionaries(cell, positive, max_size=4))
+    cloth = {"name": draw(name), "resolution": [rows, cols],
+             "size": [draw(positive) if rows > 1 else draw(st.sampled_from([0.0, 1.0])), draw(positive)],
+             "origin": draw(vec3), "orientation": draw(st.sampled_from(["vertical", "horizontal"])),
+             "mass": draw(positive),
+             "sticks": sticks, "pins": pins, "particle_masses": [[r, c, kg] for (r, c), kg in masses.items()]}
+    if draw(st.booleans()):
+        cloth["tear_threshold"] = draw(st.floats(min_value=1.001, max_value=100.0))
+    collider = draw(st.one_of(
+        st.fixed_dictionaries({"type": st.just("plane"), "point": vec3, "thickness": st.floats(0.0, 1.0),
+                               "friction": unit, "display_size": positive,
+                               "normal": vec3.filter(lambda v: math.sqrt(sum(x * x for x in v)) > 1e-3)}),
+        st.fixed_dictionaries({"type": st.just("sphere"), "radius": positive, "centre": vec3, "friction": unit}),
+    ))
+    return {
+        "simulation": {"fps": draw(positive), "frames": draw(st.integers(1, 10**6)),
+                       "substeps": draw(st.integers(1, 10_000)),
+                       "iterations": draw(st.integers(0, 100_000)), "gravity": draw(vec3), "wind": draw(vec3),
+                       "drag": draw(unit), "solver": draw(st.sampled_from(["coloured", "jacobi"])),
+                       "max_dt_ratio": draw(st.floats(1.0, 1e6)), "max_frame_time": draw(positive),
+                       "position_bound": draw(positive)},
+        "output": {"path": draw(st.text(st.characters(codec="utf-8", exclude_characters="\0/"), min_size=1, max_size=8))
+                   + draw(st.sampled_from([".usd", ".usdc", ".usda"])), "save_every": draw(st.integers(1, 1000)),
+                   "up_axis": draw(st.sampled_from(["Y", "Z"])), "meters_per_unit": draw(positive)},
+        "cloth": [cloth],
+        "collider": [collider],
+    }
+
+
+@FUZZ
+@given(doc=valid_scenes())
+def test_valid_scenes_load_and_read_back(tmp_path, doc):
+    scene = load_doc(tmp_path, doc)
+    sim, out, cloth = doc["simulation"], doc["output"], doc["cloth"][0]
+    assert scene.simulation == SimulationSettings(**{k: tuple(v) if isinstance(v, list) else float(v) if k in (
+        "fps", "drag", "max_dt_ratio", "max_frame_time", "position_bound") else v for k, v in sim.items()})
+    assert scene.output == OutputSettings(path=Path(out["path"]), save_every=out["save_every"], up_axis=out["up_axis"],
+                                          meters_per_unit=out["meters_per_unit"])
+    spec = scene.cloths[0]
+    assert isinstance(spec, ClothSpec) and spec.name == cloth["name"]
+    assert spec.resolution == tuple(cloth["resolution"]) and spec.size == tuple(cloth["size"])
+    assert spec.origin == tuple(cloth["origin"]) and spec.mass == cloth["mass"]
+    assert spec.stiffness == {k: v for k, v in cloth["sticks"].items() if v > 0}
+    assert spec.tear_threshold == cloth.get("tear_threshold")
+    assert sorted(spec.particle_masses) == sorted(tuple(m) for m in cloth["particle_masses"])
+    rows, cols = cloth["resolution"]
+    expected_pins = set()
+    for pin in cloth["pins"]:
+        if isinstance(pin, str):
+            expected_pins.update(NAMED_PINS[pin](rows, cols))
+        elif isinstance(pin, int):
+            expected_pins.add(divmod(pin, cols))
+        else:
+            expected_pins.add(tuple(pin))
+    assert spec.pins == tuple(sorted(expected_pins))
+    (collider,) = scene.colliders
+    given_collider = doc["collider"][0]
+    if given_collider["type"] == "plane":
+        assert isinstance(collider, PlaneCollider) and collider.point == tuple(given_collider["point"])
+        assert math.isclose(sum(v * v for v in collider.normal), 1.0, rel_tol=1e-9)
+    else:
+        assert isinstance(collider, SphereCollider) and collider.radius == given_collider["radius"]
+        assert collider.keyframes == ((0.0, tuple(given_collider["centre"])),)
