@@ -410,51 +410,7 @@ def test_documented_example_loads(tmp_path):
 # ---------------------------------------------------------------------------------------------- fuzz
 
 
-class Raw(str):
-    """A TOML literal emitted as is (datetimes, over-long numbers, deep nesting)."""
-
-
-_ESCAPES = {'"': '\\"', "\\": "\\\\", "\b": "\\b", "\t": "\\t", "\n": "\\n", "\f": "\\f", "\r": "\\r"}
-
-
-def toml_string(s: str) -> str:
-    out = []
-    for ch in s:
-        if ch in _ESCAPES:
-            out.append(_ESCAPES[ch])
-        elif ord(ch) < 0x20 or ord(ch) == 0x7F:
-            out.append(f"\\u{ord(ch):04X}")
-        else:
-            out.append(ch)
-    return '"' + "".join(out) + '"'
-
-
-def toml_value(v) -> str:
-    if isinstance(v, Raw):
-        return str(v)
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, int):
-        # decimal int() -> str() is capped at 4300 digits; hex is not, and TOML has no negative hex
-        return hex(v) if v > 0 and v.bit_length() > 256 else str(v)
-    if isinstance(v, float):
-        if math.isnan(v):
-            return "nan"
-        if math.isinf(v):
-            return "inf" if v > 0 else "-inf"
-        return repr(v)
-    if isinstance(v, str):
-        return toml_string(v)
-    if isinstance(v, list):
-        return "[" + ", ".join(toml_value(x) for x in v) + "]"
-    if isinstance(v, dict):
-        return "{ " + ", ".join(f"{toml_string(k)} = {toml_value(x)}" for k, x in v.items()) + " }"
-    raise TypeError(type(v))
-
-
-def toml_document(doc: dict) -> str:
-    """A document as one ``"key" = value`` line per top-level key; tables and [[arrays]] become inline."""
-    return "".join(f"{toml_string(k)} = {toml_value(v)}\n" for k, v in doc.items())
+from toml_text import Raw, toml_document  # noqa: E402
 
 
 def has_raw(v) -> bool:
