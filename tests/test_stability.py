@@ -152,3 +152,18 @@ def test_checks_fail_when_they_should():
     assert not Check("c", "x", float("nan"), 1.0, "b").passed
     assert Check("c", "x", 1.0, 1.0, "b").passed and not Check("c", "x", 1.0 + 1e-12, 1.0, "b").passed
     assert not cases.count_check("c", "x", 1).passed and cases.count_check("c", "x", 0).passed
+
+
+def test_the_summary_says_when_the_sticks_are_far_from_satisfied(tmp_path):
+    """Where the relaxation has not converged (here 1 substep x 1 iteration on a 48^2 cloth: a stick near a
+    pin ends at 8x its rest length) the run summary warns instead of presenting the result as a cloth; a
+    converged run (12^2 at 4 x 8, stretch max 0.05) does not."""
+    from conftest import make_scene
+    from warp_verlet.runner import UNCONVERGED_STRETCH, run_scene
+
+    pins = ["top-left", "top-right"]
+    loose = run_scene(make_scene({"frames": 20, "substeps": 1, "iterations": 1}, resolution=[48, 48], pins=pins),
+                      tmp_path / "loose.usdc", device="cpu")
+    assert loose.stretch_max > UNCONVERGED_STRETCH and "relaxation has not converged" in loose.format()
+    tight = run_scene(make_scene({"frames": 20}, resolution=[12, 12], pins=pins), tmp_path / "tight.usdc", device="cpu")
+    assert tight.stretch_max < UNCONVERGED_STRETCH and "warning" not in tight.format()

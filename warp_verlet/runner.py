@@ -21,6 +21,11 @@ from .errors import DivergenceError
 from .scene import Scene
 
 
+# A structural stick stretched to twice its rest length: far outside anything cloth does, so the solver has
+# not converged (the summary says so rather than presenting the result as a cloth).
+UNCONVERGED_STRETCH = 1.0
+
+
 @dataclass(frozen=True)
 class RunSummary:
     scene: str
@@ -54,6 +59,12 @@ class RunSummary:
         ]
         if self.torn is not None:
             lines.append(f"torn sticks      {self.torn} of {self.sticks}")
+        if self.stretch_max > UNCONVERGED_STRETCH:
+            lines.append(
+                f"warning          the sticks are far from satisfied (a structural stick at {1 + self.stretch_max:.3g} x "
+                "its rest length): the relaxation has not converged. Pins out of each other's reach, too few "
+                "iterations or substeps for this grid size, or too large a load; see the README's "
+                "work-precision section")
         return "\n".join(lines)
 
 
