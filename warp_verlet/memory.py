@@ -40,6 +40,8 @@ def stick_count(spec: ClothSpec) -> int:
 
 @dataclass(frozen=True)
 class MemoryNeed:
+    particles: int
+    sticks: int
     device_bytes: int  # the simulator's arrays, on the device it runs on
     host_bytes: int  # peak host memory while the sticks are built
 
@@ -55,9 +57,11 @@ def estimate(scene: Scene) -> MemoryNeed:
     solver = scene.simulation.solver
     particles = scene.particle_count
     sticks = sum(stick_count(c) for c in scene.cloths)
-    tearing = sum(stick_count(c) for c in scene.cloths if c.tear_threshold is not None)
-    per_stick = STICK_BYTES[solver] + (TEAR_STICK_BYTES[solver] if tearing else 0)
+    # Tear lengths are allocated for every stick once any cloth can tear (Model._build_tearing).
+    per_stick = STICK_BYTES[solver] + (TEAR_STICK_BYTES[solver] if scene.tears else 0)
     return MemoryNeed(
+        particles=particles,
+        sticks=sticks,
         device_bytes=particles * PARTICLE_BYTES[solver] + sticks * per_stick,
         host_bytes=sticks * HOST_BUILD_BYTES_PER_STICK + particles * 64,
     )
@@ -82,8 +86,7 @@ def check_fits(scene: Scene, device_name: str, device_free: int | None, host_fre
     """Raise one clear error when the scene cannot fit; ``device_free`` None means the device is the host."""
     need = estimate(scene)
     host_need = need.host_bytes + (need.device_bytes if device_free is None else 0)
-    what = (f"{scene.source}: {scene.particle_count:,} particles and "
-            f"{sum(stick_count(c) for c in scene.cloths):,} sticks need {need.describe()}")
+    what = f"{scene.source}: {need.particles:,} particles and {need.sticks:,} sticks need {need.describe()}"
     if device_free is not None and need.device_bytes > device_free:
         raise WarpVerletError(f"{what}, but {device_name} has only {gib(device_free)} free; "
                               "lower the resolution or run on a larger device")

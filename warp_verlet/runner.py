@@ -138,9 +138,11 @@ def _step_loop(sim, settings, write: Callable[..., None], progress: Callable[[in
             reason = divergence_reason(points[particle], settings.position_bound)
             raise DivergenceError(frame, slot.name, particle - slot.first, points[particle], reason)
         hidden = None
-        if model.tears and sim.torn_count() != torn:  # one integer per frame; the stick flags only on change
-            torn = sim.torn_count()
-            hidden = model.hidden_faces(sim.torn_sticks())
+        if model.tears:  # one integer per frame; the stick flags only when it changed
+            count = sim.torn_count()
+            if count != torn:
+                torn = count
+                hidden = model.hidden_faces(sim.torn_sticks())
         write(frame, model.split(points), sim.colliders.moving_centres(), hidden)
         if progress is not None:
             progress(frame)
