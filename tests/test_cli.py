@@ -84,6 +84,21 @@ def test_same_scene_gives_bit_identical_caches(scene_file):
     assert all(np.array_equal(pa[t], pb[t]) for t in pa)
 
 
+def test_threads_option_gives_the_same_cache_and_says_so(scene_file, capsys):
+    one, three = scene_file.parent / "one.usdc", scene_file.parent / "three.usdc"
+    assert main(["run", str(scene_file), "-o", str(one), "--device", "cpu", "-q", "--threads", "1"]) == 0
+    assert "relaxation on" not in capsys.readouterr().out
+    assert main(["run", str(scene_file), "-o", str(three), "--device", "cpu", "-q", "--threads", "3"]) == 0
+    assert "relaxation on 3 threads" in capsys.readouterr().out
+    for prim in ("/World/sheet", "/World/rope"):
+        _, p1 = read_points(one, prim)
+        _, p3 = read_points(three, prim)
+        assert p1.keys() == p3.keys() and all(np.array_equal(p1[t], p3[t]) for t in p1)
+    with pytest.raises(SystemExit):
+        main(["run", str(scene_file), "--threads", "0"])
+    assert "--threads" in capsys.readouterr().err
+
+
 def test_invalid_scene_exits_nonzero_names_the_key_and_writes_nothing(scene_file, capsys):
     scene_file.write_text(SCENE.replace("drag = 0.99", "drag = 1.5"))
     assert main(["run", str(scene_file), "--device", "cpu", "-q"]) == 2

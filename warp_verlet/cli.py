@@ -70,6 +70,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("-o", "--output", type=Path, help="output .usd/.usdc/.usda (default: the scene's [output] path)")
     run.add_argument("--device", help="cpu, cuda or cuda:N (default: CUDA when present, else CPU)")
     run.add_argument("--frames", type=_positive_int, help="number of frames (default: the scene's)")
+    run.add_argument("--threads", type=_positive_int,
+                     help="CPU threads for the relaxation (default: the cores, when the grid is large enough to "
+                          "gain; results are bit-identical for any count)")
     run.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     run.add_argument("-v", "--verbose", action="store_true", help="show Warp's device and kernel-compilation messages")
     run.add_argument("--preview", action="store_true",
@@ -128,7 +131,7 @@ def _run(args) -> int:
         bar = tqdm(total=frames, unit="frame", desc=scene.cloths[0].name if len(scene.cloths) == 1 else "scene",
                    file=sys.stderr, dynamic_ncols=True)
     try:
-        summary = run_scene(scene, output=args.output, device=args.device, frames=args.frames,
+        summary = run_scene(scene, output=args.output, device=args.device, frames=args.frames, threads=args.threads,
                             progress=(lambda frame: bar.update(1)) if bar else None)
     finally:
         if bar is not None:

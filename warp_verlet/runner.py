@@ -41,6 +41,7 @@ class RunSummary:
     stretch_max: float
     stretch_rms: float
     torn: int | None = None  # sticks torn by the end; None when no cloth can tear
+    threads: int = 1  # CPU threads the relaxation ran on
 
     def format(self) -> str:
         rate = self.frames / self.wall_seconds if self.wall_seconds > 0 else float("inf")
@@ -48,7 +49,7 @@ class RunSummary:
         lines = [
             f"scene            {self.scene}",
             f"output           {self.output}",
-            f"device           {self.device}",
+            f"device           {self.device}" + (f" (relaxation on {self.threads} threads)" if self.threads > 1 else ""),
             f"frames           {self.frames}",
             f"simulated        {self.simulated_seconds:.4f} s",
             f"wall             {self.wall_seconds:.3f} s ({rate:.1f} frames/s)",
@@ -79,9 +80,11 @@ def run_scene(
     frames: int | None = None,
     progress: Callable[[int], None] | None = None,
     overlap: bool = True,
+    threads: int | None = None,
 ) -> RunSummary:
     """Simulate ``scene`` and write its point cache. ``progress(frame)`` is called after each frame.
-    ``overlap=False`` writes each frame before simulating the next (for measuring what overlap saves)."""
+    ``overlap=False`` writes each frame before simulating the next (for measuring what overlap saves).
+    ``threads`` is the CPU relaxation's thread count (None: chosen from the cores and the grid size)."""
     from .simulator import Simulator  # imports warp
     from .usd_writer import CachedPlane, CachedShape, CachedSphere, PointCacheWriter  # imports pxr
 
@@ -89,7 +92,7 @@ def run_scene(
         scene = replace(scene, simulation=replace(scene.simulation, frames=frames))
     settings = scene.simulation
     output = Path(output) if output is not None else scene.output.path
-    sim = Simulator(scene, device)
+    sim = Simulator(scene, device, threads=threads)
     model = sim.model
     shapes = [CachedShape(s.name, s.topology.faces, s.topology.uvs, s.count, tears=spec.tear_threshold is not None)
               for s, spec in zip(model.cloths, scene.cloths)]
@@ -121,6 +124,7 @@ def run_scene(
         simulated_seconds=sim.time, wall_seconds=wall, particles=model.particle_count, sticks=model.stick_count,
         colours=model.colour_count, colour_balance=colouring.balance if colouring else 0.0,
         stretch_max=stretch.max, stretch_rms=stretch.rms, torn=sim.torn_count() if model.tears else None,
+        threads=sim.threads,
     )
 
 

@@ -1,0 +1,164 @@
+"""The CPU relaxation spread over threads (warp_verlet/cpu_team.py) and the captured CPU frame.
+
+Cutting a colour over threads must not change a single bit: every particle still sees its sticks in colour
+order. The analytic cases below (stability suite) run with the relaxation forced onto three threads, and the
+same runs are compared bit-for-bit with one thread and with uncaptured launches.
+"""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+import pytest
+import warp as wp
+
+import warp_verlet.cpu_team as cpu_team
+from conftest import make_scene
+from test_stability import assert_all_pass, cases
+from warp_verlet.cpu_team import PhaseTeam, auto_threads, split
+from warp_verlet.errors import WarpVerletError
+from warp_verlet.scene import parse_scene
+from warp_verlet.simulator import Simulator
+
+
+def test_split_cuts_a_range_into_contiguous_pieces_in_order():
+    for first, count, parts in [(0, 10, 3), (7, 2, 4), (5, 0, 2), (3, 12, 1)]:
+        pieces = split(first, count, parts)
+        assert len(pieces) == parts
+        covered = [i for f, n in pieces for i in range(f, f + n)]
+        assert covered == list(range(first, first + count))
+        assert max(n for _, n in pieces) - min(n for _, n in pieces) <= 1
+
+
+def test_auto_threads_only_threads_phases_large_enough_to_gain():
+    per = cpu_team.MIN_WORK_PER_THREAD
+    assert auto_threads([per - 1] * 12, cores=8) == 1  # 64^2-like colours: a barrier costs more than it saves
+    assert auto_threads([2 * per] * 12, cores=8) == 2
+    assert auto_threads([100 * per] * 12, cores=8) == 8  # never more than the cores
+    assert auto_threads([100 * per] * 12, cores=1) == 1
+    assert auto_threads([], cores=8) == 1
+
+
+def busy_scene(solver: str):
+    """A 20 x 24 cloth with every stick kind, a moving ball, the ground and tearing: all stages run."""
+    return parse_scene({
+        "simulation": {"fps": 60, "substeps": 3, "iterations": 6, "solver": solver, "wind": [8.0, 0.0, 3.0]},
+        "cloth": [{"resolution": [20, 24], "size": [1.0, 1.2], "pins": ["top-left", "top-right"], "tear_threshold": 1.4,
+                   "sticks": {"structural": 1.0, "shear": 0.8, "bend": 0.3}}],
+        "collider": [{"type": "sphere", "radius": 0.2, "path": [[0.0, 0.0, 0.3, 1.0], [0.5, 0.0, 0.3, -1.0]]},
+                     {"type": "plane", "point": [0.0, -1.0, 0.0], "normal": [0.0, 1.0, 0.0]}],
+    }, file="<busy>")
+
+
+def run_frames(scene, frames: int, **options) -> tuple[np.ndarray, int]:
+    sim = Simulator(scene, "cpu", **options)
+    for _ in range(frames):
+        sim.step_frame()
+    return sim.positions(), sim.torn_count()
+
+
+@pytest.mark.parametrize("solver", ["coloured", "jacobi"])
+def test_threaded_relaxation_is_bit_identical_to_one_thread(solver):
+    scene = busy_scene(solver)
+    one, torn_one = run_frames(scene, 30, threads=1)
+    assert torn_one > 0  # the scene exercises tearing, so the comparison covers it
+    for threads in (2, 3, 7):
+        points, torn = run_frames(scene, 30, threads=threads)
+        assert torn == torn_one
+        assert np.array_equal(points, one), f"{threads} threads changed the result"
+
+
+def test_captured_cpu_frames_match_launch_by_launch():
+    scene = busy_scene("coloured")
+    captured, torn_captured = run_frames(scene, 20, threads=1)
+    launched, torn_launched = run_frames(scene, 20, threads=1, use_graph=False)
+    assert torn_captured == torn_launched > 0
+    assert np.array_equal(captured, launched)
+
+
+@pytest.fixture
+def always_three_threads(monkeypatch):
+    """Make auto_threads pick three threads for any grid, so the stability cases run threaded."""
+    monkeypatch.setattr(cpu_team, "MIN_WORK_PER_THREAD", 1)
+    monkeypatch.setattr(cpu_team, "usable_cores", lambda: 3)
+    created = []
+    original = Simulator.__init__
+
+    def spy(self, *args, **kwargs):
+        original(self, *args, **kwargs)
+        created.append(self.threads)
+
+    monkeypatch.setattr(Simulator, "__init__", spy)
+    return created
+
+
+@pytest.mark.parametrize("case", ["heavy_chain", "stiff_iterations", "mass_ratio", "two_places"])
+def test_stability_cases_pass_with_threaded_relaxation(always_three_threads, case):
+    assert_all_pass(getattr(cases, case)("cpu"))
+    assert 3 in always_three_threads  # (a phase of one or two sticks stays on one thread)
+
+
+def test_auto_threads_picks_one_thread_for_small_grids_and_cuda_takes_none():
+    small = make_scene({}, resolution=[16, 16])
+    assert Simulator(small, "cpu").threads == 1
+    for bad in (0, -2, 1.5, True, "2"):
+        with pytest.raises(WarpVerletError, match="threads must be a whole number"):
+            Simulator(small, "cpu", threads=bad)
+
+
+@pytest.mark.cuda
+@pytest.mark.skipif(not wp.is_cuda_available(), reason="no CUDA device")
+def test_threads_are_refused_on_cuda():
+    small = make_scene({}, resolution=[8, 8])
+    assert Simulator(small, "cuda").threads == 1
+    with pytest.raises(WarpVerletError, match="CPU only"):
+        Simulator(small, "cuda", threads=2)
+
+
+def test_an_error_in_a_worker_reaches_the_caller_and_stops_the_team():
+    done = []
+
+    def fail():
+        raise RuntimeError("boom in worker")
+
+    team = PhaseTeam([[lambda: done.append(0), fail], [lambda: done.append(1), None]], repeats=2)
+    with pytest.raises(RuntimeError, match="boom in worker"):
+        team.run()
+    with pytest.raises(WarpVerletError, match="stopped after an earlier error"):
+        team.run()
+    assert all(not w.is_alive() for w in _joined(team))
+
+
+def test_an_interrupt_in_the_caller_releases_the_workers():
+    def interrupt():
+        raise KeyboardInterrupt
+
+    team = PhaseTeam([[interrupt, lambda: None, lambda: None]], repeats=1)
+    with pytest.raises(KeyboardInterrupt):
+        team.run()
+    assert all(not w.is_alive() for w in _joined(team))
+
+
+def test_phases_run_in_order_with_every_member_and_workers_stop_on_close():
+    log, lock = [], threading.Lock()
+
+    def note(phase, member):
+        def task():
+            with lock:
+                log.append((phase, member))
+        return task
+
+    team = PhaseTeam([[note(p, t) for t in range(3)] for p in range(4)], repeats=2)
+    team.run()
+    phases = [p for p, _ in log]
+    assert phases == sorted(phases[:12]) + sorted(phases[12:])  # each pass: phase 0 done before 1, ...
+    assert sorted(log) == sorted((p, t) for p in range(4) for t in range(3) for _ in range(2))
+    team.close()
+    assert all(not w.is_alive() for w in _joined(team))
+
+
+def _joined(team: PhaseTeam) -> list[threading.Thread]:
+    for worker in team._workers:
+        worker.join(timeout=5)
+    return team._workers
