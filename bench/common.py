@@ -47,7 +47,7 @@ def median_spread(values: list[float]) -> tuple[float, float]:
 def machine(device) -> str:
     if device.is_cuda:
         return f"{device.name} (CUDA), Warp {wp.__version__}"
-    return f"CPU {platform.processor() or platform.machine()}, 1 thread (Warp CPU backend), Warp {wp.__version__}"
+    return f"CPU {platform.processor() or platform.machine()}, Warp {wp.__version__}"
 
 
 def copy_bandwidth(device, mib: int = 1024, repeats: int = 20) -> float:
@@ -113,7 +113,8 @@ def machine_lines(command: list[str] | None = None) -> list[str]:
     except OSError:
         load = "n/a"
     lines = [
-        f"- CPU: {cpu_model()}, {os.cpu_count()} logical CPUs; Warp's CPU backend runs a kernel on 1 thread",
+        f"- CPU: {cpu_model()}, {os.cpu_count()} logical CPUs; Warp runs one CPU launch on one thread, "
+        "warp_verlet cuts each colour over its relaxation threads",
         f"- load average (1 / 5 / 15 min) at the end: {load}",
         f"- Warp {wp.__version__}, numpy {np.__version__}, Python {platform.python_version()}, {platform.system()}",
         f"- date: {datetime.now().isoformat(timespec='seconds')}",

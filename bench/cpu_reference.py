@@ -7,8 +7,12 @@ structural + shear + bend sticks, 4 substeps x 8 iterations at 60 fps. Each cont
 state: ``--warm-up`` frames (Warp compiles its kernels there), then ``--repeats`` timed batches of ``--frames``
 frames; the median batch gives ms/frame, and stick projections/s = sticks x substeps x iterations / (s/frame).
 
-- warp coloured: the full simulator, ``Simulator(scene, "cpu").step_frame()`` (coloured Gauss-Seidel).
-- warp jacobi: the same with ``solver = "jacobi"``, the like-for-like peer of numpy Jacobi.
+- warp coloured, 1 thread: the full simulator, ``Simulator(scene, "cpu", threads=1).step_frame()`` (coloured
+  Gauss-Seidel), the like-for-like peer of the single-threaded C.
+- warp coloured, N threads: the same with the relaxation cut over N threads (``--threads N``; by default
+  what the simulator picks by itself for this grid on this machine, and no such row when that is 1); its
+  positions must equal the 1-thread run's bit for bit.
+- warp jacobi, 1 and N threads: the same with ``solver = "jacobi"``, the like-for-like peer of numpy Jacobi.
 - C: bench/c_reference/relax.c, compiled here with ``cc -O3 -march=native -shared -fPIC`` (``$CC`` if set) into
   a temporary directory and called through ctypes once per frame: Verlet plus Gauss-Seidel sweeps over the
   simulator's own sticks in its colour order, one thread. Skipped, with a message, if there is no compiler.
@@ -41,6 +45,7 @@ sys.path.insert(0, str(HERE))
 from common import hanging_cloth, machine_lines, quiet_warp  # noqa: E402
 from numpy_baseline import NumpyCloth  # noqa: E402
 
+from warp_verlet.cpu_team import usable_cores  # noqa: E402
 from warp_verlet.simulator import Simulator  # noqa: E402
 
 C_SOURCE = HERE / "c_reference" / "relax.c"
@@ -130,7 +135,7 @@ def time_contender(step_frame, warm_up: int, frames: int, repeats: int, sync=Non
 
 
 def run(size: int = 256, frames: int = 10, repeats: int = 3, warm_up: int = 2, numpy_frames: int = 2,
-        substeps: int = 4, iterations: int = 8, with_c: bool = True, log=print) -> dict:
+        substeps: int = 4, iterations: int = 8, with_c: bool = True, threads: int | None = None, log=print) -> dict:
     """Measure every contender; returns {"rows": [...], "check": {...} or None, "compiler": str or None}."""
     scene = hanging_cloth(size, substeps, iterations)
     jacobi = dataclasses.replace(scene, simulation=dataclasses.replace(scene.simulation, solver="jacobi"))
@@ -145,11 +150,18 @@ def run(size: int = 256, frames: int = 10, repeats: int = 3, warm_up: int = 2, n
         log(f"  {name:15s} {per_frame * 1e3:9.2f} ms/frame ({min(times) * 1e3:.2f}..{max(times) * 1e3:.2f}), "
             f"{rows[-1]['Mproj_per_s']:8.2f} M projections/s", flush=True)
 
-    for name, sc in (("warp coloured", scene), ("warp jacobi", jacobi)):
-        sim = Simulator(sc, device="cpu")
-        times = time_contender(sim.step_frame, warm_up, frames, repeats, lambda: wp.synchronize_device(sim.device))
-        record(name, times, sim.model.stick_count, frames * repeats)
-        finals[name] = (sim, sim.positions())
+    if threads is None:
+        threads = Simulator(scene, device="cpu").threads  # the simulator's own choice for this grid here
+    for solver, sc in (("coloured", scene), ("jacobi", jacobi)):
+        for count in sorted({1, threads}):
+            name = f"warp {solver}, {count} thread" + ("s" if count > 1 else "")
+            sim = Simulator(sc, device="cpu", threads=count)
+            times = time_contender(sim.step_frame, warm_up, frames, repeats, lambda: wp.synchronize_device(sim.device))
+            record(name, times, sim.model.stick_count, frames * repeats)
+            finals[name] = (sim, sim.positions())
+    threaded_identical = all(
+        np.array_equal(finals[f"warp {solver}, 1 thread"][1], finals[f"warp {solver}, {threads} threads"][1])
+        for solver in ("coloured", "jacobi")) if threads > 1 else None
 
     compiler = None
     with tempfile.TemporaryDirectory() as tmp:
@@ -170,24 +182,30 @@ def run(size: int = 256, frames: int = 10, repeats: int = 3, warm_up: int = 2, n
 
     check = None
     if "C (1 thread)" in finals:
-        sim, xw = finals["warp coloured"]
+        sim, xw = finals["warp coloured, 1 thread"]
         xc = finals["C (1 thread)"][1]
         dist = np.linalg.norm(xw.astype(np.float64) - xc, axis=1)
         cloth_size = max(max(c.size) for c in scene.cloths)
         check = {"frames": warm_up + frames * repeats, "max_diff": float(dist.max()),
                  "rms_diff": float(np.sqrt(np.mean(dist**2))), "cloth_size": cloth_size,
                  "stretch_rms_warp": sim.stretch(xw).rms, "stretch_rms_c": sim.stretch(xc).rms}
-    return {"rows": rows, "check": check, "compiler": compiler}
+    return {"rows": rows, "check": check, "compiler": compiler, "threaded_identical": threaded_identical,
+            "threads": threads}
 
 
 def ratios(rows: list[dict]) -> dict[str, float]:
+    """Ratios of projection rates: C against Warp on the same single core, and Warp (on one core and on all
+    of them) against the numpy baselines, which run on one core."""
     rate = {r["contender"]: r["Mproj_per_s"] for r in rows}
+    warp = [name for name in rate if name.startswith("warp ")]
     out = {}
     if "C (1 thread)" in rate:
-        out["C / warp coloured"] = rate["C (1 thread)"] / rate["warp coloured"]
-    out["warp coloured / numpy jacobi"] = rate["warp coloured"] / rate["numpy jacobi"]
-    out["warp coloured / numpy coloured"] = rate["warp coloured"] / rate["numpy coloured"]
-    out["warp jacobi / numpy jacobi"] = rate["warp jacobi"] / rate["numpy jacobi"]
+        out["C / warp coloured, 1 thread"] = rate["C (1 thread)"] / rate["warp coloured, 1 thread"]
+    for name in warp:
+        solver = "coloured" if "coloured" in name else "jacobi"
+        out[f"{name} / numpy {solver}"] = rate[name] / rate[f"numpy {solver}"]
+        if solver == "coloured":
+            out[f"{name} / numpy jacobi"] = rate[name] / rate["numpy jacobi"]
     return out
 
 
@@ -214,6 +232,9 @@ def write(res: dict, out: Path, size: int, argv: list[str], tolerance: float) ->
                   f"at most {c['max_diff']:.2e} m (RMS {c['rms_diff']:.2e} m), {verdict} the tolerance "
                   f"{tolerance:g} x cloth size; RMS structural stretch Warp {c['stretch_rms_warp']:.4e}, "
                   f"C {c['stretch_rms_c']:.4e}."]
+    if res["threaded_identical"] is not None:
+        lines += ["", f"Threads: the {res['threads']}-thread runs ended bit-identical to the 1-thread runs: "
+                  f"{'yes' if res['threaded_identical'] else 'NO'}."]
     text = "\n".join(lines) + "\n"
     (out / "cpu_reference.md").write_text(text)
     return text
@@ -230,6 +251,9 @@ def main(argv=None) -> int:
     p.add_argument("--substeps", type=int, default=4)
     p.add_argument("--iterations", type=int, default=8)
     p.add_argument("--no-c", action="store_true", help="skip the C reference")
+    p.add_argument("--threads", type=int, default=None,
+                   help="threads of the threaded Warp rows (default: the simulator's choice; usable cores here: "
+                        f"{usable_cores()})")
     p.add_argument("--tolerance", type=float, default=1e-4,
                    help="largest Warp-C particle distance accepted, as a fraction of the cloth size")
     p.add_argument("--out", type=Path, default=HERE / "results" / "cpu_reference")
@@ -237,11 +261,14 @@ def main(argv=None) -> int:
     quiet_warp()
     print(f"{args.size}x{args.size} hanging cloth, {args.substeps} x {args.iterations}:", flush=True)
     res = run(args.size, args.frames, args.repeats, args.warm_up, args.numpy_frames, args.substeps, args.iterations,
-              with_c=not args.no_c)
+              with_c=not args.no_c, threads=args.threads)
     print(write(res, args.out, args.size, ["bench/cpu_reference.py", *argv], args.tolerance))
     c = res["check"]
     if c and c["max_diff"] > args.tolerance * c["cloth_size"]:
         print("error: the C reference and Warp disagree beyond the tolerance", file=sys.stderr)
+        return 1
+    if res["threaded_identical"] is False:
+        print("error: the threaded Warp runs differ from the 1-thread runs", file=sys.stderr)
         return 1
     return 0
 

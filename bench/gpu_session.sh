@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # One batch of GPU work on the lent GPU machine (see ../shared/tools/gpu-warp/README.md): the whole test
 # suite on CUDA, throughput (with stages and bandwidth) with and without graph capture and with colliders
-# and tearing, writer overlap, CPU/CUDA parity on the shipped scenes, and CLI runs end to end.
+# and tearing, writer overlap, CPU/CUDA parity on the shipped scenes, CLI runs end to end, and last the CPU
+# reference and CPU throughput on the host's many cores. GPU_EXTRA, if set, is run (eval) before the CPU part.
 # Tables land in $OUT/results (tarred into $OUT/gpu-results.tar.gz: $OUT may hold few files), the log in
 # $OUT/gpu-session.log.
 set -uo pipefail
@@ -19,9 +20,13 @@ python3 bench/throughput.py --device cuda --sizes 64 1024 --repeats 3 --no-graph
 python3 bench/throughput.py --device cuda --sizes 64 1024 --repeats 3 --colliders --tear 1.5 --out "$res"
 python3 bench/overlap.py --device cuda --sizes 256 1024 --frames 30 --repeats 3 --out "$res"
 python3 bench/parity.py --frames 30 --big-frames 3 --out "$res"
-for extra in ${GPU_EXTRA:-}; do bash -c "$extra"; done
+if [ -n "${GPU_EXTRA:-}" ]; then eval "$GPU_EXTRA"; fi
 # End to end through the CLI, USD writing included.
 { python3 -m warp_verlet run scenes/hanging_cloth.toml --device cuda -q -o /tmp/hanging.usdc
   python3 -m warp_verlet run scenes/flag_tear.toml --device cuda -q -o /tmp/flag.usdc
   python3 -m warp_verlet run scenes/big_grid_1024.toml --device cuda -q -o /tmp/big.usdc --frames 20; } 2>&1 | tee -a "$res/gpu.txt"
+tar -czf "$out/gpu-results.tar.gz" -C "$res" .
+# The host's CPU cores too: the threaded CPU relaxation on more than the development machine's 2 cores.
+python3 bench/cpu_reference.py --out "$res/cpu_reference_host"
+python3 bench/throughput.py --device cpu --sizes 64 256 1024 --repeats 2 --out "$res/cpu_host"
 tar -czf "$out/gpu-results.tar.gz" -C "$res" .

@@ -196,22 +196,24 @@ def test_c_reference_matches_warp(tmp_path):
 
 
 def test_cpu_reference_outputs(tmp_path, capsys):
-    args = ["--size", "8", "--frames", "2", "--repeats", "2", "--numpy-frames", "1", "--out", str(tmp_path)]
+    args = ["--size", "8", "--frames", "2", "--repeats", "2", "--numpy-frames", "1", "--out", str(tmp_path),
+            "--threads", "2"]
     assert cref.main(args) == 0
     rows = _rows(tmp_path / "cpu_reference.csv")
     assert list(rows[0]) == ["contender", "grid", "sticks", "substeps", "iterations", "frames_timed", "ms_per_frame",
                              "ms_min", "ms_max", "Mproj_per_s"]
     names = [r["contender"] for r in rows]
     has_c = cref.find_compiler() is not None
-    assert names == ["warp coloured", "warp jacobi"] + (["C (1 thread)"] if has_c else []) + ["numpy jacobi",
-                                                                                               "numpy coloured"]
+    warp = [f"warp {solver}, {t}" for solver in ("coloured", "jacobi") for t in ("1 thread", "2 threads")]
+    assert names == warp + (["C (1 thread)"] if has_c else []) + ["numpy jacobi", "numpy coloured"]
     assert {r["grid"] for r in rows} == {"8x8"} and len({r["sticks"] for r in rows}) == 1 and int(rows[0]["sticks"]) > 0
     for r in rows:
         for key in ("ms_per_frame", "ms_min", "ms_max", "Mproj_per_s"):
             assert math.isfinite(float(r[key])) and float(r[key]) > 0, (key, r)
     md = (tmp_path / "cpu_reference.md").read_text()
-    assert "warp coloured / numpy jacobi" in md
+    assert "warp coloured, 1 thread / numpy jacobi" in md
+    assert "bit-identical to the 1-thread runs: yes" in md
     if has_c:
-        assert "C / warp coloured" in md and "within the tolerance" in md
+        assert "C / warp coloured, 1 thread" in md and "within the tolerance" in md
     else:
         assert "no C compiler found" in capsys.readouterr().out

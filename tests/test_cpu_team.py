@@ -31,13 +31,14 @@ def test_split_cuts_a_range_into_contiguous_pieces_in_order():
         assert max(n for _, n in pieces) - min(n for _, n in pieces) <= 1
 
 
-def test_auto_threads_only_threads_phases_large_enough_to_gain():
-    per = cpu_team.MIN_WORK_PER_THREAD
-    assert auto_threads([per - 1] * 12, cores=8) == 1  # 64^2-like colours: a barrier costs more than it saves
-    assert auto_threads([2 * per] * 12, cores=8) == 2
-    assert auto_threads([100 * per] * 12, cores=8) == 8  # never more than the cores
-    assert auto_threads([100 * per] * 12, cores=1) == 1
-    assert auto_threads([], cores=8) == 1
+def test_auto_threads_balances_work_per_thread_against_the_cost_per_thread():
+    cost = cpu_team.LAUNCH_COST_S
+    assert auto_threads(0.9 * cost, cores=8) == 1  # a 64^2-like colour: a barrier costs more than it saves
+    assert auto_threads(16 * cost, cores=8) == 4  # sqrt(work / cost)
+    assert auto_threads(15.9 * cost, cores=8) == 3  # rounded down
+    assert auto_threads(16 * cost, cores=2) == 2  # never more than the cores
+    assert auto_threads(10_000 * cost, cores=64) == cpu_team.MAX_AUTO_THREADS
+    assert auto_threads(0.0, cores=8) == 1
 
 
 def busy_scene(solver: str):
@@ -80,7 +81,7 @@ def test_captured_cpu_frames_match_launch_by_launch():
 @pytest.fixture
 def always_three_threads(monkeypatch):
     """Make auto_threads pick three threads for any grid, so the stability cases run threaded."""
-    monkeypatch.setattr(cpu_team, "MIN_WORK_PER_THREAD", 1)
+    monkeypatch.setattr(cpu_team, "LAUNCH_COST_S", 1e-15)
     monkeypatch.setattr(cpu_team, "usable_cores", lambda: 3)
     created = []
     original = Simulator.__init__
@@ -96,7 +97,7 @@ def always_three_threads(monkeypatch):
 @pytest.mark.parametrize("case", ["heavy_chain", "stiff_iterations", "mass_ratio", "two_places"])
 def test_stability_cases_pass_with_threaded_relaxation(always_three_threads, case):
     assert_all_pass(getattr(cases, case)("cpu"))
-    assert 3 in always_three_threads  # (a phase of one or two sticks stays on one thread)
+    assert always_three_threads and set(always_three_threads) == {3}
 
 
 def test_auto_threads_picks_one_thread_for_small_grids_and_cuda_takes_none():

@@ -13,8 +13,9 @@ device (the CPU always, CUDA where present). Where the test is smaller than the 
 Every check is ``measured <= bound`` (a NaN never passes); a failure lists each failed criterion with its
 measured value, bound and where the bound comes from.
 
-Two tests fail on purpose, because the simulator fails them (see each test's docstring): a free cloth does
-not fall at dt <= 1e-4 s, and an abrupt drop of dt creates energy.
+Two cases found simulator problems that are now refused with a clear error, and the tests check the
+refusal (see each test's docstring): a dt below the float32 limit (a free cloth did not fall at 1e-5 s),
+and a step shrinking by more than max_dt_ratio at once (it created energy).
 """
 
 from __future__ import annotations

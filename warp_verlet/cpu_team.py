@@ -4,16 +4,19 @@ Warp runs a CPU kernel launch on one core. The sticks of one colour share no par
 can be cut into T contiguous pieces that T threads launch at once: Warp releases the GIL while a CPU kernel
 runs, so the pieces run in parallel. The colours still run one after the other (a barrier between them), so
 every particle sees its sticks in the same order as with one thread, and the result is bit-for-bit the same
-whatever T is. Jacobi is cut by particle instead (each thread gathers for its own particles).
+whatever T is. Jacobi is cut by particle instead (each thread gathers, then copies back, its own particles).
 
-The cost is one barrier per colour, about 30 us with Python threads on the 2-core development machine: at
-64^2 (about 1 000 sticks per thread per colour) that made a sweep 2.5x slower, at 256^2 (16 000) 1.5x
-faster, at 512^2 1.8x. ``auto_threads`` therefore only threads when each thread gets at least
-``MIN_WORK_PER_THREAD`` items per phase.
+Each thread pays a fixed cost per phase (its Python launch, under the GIL, and its share of the barrier),
+so a phase of one-thread time W is fastest on about sqrt(W / LAUNCH_COST_S) threads (W / T + T x cost is
+least there). ``auto_threads`` picks that, capped by the cores and MAX_AUTO_THREADS. Measured (bench/thread_scaling.py, hanging cloth 4 x 8,
+coloured): on the 2-core development EPYC 64^2 ran 2.5x slower on 2 threads, 256^2 1.5x faster and 512^2
+1.8x; on a 16-core Xeon 128^2 gained 1.14x at best (2 threads), 256^2 2.0x (4 threads), 1024^2 5.4x
+(8 threads; 12 were no better and 16 slower).
 """
 
 from __future__ import annotations
 
+import math
 import os
 import threading
 import weakref
@@ -21,8 +24,19 @@ from typing import Callable, Sequence
 
 from .errors import WarpVerletError
 
-MIN_WORK_PER_THREAD = 4096
-"""Fewest items (sticks of a colour, or particles for Jacobi) per thread and phase worth a barrier."""
+LAUNCH_COST_S = 13e-6
+"""Fixed cost per thread and phase. With it, a 128^2 colour (51 us of one-thread work) stays on one thread
+(2 threads were 15% slower on the 2-core EPYC, 14% faster on the Xeon) and a 256^2 colour (205 us) gets 3
+on the Xeon (1.7x; 4 were best there, 2.0x)."""
+
+MAX_AUTO_THREADS = 8
+"""The barrier's cost grows with the thread count: at 1024^2, 16 threads were slower than 8 (coloured)."""
+
+COLOURED_SECONDS_PER_STICK = 6.3e-9
+"""One thread's time per coloured stick projection (6.2-6.4 ns on both machines above)."""
+
+JACOBI_SECONDS_PER_ENTRY = 4.8e-9
+"""One thread's time per Jacobi gather entry (two per stick), copy back included."""
 
 
 def usable_cores() -> int:
@@ -32,14 +46,12 @@ def usable_cores() -> int:
     return max(1, os.cpu_count() or 1)
 
 
-def auto_threads(phase_sizes: Sequence[int], cores: int | None = None) -> int:
-    """How many threads pay off for phases of these sizes: as many as the cores, but no more than leave
-    ``MIN_WORK_PER_THREAD`` items of the average phase to each."""
+def auto_threads(phase_seconds: float, cores: int | None = None) -> int:
+    """Threads for phases that take ``phase_seconds`` on one thread: sqrt(phase_seconds / LAUNCH_COST_S) rounded
+    down (when in doubt, fewer), at least 1, at most the cores and MAX_AUTO_THREADS."""
     cores = usable_cores() if cores is None else cores
-    if not phase_sizes:
-        return 1
-    average = sum(phase_sizes) / len(phase_sizes)
-    return int(max(1, min(cores, average // MIN_WORK_PER_THREAD)))
+    best = math.floor(math.sqrt(max(phase_seconds, 0.0) / LAUNCH_COST_S))
+    return int(max(1, min(best, cores, MAX_AUTO_THREADS)))
 
 
 def split(first: int, count: int, parts: int) -> list[tuple[int, int]]:

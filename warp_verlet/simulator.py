@@ -28,7 +28,7 @@ from warp_verlet.kernels.relax import relax_colour, relax_jacobi
 from warp_verlet.kernels.tear import tear_sticks
 
 from .colliders import Colliders
-from .cpu_team import PhaseTeam, auto_threads, split
+from .cpu_team import COLOURED_SECONDS_PER_STICK, JACOBI_SECONDS_PER_ENTRY, PhaseTeam, auto_threads, split
 from .errors import WarpVerletError
 from .memory import available_host_bytes, check_fits
 from .model import Model
@@ -127,8 +127,11 @@ class Simulator:
         if threads is not None:
             return threads
         m = self.model
-        sizes = [count for _, count in m.colour_ranges] if self.settings.solver == "coloured" else [m.particle_count]
-        return auto_threads(sizes)
+        if self.settings.solver == "coloured":
+            phase = m.stick_count / max(m.colour_count, 1) * COLOURED_SECONDS_PER_STICK
+        else:
+            phase = m.stick_count * JACOBI_SECONDS_PER_ENTRY  # two entries per stick over two phases per sweep
+        return auto_threads(phase)
 
     def _smallest_resolved_dt(self) -> float:
         """The smallest dt whose gravity-and-wind step |a| dt^2 is at least 4 float32 spacings of the scene's
@@ -247,8 +250,12 @@ class Simulator:
             gather = pieces(relax_jacobi, 0, m.particle_count,
                             lambda f: [self.x, m.inv_mass, m.neighbour_start, m.neighbour, m.neighbour_rest,
                                        m.neighbour_stiffness, f, self._x_scratch])
-            copy_back = [lambda: wp.copy(self.x, self._x_scratch)] + [None] * (threads - 1)
+            copy_back = [self._copy_back(f, n) if n else None for f, n in split(0, m.particle_count, threads)]
             return [gather, copy_back]
+
+    def _copy_back(self, first: int, count: int) -> Callable[[], None]:
+        """Jacobi's new positions of particles first .. first + count - 1 into x."""
+        return lambda: wp.copy(self.x, self._x_scratch, dest_offset=first, src_offset=first, count=count)
 
     def _relax(self, dt: float = 0.0) -> None:
         if self._team is not None:
