@@ -8,10 +8,11 @@ whatever T is. Jacobi is cut by particle instead (each thread gathers, then copi
 
 Each thread pays a fixed cost per phase (its Python launch, under the GIL, and its share of the barrier),
 so a phase of one-thread time W is fastest on about sqrt(W / LAUNCH_COST_S) threads (W / T + T x cost is
-least there). ``auto_threads`` picks that, capped by the cores and MAX_AUTO_THREADS. Measured (bench/thread_scaling.py, hanging cloth 4 x 8,
-coloured): on the 2-core development EPYC 64^2 ran 2.5x slower on 2 threads, 256^2 1.5x faster and 512^2
-1.8x; on a 16-core Xeon 128^2 gained 1.14x at best (2 threads), 256^2 2.0x (4 threads), 1024^2 5.4x
-(8 threads; 12 were no better and 16 slower).
+least there). ``auto_threads`` picks that, capped by the cores and MAX_AUTO_THREADS.
+
+Measured (bench/thread_scaling.py, hanging cloth 4 x 8, coloured): on the 2-core development EPYC 64^2
+ran 3x slower on 2 threads, 128^2 1.15x slower, 256^2 1.45x faster and 512^2 1.8x; on a 16-core Xeon 128^2 gained 1.1x at best (2 threads), 256^2 2.1x (4 threads)
+and 1024^2 5.5x on 8 threads (bench/results/xeon16).
 """
 
 from __future__ import annotations
@@ -26,11 +27,12 @@ from .errors import WarpVerletError
 
 LAUNCH_COST_S = 13e-6
 """Fixed cost per thread and phase. With it, a 128^2 colour (51 us of one-thread work) stays on one thread
-(2 threads were 15% slower on the 2-core EPYC, 14% faster on the Xeon) and a 256^2 colour (205 us) gets 3
-on the Xeon (1.7x; 4 were best there, 2.0x)."""
+(2 threads were 15-20% slower on the 2-core EPYC, 9% faster on the Xeon) and a 256^2 colour (205 us) gets 3
+on the Xeon (1.96x; 4 were best there, 2.06x)."""
 
 MAX_AUTO_THREADS = 8
-"""The barrier's cost grows with the thread count: at 1024^2, 16 threads were slower than 8 (coloured)."""
+"""The barrier's cost grows with the thread count. At 1024^2 on the Xeon two runs agreed up to 8 threads
+(5.4x, 5.5x) and disagreed beyond (12: 5.4x and 6.4x; 16: 4.4x and 6.3x), so automatic stops at 8."""
 
 COLOURED_SECONDS_PER_STICK = 6.3e-9
 """One thread's time per coloured stick projection (6.2-6.4 ns on both machines above)."""
