@@ -11,8 +11,9 @@ so a phase of one-thread time W is fastest on about sqrt(W / LAUNCH_COST_S) thre
 least there). ``auto_threads`` picks that, capped by the cores and MAX_AUTO_THREADS.
 
 Measured (bench/thread_scaling.py, hanging cloth 4 x 8, coloured): on the 2-core development EPYC 64^2
-ran 3x slower on 2 threads, 128^2 1.15x slower, 256^2 1.45x faster and 512^2 1.8x; on a 16-core Xeon 128^2 gained 1.1x at best (2 threads), 256^2 2.1x (4 threads)
-and 1024^2 5.5x on 8 threads (bench/results/xeon16).
+ran 3x slower on 2 threads, 128^2 1.15x slower, 256^2 1.45x faster and 512^2 1.8x; on a 16-core Xeon
+128^2 gained 1.1x at best (2 threads), 256^2 2.1x (4 threads) and 1024^2 5.5x on 8 threads
+(bench/results/xeon16).
 """
 
 from __future__ import annotations
