@@ -7,6 +7,7 @@ same runs are compared bit-for-bit with one thread and with uncaptured launches.
 
 from __future__ import annotations
 
+import gc
 import threading
 
 import numpy as np
@@ -157,6 +158,19 @@ def test_phases_run_in_order_with_every_member_and_workers_stop_on_close():
     assert sorted(log) == sorted((p, t) for p in range(4) for t in range(3) for _ in range(2))
     team.close()
     assert all(not w.is_alive() for w in _joined(team))
+
+
+@pytest.mark.parametrize("solver", ["coloured", "jacobi"])
+def test_dropping_a_threaded_simulator_stops_its_threads(solver):
+    sim = Simulator(busy_scene(solver), "cpu", threads=3)
+    sim.step_frame()
+    workers = sim._team._workers
+    assert all(w.is_alive() for w in workers)
+    del sim
+    gc.collect()
+    for worker in workers:
+        worker.join(timeout=5)
+    assert not any(w.is_alive() for w in workers)
 
 
 def _joined(team: PhaseTeam) -> list[threading.Thread]:

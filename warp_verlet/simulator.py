@@ -254,8 +254,10 @@ class Simulator:
             return [gather, copy_back]
 
     def _copy_back(self, first: int, count: int) -> Callable[[], None]:
-        """Jacobi's new positions of particles first .. first + count - 1 into x."""
-        return lambda: wp.copy(self.x, self._x_scratch, dest_offset=first, src_offset=first, count=count)
+        """Jacobi's new positions of particles first .. first + count - 1 into x. The task holds the arrays,
+        not the simulator: worker threads keep their tasks alive, and must not keep the simulator alive."""
+        x, scratch = self.x, self._x_scratch
+        return lambda: wp.copy(x, scratch, dest_offset=first, src_offset=first, count=count)
 
     def _relax(self, dt: float = 0.0) -> None:
         if self._team is not None:
@@ -266,8 +268,9 @@ class Simulator:
                 task()
 
     def step_frame(self) -> None:
-        """The scene's ``substeps`` fixed steps of one frame. On CUDA, replayed from a captured graph once the
-        first frame (which initialises x_prev) has run."""
+        """The scene's ``substeps`` fixed steps of one frame, replayed from a capture (a CUDA graph, or Warp's
+        CPU capture) once the first frame (which initialises x_prev) has run, unless the CPU relaxation is
+        threaded."""
         n, dt = self.settings.substeps, self.settings.dt
         with wp.ScopedDevice(self.device):
             if not self._use_graph or self._dt_prev != dt:
