@@ -92,6 +92,7 @@ class PhaseTeam:
         ]
         for worker in self._workers:
             worker.start()
+        self._own_work = self._work_of(0)
         # The workers hold only the barrier, the state and their work, not the team, so the team can be
         # collected; collecting it (or interpreter exit) releases them.
         self._finalizer = weakref.finalize(self, PhaseTeam._release, self._barrier, self._state)
@@ -133,10 +134,9 @@ class PhaseTeam:
         """One run: every member does its work of every phase, ``repeats`` times; returns when all are done."""
         if self._state["closed"] or self._barrier.broken:
             raise WarpVerletError("the CPU relaxation threads stopped after an earlier error") from self._state["error"]
-        work = self._work_of(0)
         try:
             self._barrier.wait()
-            work()
+            self._own_work()
         except threading.BrokenBarrierError:
             self._state["closed"] = True
             error = self._state["error"]
