@@ -237,7 +237,7 @@ class Simulator:
         m, threads = self.model, self.threads
 
         def pieces(kernel, first: int, count: int, args) -> list:
-            return [wp.launch(kernel, n, inputs=args(f), outputs=[], record_cmd=True).launch if n else None
+            return [wp.launch(kernel, n, inputs=args(f), record_cmd=True).launch if n else None
                     for f, n in split(first, count, threads)]
 
         with wp.ScopedDevice(self.device):
