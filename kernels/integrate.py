@@ -27,20 +27,20 @@ import warp as wp
 def verlet_start(
     x: wp.array(dtype=wp.vec3),
     inv_mass: wp.array(dtype=float),
-    velocity: wp.vec3,
     accel: wp.vec3,
     dt: float,
     x_inertial: wp.array(dtype=wp.vec3),
     delta: wp.array(dtype=wp.vec3),
 ):
     """Exact start for constant acceleration: x_prev = x0 - v0 dt + a dt^2 / 2, so the first step lands on
-    x0 + v0 dt + a dt^2 / 2. Stored as delta = x0 - x_prev and x_inertial = x0."""
+    x0 + v0 dt + a dt^2 / 2. ``delta`` holds the initial velocity v0 (m/s) on entry (State.set_velocity) and
+    leaves as delta = x0 - x_prev, with x_inertial = x0."""
     i = wp.tid()
     x_inertial[i] = x[i]
     if inv_mass[i] == 0.0:
         delta[i] = wp.vec3(0.0)  # pinned: no implicit velocity
     else:
-        delta[i] = velocity * dt - accel * (0.5 * dt * dt)
+        delta[i] = delta[i] * dt - accel * (0.5 * dt * dt)
 
 
 @wp.kernel

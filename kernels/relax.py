@@ -1,12 +1,17 @@
 """Distance-stick relaxation (Jakobsen 2001), weighted by inverse mass.
 
-For a stick (i, j) with rest length L and current separation d = x_j - x_i, D = |d|, both ends move
+For a rigid stick (i, j) with rest length L and current separation d = x_j - x_i, D = |d|, both ends move
 along d by the error D - L, split by inverse mass: x_i += w_i / (w_i + w_j) * k * (D - L) * d / D and
 x_j -= w_j / (w_i + w_j) * k * (D - L) * d / D. Pins have w = 0 and do not move; a stick between two
 pins, or with D below MIN_LENGTH (coincident ends: no direction to push along), is skipped.
 
-k is the per-iteration stiffness k' = 1 - (1 - k)^(1/K) (Mueller et al. 2007), computed on the host, so
-that a cloth looks the same whatever the iteration count K.
+k is the stick's weight: 1 while it holds, 0 once torn (kernels/tear.py), so a torn stick keeps its slot.
+
+A soft stick is an XPBD constraint (Macklin, Mueller, Chentanez 2016) with compliance alpha (m/N): with
+alpha~ = alpha / dt^2 and the tension mu accumulated over the substep's sweeps (zeroed at its start), a
+projection moves by s = (D - L - alpha~ mu) / (w_i + w_j + alpha~) and adds s to mu. It converges to the
+spring of stiffness 1 / alpha at any substep and iteration count, where a per-sweep stiffness fraction
+would make the cloth softer with fewer sweeps. With alpha = 0 it is the rigid projection.
 """
 
 import warp as wp
@@ -31,7 +36,7 @@ def relax_colour(
     inv_mass: wp.array(dtype=float),
     ends: wp.array(dtype=wp.vec2i),
     rest: wp.array(dtype=float),
-    stiffness: wp.array(dtype=float),
+    weight: wp.array(dtype=float),
     first: int,
 ):
     """Gauss-Seidel over one colour: sticks first .. first + dim - 1 share no particle, so every thread
@@ -44,7 +49,42 @@ def relax_colour(
     wj = inv_mass[j]
     xi = x[i]
     xj = x[j]
-    c = stick_correction(xi, xj, wi, wj, rest[s], stiffness[s])
+    c = stick_correction(xi, xj, wi, wj, rest[s], weight[s])
+    x[i] = xi + c * wi
+    x[j] = xj - c * wj
+
+
+@wp.kernel
+def relax_colour_compliant(
+    x: wp.array(dtype=wp.vec3),
+    inv_mass: wp.array(dtype=float),
+    ends: wp.array(dtype=wp.vec2i),
+    rest: wp.array(dtype=float),
+    weight: wp.array(dtype=float),
+    compliance: wp.array(dtype=float),
+    inv_dt2: float,
+    first: int,
+    tension: wp.array(dtype=float),
+):
+    """XPBD over one colour (see the module docstring); ``tension`` is mu, in N s^2, per stick."""
+    s = first + wp.tid()
+    e = ends[s]
+    i = e[0]
+    j = e[1]
+    wi = inv_mass[i]
+    wj = inv_mass[j]
+    xi = x[i]
+    xj = x[j]
+    d = xj - xi
+    length = wp.length(d)
+    w = wi + wj
+    if w == 0.0 or length < MIN_LENGTH:
+        return
+    alpha = compliance[s] * inv_dt2
+    mu = tension[s]
+    step = weight[s] * (length - rest[s] - alpha * mu) / (w + alpha)
+    tension[s] = mu + step
+    c = d * (step / length)
     x[i] = xi + c * wi
     x[j] = xj - c * wj
 
@@ -56,7 +96,7 @@ def relax_jacobi(
     neighbour_start: wp.array(dtype=int),
     neighbour: wp.array(dtype=int),
     neighbour_rest: wp.array(dtype=float),
-    neighbour_stiffness: wp.array(dtype=float),
+    neighbour_weight: wp.array(dtype=float),
     first: int,
     x_out: wp.array(dtype=wp.vec3),
 ):
@@ -75,7 +115,7 @@ def relax_jacobi(
     end = neighbour_start[i + 1]
     for n in range(start, end):
         j = neighbour[n]
-        total += stick_correction(xi, x_in[j], wi, inv_mass[j], neighbour_rest[n], neighbour_stiffness[n])
+        total += stick_correction(xi, x_in[j], wi, inv_mass[j], neighbour_rest[n], neighbour_weight[n])
     count = end - start
     if count > 0:
         xi = xi + total * (wi / float(count))

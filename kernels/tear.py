@@ -1,10 +1,10 @@
 """Tearing: a stick stretched beyond its tear length (threshold x rest length) is removed.
 
-Removal sets the stick's stiffness to 0. The relaxation kernels already turn a stiffness of 0 into no
+Removal sets the stick's weight (in the State, not the Model) to 0. The relaxation kernels already turn a weight of 0 into no
 correction, so a torn stick stays in its colour's slot and needs no relax-kernel variant, no compaction
 and no new colouring: a subset of a valid colouring is still valid.
 
-Each thread decides one stick from the same positions and writes only that stick's stiffness, so the set
+Each thread decides one stick from the same positions and writes only that stick's weight, so the set
 of torn sticks is the same whatever the thread order. The counter is an integer atomic, whose sum does not
 depend on order either; the host reads that one integer per frame to learn whether anything tore.
 """
@@ -17,13 +17,13 @@ def tear_sticks(
     x: wp.array(dtype=wp.vec3),
     ends: wp.array(dtype=wp.vec2i),
     tear_length: wp.array(dtype=float),
-    stiffness: wp.array(dtype=float),
+    weight: wp.array(dtype=float),
     torn_count: wp.array(dtype=int),
 ):
     s = wp.tid()
-    if stiffness[s] == 0.0:
+    if weight[s] == 0.0:
         return  # already torn
     e = ends[s]
     if wp.length(x[e[1]] - x[e[0]]) > tear_length[s]:
-        stiffness[s] = 0.0
+        weight[s] = 0.0
         wp.atomic_add(torn_count, 0, 1)

@@ -4,7 +4,8 @@ The simulator checks the estimate against what the device and the host have free
 cannot fit with one clear error, instead of failing half-way through allocation (or swapping the machine to
 a halt). ``warp-verlet validate`` prints it. This module imports neither warp nor pxr.
 
-The per-element figures are the arrays ``model.py`` and ``simulator.py`` allocate; the host figure is the
+The device figure is the sum of what the stages and constraint sets of the table (warp_verlet/stages.py)
+declare for the scene, the same declarations the solver binds its launches from; the host figure is the
 peak of the numpy temporaries that building a grid's sticks takes, measured with tracemalloc on a 512^2
 cloth (128 B per stick coloured, 150 B Jacobi) and rounded up.
 """
@@ -17,13 +18,6 @@ from dataclasses import dataclass
 from .errors import WarpVerletError
 from .scene import ClothSpec, Scene
 
-# Device bytes per particle: x, x_inertial, delta (3 x vec3) and inv_mass; Jacobi adds a scratch vec3
-# and its CSR row start.
-PARTICLE_BYTES = {"coloured": 3 * 12 + 4, "jacobi": 3 * 12 + 4 + 12 + 4}
-# Device bytes per stick: coloured keeps ends (vec2i), rest and stiffness; Jacobi keeps neighbour, rest and
-# stiffness for both ends. Tearing adds a tear length per entry (and, for Jacobi, the entries' ends).
-STICK_BYTES = {"coloured": 8 + 4 + 4, "jacobi": 2 * (4 + 4 + 4)}
-TEAR_STICK_BYTES = {"coloured": 4, "jacobi": 2 * (4 + 8)}
 HOST_BUILD_BYTES_PER_STICK = 160
 
 
@@ -35,7 +29,7 @@ def stick_count(spec: ClothSpec) -> int:
         "shear": 2 * (r - 1) * (c - 1),
         "bend": r * max(c - 2, 0) + max(r - 2, 0) * c,
     }
-    return sum(per_family[family] for family in spec.stiffness)
+    return sum(per_family[family] for family in spec.sticks)
 
 
 @dataclass(frozen=True)
@@ -54,16 +48,14 @@ def gib(n: float) -> str:
 
 
 def estimate(scene: Scene) -> MemoryNeed:
-    solver = scene.simulation.solver
-    particles = scene.particle_count
-    sticks = sum(stick_count(c) for c in scene.cloths)
-    # Tear lengths are allocated for every stick once any cloth can tear (Model._build_tearing).
-    per_stick = STICK_BYTES[solver] + (TEAR_STICK_BYTES[solver] if scene.tears else 0)
+    from .stages import Need, device_bytes  # stages imports this module's stick_count
+
+    need = Need.of(scene)
     return MemoryNeed(
-        particles=particles,
-        sticks=sticks,
-        device_bytes=particles * PARTICLE_BYTES[solver] + sticks * per_stick,
-        host_bytes=sticks * HOST_BUILD_BYTES_PER_STICK + particles * 64,
+        particles=need.particles,
+        sticks=need.sticks,
+        device_bytes=device_bytes(need),
+        host_bytes=need.sticks * HOST_BUILD_BYTES_PER_STICK + need.particles * 64,
     )
 
 

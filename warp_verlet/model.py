@@ -1,5 +1,8 @@
 """The static data of a scene on one device: every cloth's particles in one array, sticks sorted by colour.
 
+A Model is immutable once built: nothing in a run writes it (tearing zeroes the State's stick weights). So
+one model serves any number of states (checkpoints, clones, a batch of shots).
+
 All cloths share one particle array (cloth ``k`` owns a contiguous slice), so one launch serves every
 cloth. Colour ``c`` of one cloth and colour ``c`` of another touch disjoint particles, so their union is
 still a valid colour: a step costs as many launches as the most-coloured cloth, not the sum.
@@ -16,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
+from .colliders import ColliderModel
 from .colouring import Colouring, check_partition, graph_colouring, grid_colouring
 from .scene import Scene
 from .topology import STRUCT_H, STRUCT_V, ClothTopology, build_cloth, faces_beside_sticks
@@ -41,15 +45,18 @@ class ClothSlot:
         return slice(self.first, self.first + self.count)
 
 
-def per_iteration_stiffness(k: np.ndarray, iterations: int) -> np.ndarray:
-    """k' = 1 - (1 - k)^(1/K): K relaxations with k' remove the same fraction k of an isolated stick's error
-    as one with k, so a cloth's look does not depend on the iteration count (Mueller et al. 2007, 3.3)."""
-    if iterations <= 1:
-        return k.astype(np.float32)
-    return (1.0 - np.power(1.0 - k.astype(np.float64), 1.0 / iterations)).astype(np.float32)
-
-
 class Model:
+    """Device arrays (read by the kernels, never written) and the host copies the metrics need.
+
+    Particles (N): ``inv_mass`` (N,) float32, 1/kg, 0 for a pin; ``rest_positions`` (N, 3) float32, m (host).
+    Coloured solver, per stick in colour order (M): ``stick_ends`` (M,) vec2i particle indices,
+    ``stick_rest`` (M,) float32 m, ``stick_weight`` (M,) float32 (all 1: the intact weights a State starts
+    from), ``stick_compliance`` (M,) float32 m/N or None when every stick is rigid; ``colour_ranges`` the
+    (first, count) of each colour. Jacobi solver: the per-particle CSR ``neighbour_start`` (N + 1,),
+    ``neighbour``, ``neighbour_rest`` and ``neighbour_weight`` (2M,) instead. Tearing (only when a cloth can
+    tear): ``tear_ends`` and ``tear_length`` (E,), one entry per stick (coloured) or per stick end (Jacobi).
+    """
+
     def __init__(self, scene: Scene, device, colouring: str = "auto"):
         """``colouring``: "auto" (analytic for grids), "grid" or "graph" (Warp's graph colouring)."""
         if colouring not in ("auto", "grid", "graph"):
@@ -65,12 +72,10 @@ class Model:
 
         # Host copies of everything, concatenated with particle indices made global.
         self.rest_positions = np.concatenate([s.topology.positions for s in slots])
-        inv_mass = np.concatenate([s.topology.inv_mass for s in slots])
+        self.host_inv_mass = np.concatenate([s.topology.inv_mass for s in slots])
         sticks = np.concatenate([s.topology.sticks + s.first for s in slots]).astype(np.int32)
         rest = np.concatenate([s.topology.rest_length for s in slots])
-        stiffness = per_iteration_stiffness(
-            np.concatenate([s.topology.stiffness for s in slots]), scene.simulation.iterations
-        )
+        compliance = np.concatenate([s.topology.compliance for s in slots])
         grid_class = np.concatenate([s.topology.grid_class for s in slots])
         anchor = np.concatenate([s.topology.anchor for s in slots])
         owner = np.repeat(np.arange(len(slots), dtype=np.int32), [len(s.topology.sticks) for s in slots])
@@ -82,8 +87,10 @@ class Model:
         ]).astype(np.float32)
         self.stick_count = len(sticks)
 
-        self.inv_mass = wp.array(inv_mass, dtype=float, device=device)
-        self.has_free_particles = bool((inv_mass > 0).any())
+        self.inv_mass = wp.array(self.host_inv_mass, dtype=float, device=device)
+        self.has_free_particles = bool((self.host_inv_mass > 0).any())
+        self.compliant = bool((compliance > 0).any())
+        self.stick_compliance = None
 
         csr_stick = csr_ends = None  # Jacobi only
         if self.solver == "coloured":
@@ -93,17 +100,19 @@ class Model:
                 self.colouring = grid_colouring(grid_class, anchor)
             check_partition(sticks, self.colouring.colour)  # cheap, and a wrong colouring is a silent race
             order = np.argsort(self.colouring.colour, kind="stable")
-            sticks, rest, stiffness = sticks[order], rest[order], stiffness[order]
+            sticks, rest, compliance = sticks[order], rest[order], compliance[order]
             grid_class, anchor, owner, tear_length = grid_class[order], anchor[order], owner[order], tear_length[order]
             sizes = self.colouring.sizes
             self.colour_ranges = [(int(a), int(n)) for a, n in zip(np.r_[0, np.cumsum(sizes)[:-1]], sizes) if n > 0]
             self.stick_ends = wp.array(sticks, dtype=wp.vec2i, device=device)
             self.stick_rest = wp.array(rest, dtype=float, device=device)
-            self.stick_stiffness = wp.array(stiffness, dtype=float, device=device)
+            self.stick_weight = wp.array(np.ones(len(sticks), np.float32), dtype=float, device=device)
+            if self.compliant:
+                self.stick_compliance = wp.array(compliance, dtype=float, device=device)
         else:
             self.colouring = None
             self.colour_ranges = []
-            csr_stick, csr_ends = self._build_neighbours(sticks, rest, stiffness, device)
+            csr_stick, csr_ends = self._build_neighbours(sticks, rest, device)
 
         # Kept on the host for metrics (stretch over structural sticks) in the device order.
         self.host_sticks = sticks
@@ -112,22 +121,31 @@ class Model:
         self.tears = scene.tears
         if self.tears:
             self._build_tearing(tear_length, grid_class, anchor, owner, device, csr_stick, csr_ends)
+        self.colliders = ColliderModel(scene, device)
+        self._frozen = True
+
+    def __setattr__(self, name, value):
+        if getattr(self, "_frozen", False):
+            raise AttributeError(f"a Model is immutable once built (tried to set {name!r}); "
+                                 "time-varying data belongs in the State")
+        super().__setattr__(name, value)
 
     def _build_tearing(self, tear_length, grid_class, anchor, owner, device, csr_stick=None, csr_ends=None) -> None:
-        """What ``tear_sticks`` reads (its sticks, their tear lengths and the stiffness it zeroes) and, on the
-        host, which faces each structural stick borders, to hide them when it tears.
+        """What ``tear_sticks`` reads (its sticks and their tear lengths), the intact weights a State's live
+        copy starts from, and, on the host, which faces each structural stick borders, to hide them when it
+        tears.
 
-        The coloured solver's stiffness belongs to the sticks themselves. The Jacobi solver keeps a copy per
-        stick end (one per CSR entry), so its tear kernel runs over those entries: both ends of a stick see
-        the same length (x_j - x_i and x_i - x_j differ only in sign, exactly) and tear together."""
+        The coloured solver's weight belongs to the sticks themselves. The Jacobi solver keeps one per stick
+        end (one per CSR entry), so its tear kernel runs over those entries: both ends of a stick see the
+        same length (x_j - x_i and x_i - x_j differ only in sign, exactly) and tear together."""
         if csr_stick is None:
             self.tear_ends = self.stick_ends
-            self.tear_stiffness = self.stick_stiffness
+            self.tear_weight_start = self.stick_weight
             self._tear_entry_stick = np.arange(self.stick_count)
             entry_length = tear_length
         else:
             self.tear_ends = wp.array(csr_ends, dtype=wp.vec2i, device=device)
-            self.tear_stiffness = self.neighbour_stiffness
+            self.tear_weight_start = self.neighbour_weight
             self._tear_entry_stick = csr_stick
             entry_length = tear_length[csr_stick]
         self.tear_length = wp.array(entry_length, dtype=float, device=device)
@@ -139,8 +157,8 @@ class Model:
             self.stick_faces[mine] = faces_beside_sticks(slot.topology.rows, slot.topology.cols,
                                                          grid_class[mine], anchor[mine])
 
-    def _build_neighbours(self, sticks, rest, stiffness, device) -> tuple[np.ndarray, np.ndarray]:
-        """CSR list of (neighbour, rest, stiffness) per particle for the gather-form Jacobi solver. Returns,
+    def _build_neighbours(self, sticks, rest, device) -> tuple[np.ndarray, np.ndarray]:
+        """CSR list of (neighbour, rest, weight) per particle for the gather-form Jacobi solver. Returns,
         per CSR entry, its stick and its (particle, neighbour) pair, which tearing needs."""
         n = self.particle_count
         a = np.concatenate([sticks[:, 0], sticks[:, 1]])
@@ -152,7 +170,7 @@ class Model:
         self.neighbour_start = wp.array(start, dtype=int, device=device)
         self.neighbour = wp.array(b[order].astype(np.int32), dtype=int, device=device)
         self.neighbour_rest = wp.array(np.tile(rest, 2)[order], dtype=float, device=device)
-        self.neighbour_stiffness = wp.array(np.tile(stiffness, 2)[order], dtype=float, device=device)
+        self.neighbour_weight = wp.array(np.ones(2 * len(sticks), np.float32), dtype=float, device=device)
         return order % max(len(sticks), 1), np.stack([a[order], b[order]], axis=1).astype(np.int32)
 
     @property
@@ -163,10 +181,10 @@ class Model:
         """Per-cloth views of a (particle_count, 3) array."""
         return [points[s.particles] for s in self.cloths]
 
-    def torn_sticks(self, tear_stiffness: np.ndarray) -> np.ndarray:
-        """Which sticks (in ``host_sticks`` order) are torn, from a host copy of ``tear_stiffness``."""
+    def torn_sticks(self, stick_weight: np.ndarray) -> np.ndarray:
+        """Which sticks (in ``host_sticks`` order) are torn, from a host copy of a State's ``stick_weight``."""
         torn = np.zeros(self.stick_count, bool)
-        torn[self._tear_entry_stick[tear_stiffness == 0.0]] = True
+        torn[self._tear_entry_stick[stick_weight == 0.0]] = True
         return torn
 
     def hidden_faces(self, torn: np.ndarray) -> list[np.ndarray]:

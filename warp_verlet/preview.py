@@ -6,7 +6,7 @@ importing this module does not choose or change the caller's matplotlib backend.
 
 Every surface drawn for one frame goes into a single ``Poly3DCollection``: matplotlib sorts polygons by
 depth only within a collection, so a cloth draped over a sphere is drawn in the right order only if the sphere's
-facets and the cloth's quads are sorted together.
+facets and the cloth's faces are sorted together. A cloth's faces may be triangles, quads, n-gons or a mix.
 
 This module never imports warp: previewing a cache must not need the simulator.
 """
@@ -27,6 +27,7 @@ from mpl_toolkits.mplot3d.art3d import Line3DCollection, Poly3DCollection
 from pxr import Tf, Usd, UsdGeom
 
 from .errors import OutputError, WarpVerletError
+from .faces import Faces, as_faces, grid_faces, next_corner
 from .usd_writer import COLLIDERS_PATH
 
 SUFFIXES = (".png", ".gif")
@@ -55,15 +56,20 @@ class PreviewError(WarpVerletError):
     """The cache or the preview's options cannot be used as given: a bad argument or input (exit code 2)."""
 
 
+# The polygons of one cloth, in 3D: a (Q, k, 3) array when every face has the same k corners (every grid,
+# the large case, handled whole by numpy), else a list of (k_i, 3) arrays, which matplotlib also draws.
+Polygons = np.ndarray | list[np.ndarray]
+
+
 # --------------------------------------------------------------------------------------------- reading
 
 
 @dataclass(frozen=True)
 class ClothPrim:
-    """The static part of one cloth mesh: its quads and, when they form the writer's grid, its shape."""
+    """The static part of one cloth mesh: its faces and, when they form the writer's grid, its shape."""
 
     prim: UsdGeom.Mesh
-    faces: np.ndarray  # (F, k) vertex indices, every face with the same k
+    faces: Faces  # triangles, quads, n-gons, or a mix
     grid: tuple[int, int] | None  # (rows, cols) of points when the faces are the writer's regular grid
     points_needed: int  # 1 + the largest vertex index the faces use
 
@@ -89,30 +95,29 @@ class FrameGeometry:
 
     frame: int
     seconds: float
-    cloths: tuple[np.ndarray, ...]  # (Q, k, 3) visible polygons of each cloth, decimated when large
+    cloths: tuple[Polygons, ...]  # visible polygons of each cloth, decimated when large, in stage coordinates
     ropes: tuple[np.ndarray, ...]  # (N, 3) polyline of each curve
     spheres: tuple[tuple[np.ndarray, float], ...]  # (centre, radius)
     planes: tuple[np.ndarray, ...]  # (4, 3) corners as authored (drawing clips them to the cloth's box)
 
 
-def grid_shape(faces: np.ndarray, point_count: int) -> tuple[int, int] | None:
-    """(rows, cols) of points when ``faces`` are exactly the writer's grid, else None.
+def grid_shape(faces: Faces | np.ndarray, point_count: int) -> tuple[int, int] | None:
+    """(rows, cols) of points when ``faces`` (Faces, or an (F, k) array) are exactly the writer's grid
+    (``faces.grid_faces``), else None.
 
-    The writer's face (r, c) is (r,c), (r+1,c), (r+1,c+1), (r,c+1) with vertex r*cols + c, in row-major
-    order, so the first face gives cols; the whole array is then compared against the grid it implies.
+    The grid's first face is (0, cols, cols + 1, 1), so it gives cols; the point count then gives rows, and
+    the faces are compared with the grid those imply.
     """
-    if faces.ndim != 2 or faces.shape[1] != 4 or len(faces) == 0 or faces[0, 0] != 0:
+    faces = as_faces(faces)
+    if len(faces) == 0 or faces.counts[0] != 4 or faces.indices[0] != 0:
         return None
-    cols = int(faces[0, 1])
+    cols = int(faces.indices[1])
     if cols < 2 or point_count % cols:
         return None
     rows = point_count // cols
-    if rows < 2 or len(faces) != (rows - 1) * (cols - 1):
+    if rows < 2 or len(faces) != (rows - 1) * (cols - 1):  # also keeps a bogus cols from building a huge grid
         return None
-    r, c = np.meshgrid(np.arange(rows - 1), np.arange(cols - 1), indexing="ij")
-    a = (r * cols + c).ravel()
-    expected = np.stack([a, a + cols, a + cols + 1, a + 1], axis=1)
-    return (rows, cols) if np.array_equal(faces, expected) else None
+    return (rows, cols) if faces == grid_faces(rows, cols) else None
 
 
 def _grid_lines(quads: int, limit: int) -> np.ndarray:
@@ -120,15 +125,19 @@ def _grid_lines(quads: int, limit: int) -> np.ndarray:
     return np.round(np.linspace(0, quads, min(quads, limit) + 1)).astype(np.int64)
 
 
-def visible_polygons(points: np.ndarray, faces: np.ndarray, hidden: Sequence[int] = (),
-                     grid: tuple[int, int] | None = None, max_quads: int = MAX_GRID_QUADS) -> np.ndarray:
-    """The polygons to draw, (Q, k, 3): every face not in ``hidden``, or, for a grid, a coarse grid of at
-    most ``max_quads`` x ``max_quads`` quads in which a quad is hidden if any fine face it covers is."""
+def visible_polygons(points: np.ndarray, faces: Faces | np.ndarray, hidden: Sequence[int] = (),
+                     grid: tuple[int, int] | None = None, max_quads: int = MAX_GRID_QUADS) -> Polygons:
+    """The polygons to draw: every face not in ``hidden``, or, for a grid, a coarse grid of at most
+    ``max_quads`` x ``max_quads`` quads in which a quad is hidden if any fine face it covers is.
+
+    ``faces`` is Faces or an (F, k) array. The result is a (Q, k, 3) array when every face has k corners
+    (one fancy index, however many faces), else a list of (k_i, 3) arrays in face order."""
+    faces = as_faces(faces)
     hidden_mask = np.zeros(len(faces), bool)
     hidden = np.asarray(hidden, dtype=np.int64)
     hidden_mask[hidden[(hidden >= 0) & (hidden < len(faces))]] = True  # out-of-range indices hide nothing
     if grid is None:
-        return points[faces[~hidden_mask]]
+        return _face_polygons(points, faces, ~hidden_mask)
     rows, cols = grid
     ri, ci = _grid_lines(rows - 1, max_quads), _grid_lines(cols - 1, max_quads)
     p = points.reshape(rows, cols, 3)[np.ix_(ri, ci)]
@@ -136,6 +145,16 @@ def visible_polygons(points: np.ndarray, faces: np.ndarray, hidden: Sequence[int
     fine_hidden = hidden_mask.reshape(rows - 1, cols - 1)
     coarse_hidden = np.logical_or.reduceat(np.logical_or.reduceat(fine_hidden, ri[:-1], axis=0), ci[:-1], axis=1)
     return quads[~coarse_hidden]
+
+
+def _face_polygons(points: np.ndarray, faces: Faces, keep: np.ndarray) -> Polygons:
+    """The corner positions of the faces where ``keep`` is True, as ``visible_polygons`` returns them."""
+    uniform = faces.as_uniform()
+    if uniform is not None:
+        return points[uniform[keep]]
+    corners = points[faces.indices[np.repeat(keep, faces.counts)]]
+    counts = faces.counts[keep]
+    return np.split(corners, np.cumsum(counts)[:-1]) if len(counts) else []
 
 
 def open_cache(path: str | os.PathLike[str]) -> PointCache:
@@ -182,18 +201,16 @@ def open_cache(path: str | os.PathLike[str]) -> PointCache:
 def _cloth_prim(path: Path, mesh: UsdGeom.Mesh) -> ClothPrim:
     counts = np.asarray(mesh.GetFaceVertexCountsAttr().Get() or [], dtype=np.int64)
     indices = np.asarray(mesh.GetFaceVertexIndicesAttr().Get() or [], dtype=np.int64)
-    if counts.sum() != len(indices):
-        raise PreviewError(f"{path}: mesh {mesh.GetPath()} has {len(indices)} face vertex indices for faces of "
-                           f"{counts.sum()} corners in all")
-    if len(counts) and (counts != counts[0]).any():
-        raise PreviewError(f"{path}: mesh {mesh.GetPath()} mixes faces of different sizes; "
-                           "the preview draws meshes whose faces all have the same number of corners")
-    faces = indices.reshape(len(counts), -1) if len(counts) else np.zeros((0, 4), np.int64)
+    try:
+        faces = Faces(counts, indices)
+        faces.validate(None, f"mesh {mesh.GetPath()}")  # the point count may differ from frame to frame
+    except ValueError as e:
+        raise PreviewError(f"{path}: {e}") from e
     points = mesh.GetPointsAttr()
     times = points.GetTimeSamples()
     first = points.Get(times[0]) if times else points.Get()
     return ClothPrim(prim=mesh, faces=faces, grid=grid_shape(faces, len(first) if first is not None else 0),
-                     points_needed=int(faces.max()) + 1 if faces.size else 0)
+                     points_needed=int(faces.indices.max()) + 1 if len(faces.indices) else 0)
 
 
 def _to_world(prim: UsdGeom.Xformable, time: Usd.TimeCode, points: np.ndarray) -> np.ndarray:
@@ -218,8 +235,8 @@ def read_frame(cache: PointCache, frame: int) -> FrameGeometry:
         # The grid was recognised on the first sample; a mesh whose point count changes is drawn face by face.
         grid = cloth.grid if cloth.grid and len(points) == cloth.grid[0] * cloth.grid[1] else None
         hidden = cloth.prim.GetHoleIndicesAttr().Get(time)  # None or empty when the mesh never tears
-        polygons = visible_polygons(np.asarray(points), cloth.faces, hidden if hidden is not None else (), grid)
-        cloths.append(_to_world(cloth.prim, time, polygons.astype(np.float64)))
+        world = _to_world(cloth.prim, time, np.asarray(points, dtype=np.float64))
+        cloths.append(visible_polygons(world, cloth.faces, hidden if hidden is not None else (), grid))
     ropes = []
     for curves in cache.ropes:
         points = curves.GetPointsAttr().Get(time)
@@ -298,8 +315,18 @@ def to_display(points: np.ndarray, up_axis: str) -> np.ndarray:
     return np.stack([points[..., 0], -points[..., 2], points[..., 1]], axis=-1)
 
 
+def _flatten(polygons: Polygons) -> tuple[np.ndarray, np.ndarray]:
+    """Every corner of ``polygons`` in one (C, 3) array, and each polygon's corner count: one layout for
+    both kinds of Polygons, so that what works on it needs no per-kind code."""
+    if isinstance(polygons, np.ndarray):
+        return polygons.reshape(-1, 3), np.full(len(polygons), polygons.shape[1], np.int64)
+    counts = np.fromiter(map(len, polygons), np.int64, len(polygons))
+    return (np.concatenate(polygons) if polygons else np.zeros((0, 3))), counts
+
+
 def _content_box(geometries: Sequence[FrameGeometry]) -> tuple[np.ndarray, np.ndarray]:
-    chunks = [p.reshape(-1, 3) for g in geometries for p in (*g.cloths, *g.ropes) if p.size]
+    chunks = [_flatten(p)[0] for g in geometries for p in g.cloths] + [r for g in geometries for r in g.ropes]
+    chunks = [c for c in chunks if c.size]
     chunks += [np.stack([c - r, c + r]) for g in geometries for c, r in g.spheres]
     if not chunks:  # everything hidden: a unit box at the origin
         return np.full(3, -0.5), np.full(3, 0.5)
@@ -345,15 +372,23 @@ def _sphere_quads(centre: np.ndarray, radius: float) -> np.ndarray:
     return np.stack([p[:-1, :-1], p[1:, :-1], p[1:, 1:], p[:-1, 1:]], axis=2).reshape(-1, 4, 3)
 
 
-def _shade(polygons: np.ndarray, rgb: Sequence[float]) -> np.ndarray:
+def _normals(polygons: Polygons) -> np.ndarray:
+    """(Q, 3) Newell normals, twice each polygon's vector area: one formula for triangles, quads and
+    n-gons, the mean normal of a non-planar one (for a quad, the cross product of its diagonals). Corners are
+    taken relative to each polygon's first, so that a cloth far from the origin keeps its precision."""
+    corners, counts = _flatten(polygons)
+    if not len(counts):
+        return np.zeros((0, 3))
+    starts = np.cumsum(counts) - counts
+    rel = corners - np.repeat(corners[starts], counts, axis=0)
+    return np.add.reduceat(np.cross(rel, rel[next_corner(counts)]), starts, axis=0)
+
+
+def _shade(polygons: Polygons, rgb: Sequence[float]) -> np.ndarray:
     """Lambert shading with a light over the camera's shoulder; |n.l| because cloth is seen from both sides."""
     e, a = np.radians(VIEW_ELEVATION + 25), np.radians(VIEW_AZIMUTH + 20)
     light = np.array([np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)])
-    p = polygons
-    if p.shape[1] >= 4:  # the cross product of the diagonals: the mean normal of a non-planar quad
-        n = np.cross(p[:, 2] - p[:, 0], p[:, 3] - p[:, 1])
-    else:
-        n = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    n = _normals(polygons)
     length = np.linalg.norm(n, axis=1)
     lambert = np.abs(n @ light) / np.where(length > 0, length, 1.0)
     shade = 0.35 + 0.65 * lambert
@@ -367,9 +402,9 @@ def draw_frame(ax, geometry: FrameGeometry, planes: Sequence[np.ndarray], view: 
     for i, cloth in enumerate(geometry.cloths):
         if not len(cloth):
             continue
-        quads = to_display(cloth, up)
-        colours = _shade(quads, CLOTH_COLOURS[i % len(CLOTH_COLOURS)])
-        polygons += list(quads)
+        shown = to_display(cloth, up) if isinstance(cloth, np.ndarray) else [to_display(p, up) for p in cloth]
+        colours = _shade(shown, CLOTH_COLOURS[i % len(CLOTH_COLOURS)])
+        polygons += list(shown)
         faces.append(colours)
         edges.append(colours * [0.75, 0.75, 0.75, 1.0])  # the (coarse) grid lines show the folds
     for centre, radius in geometry.spheres:

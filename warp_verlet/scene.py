@@ -49,7 +49,7 @@ class SimulationSettings:
     iterations: int = 8
     gravity: tuple[float, float, float] = (0.0, -9.81, 0.0)
     wind: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    drag: float = 1.0
+    damping: float = 0.0  # 1/s: the implicit velocity decays as exp(-damping t), whatever the substeps
     solver: str = "coloured"
     max_dt_ratio: float = 2.0
     max_frame_time: float = 0.1
@@ -77,7 +77,8 @@ class ClothSpec:
     origin: tuple[float, float, float] = (0.0, 0.0, 0.0)
     orientation: str = "vertical"
     mass: float = 1.0
-    stiffness: dict[str, float] = field(default_factory=lambda: {"structural": 1.0})
+    sticks: tuple[str, ...] = ("structural",)  # stick families to build, in STICK_FAMILIES order
+    compliance: dict[str, float] = field(default_factory=dict)  # m/N per soft family (XPBD); absent: rigid
     pins: tuple[tuple[int, int], ...] = ()
     tear_threshold: float | None = None  # a stick tears beyond this multiple of its rest length; None: never
     particle_masses: tuple[tuple[int, int, float], ...] = ()  # (row, col, kg): overrides of the even share
@@ -148,6 +149,11 @@ class Scene:
     @property
     def tears(self) -> bool:
         return any(c.tear_threshold is not None for c in self.cloths)
+
+    @property
+    def compliant(self) -> bool:
+        """Does any cloth have soft (XPBD) sticks?"""
+        return any(c.compliance for c in self.cloths)
 
 
 _REQUIRED = object()
@@ -296,6 +302,8 @@ _non_negative = _per_element(real(0.0))
 def _read_simulation(file: str, data: Any) -> SimulationSettings:
     t = _Table(file, "simulation", data)
     d = SimulationSettings()
+    if "drag" in t.data:
+        raise t.error("drag", _drag_moved(t.data))
     settings = SimulationSettings(
         fps=t.take("fps", real(0.0, lo_open=True), d.fps),
         frames=t.take("frames", integer(1), d.frames),
@@ -303,7 +311,7 @@ def _read_simulation(file: str, data: Any) -> SimulationSettings:
         iterations=t.take("iterations", integer(0, 100_000), d.iterations),
         gravity=t.take("gravity", vector(3, _any_real), d.gravity),
         wind=t.take("wind", vector(3, _any_real), d.wind),
-        drag=t.take("drag", real(0.0, 1.0), d.drag),
+        damping=t.take("damping", real(0.0), d.damping),
         solver=t.take("solver", choice(SOLVERS), d.solver),
         max_dt_ratio=t.take("max_dt_ratio", real(1.0), d.max_dt_ratio),
         max_frame_time=t.take("max_frame_time", real(0.0, lo_open=True), d.max_frame_time),
@@ -334,16 +342,53 @@ def _read_output(file: str, data: Any, scene_path: Path) -> OutputSettings:
     return settings
 
 
-def _read_stiffness(value: Any, key: str) -> dict[str, float]:
+def _drag_moved(data: dict) -> str:
+    """The error for the old per-substep ``drag``, with the damping rate that means the same at this budget."""
+    drag, fps, substeps = data.get("drag"), data.get("fps", 60.0), data.get("substeps", 4)
+    hint = "damping = -ln(drag) x fps x substeps"
+    numbers = (drag, fps, substeps)
+    if all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in numbers) and 0 < drag <= 1 and fps > 0:
+        hint = f"damping = {-math.log(drag) * fps * substeps:.4g} (= -ln({drag}) x {fps:g} fps x {substeps} substeps)"
+    return ("drag (the velocity kept per substep, so the cloth changed with substeps) is replaced by damping, a "
+            f"rate per second (velocity decays as exp(-damping t)); for the same motion at this budget write {hint}")
+
+
+def _read_sticks(value: Any, key: str) -> tuple[str, ...]:
+    if isinstance(value, dict):
+        soft = {f: k for f, k in value.items() if isinstance(k, (int, float)) and not isinstance(k, bool) and k != 1}
+        families = [f for f in STICK_FAMILIES if f in value]
+        hint = f"sticks = {_toml_list(families or ['structural'])}"
+        if soft:
+            hint += (" and, for a soft family, its XPBD compliance in m/N (0 = rigid), e.g. compliance = { "
+                     + ", ".join(f"{f} = 1e-3" for f in soft) + " }")
+        raise _Invalid("the table form { family = stiffness } is gone: a stiffness per relaxation made the cloth "
+                       f"change with substeps and iterations; write {hint}")
+    if not isinstance(value, list) or not value:
+        raise _Invalid(f"expected a non-empty array of stick families from {_toml_list(STICK_FAMILIES)}, "
+                       f"got {_describe(value)}")
+    for i, family in enumerate(value):
+        if family not in STICK_FAMILIES:
+            raise _Invalid(f"unknown stick family {family!r} (expected one of {', '.join(STICK_FAMILIES)})",
+                           f"{key}[{i}]")
+    if len(set(value)) != len(value):
+        raise _Invalid(f"a stick family is listed twice: {_toml_list(value)}")
+    return tuple(f for f in STICK_FAMILIES if f in value)
+
+
+def _toml_list(items) -> str:
+    return "[" + ", ".join(f'"{i}"' for i in items) + "]"
+
+
+def _read_compliance(value: Any, key: str) -> dict[str, float]:
     if not isinstance(value, dict):
-        raise _Invalid(f"expected a table like {{ structural = 1.0 }}, got {_describe(value)}")
+        raise _Invalid(f"expected a table like {{ bend = 1e-3 }} (m/N per stick family), got {_describe(value)}")
     out: dict[str, float] = {}
-    for family, k in value.items():
+    for family, alpha in value.items():
         if family not in STICK_FAMILIES:
             raise _Invalid(f"unknown stick family (expected {', '.join(STICK_FAMILIES)})", f"{key}.{family}")
-        k = _per_element(real(0.0, 1.0))(k, f"{key}.{family}")
-        if k > 0.0:  # 0 means "family not built"
-            out[family] = k
+        alpha = _per_element(real(0.0))(alpha, f"{key}.{family}")
+        if alpha > 0.0:  # 0 means rigid, the default
+            out[family] = alpha
     return out
 
 
@@ -414,14 +459,17 @@ def _read_cloth(file: str, index: int, data: Any) -> ClothSpec:
         origin=t.take("origin", vector(3, _any_real), (0.0, 0.0, 0.0)),
         orientation=t.take("orientation", choice(ORIENTATIONS), "vertical"),
         mass=t.take("mass", real(0.0, lo_open=True), 1.0),
-        stiffness=t.take("sticks", _read_stiffness, {"structural": 1.0}),
+        sticks=t.take("sticks", _read_sticks, ("structural",)),
+        compliance=t.take("compliance", _read_compliance, {}),
         pins=t.take("pins", lambda v, k: _read_pins(v, k, rows, cols), ()),
         tear_threshold=t.take("tear_threshold", real(1.0, lo_open=True), None),
         particle_masses=t.take("particle_masses", lambda v, k: _read_particle_masses(v, k, rows, cols), ()),
     )
     t.finish()
-    if not spec.stiffness:
-        raise t.error("sticks", "every stick family is 0: a cloth needs at least one family with stiffness in (0, 1]")
+    missing = sorted(set(spec.compliance) - set(spec.sticks))
+    if missing:
+        raise t.error(f"compliance.{missing[0]}", f"gives a compliance to the {missing[0]} family, which sticks = "
+                      f"{_toml_list(spec.sticks)} does not build")
     return spec
 
 
@@ -486,6 +534,12 @@ def parse_scene(data: dict, file: str = "<scene>", scene_path: Path | None = Non
     cloth_specs = top.take("cloth", cloths)
     collider_specs = top.take("collider", colliders, ())
     top.finish()
+    if simulation.solver == "jacobi":
+        for i, spec in enumerate(cloth_specs):
+            if spec.compliance:
+                raise SceneError(file, f"cloth[{i}].compliance", 'soft sticks need the coloured solver (XPBD '
+                                 'accumulates each stick\'s tension in order); remove compliance or set '
+                                 'simulation.solver = "coloured"')
     for section, items in (("cloth", cloth_specs), ("collider", collider_specs)):
         names = [c.name for c in items]
         for i, n in enumerate(names):

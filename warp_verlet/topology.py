@@ -3,7 +3,7 @@
 A grid is ``rows x cols`` particles in row-major order (particle ``r * cols + c``). Row 0 lies at the
 ``origin``; columns run along +X and rows run along -Y (``vertical``) or +Z (``horizontal``).
 
-Stick families, each built only when its stiffness is non-zero:
+Stick families, each built only when the cloth lists it in ``sticks``:
 
 - structural: (r, c)-(r, c+1) and (r, c)-(r+1, c)
 - shear:      (r, c)-(r+1, c+1) and (r, c+1)-(r+1, c)
@@ -37,7 +37,7 @@ class ClothTopology:
     inv_mass: np.ndarray  # (N,) float32, 1/kg; 0 for pinned particles
     sticks: np.ndarray  # (M, 2) int32 particle indices
     rest_length: np.ndarray  # (M,) float32, metres
-    stiffness: np.ndarray  # (M,) float32 in (0, 1], per full solve (see relax kernels)
+    compliance: np.ndarray  # (M,) float32, m/N (XPBD): 0 for a rigid stick
     grid_class: np.ndarray  # (M,) int8, one of the six classes above
     anchor: np.ndarray  # (M, 2) int32 (row, col) of the stick's first particle
     faces: np.ndarray  # (F, 4) int32 quads, counter-clockwise seen from the front (+Z for vertical)
@@ -92,23 +92,23 @@ def build_cloth(spec: ClothSpec) -> ClothTopology:
         "shear": [(1, 1, SHEAR_DIAG), (1, -1, SHEAR_ANTI)],
         "bend": [(0, 2, BEND_H), (2, 0, BEND_V)],
     }
-    blocks, stiffness = [], []
-    for family, k in spec.stiffness.items():
+    blocks, compliance = [], []
+    for family in spec.sticks:
         for dr, dc, cls in directions[family]:
             block = _stick_block(rows, cols, dr, dc, cls)
             if block is not None:
                 blocks.append(block)
-                stiffness.append(np.full(len(block[0]), k, np.float32))
+                compliance.append(np.full(len(block[0]), spec.compliance.get(family, 0.0), np.float32))
     if blocks:
         sticks = np.concatenate([b[0] for b in blocks]).astype(np.int32)
         grid_class = np.concatenate([b[1] for b in blocks])
         anchor = np.concatenate([b[2] for b in blocks]).astype(np.int32)
-        stiffness_arr = np.concatenate(stiffness)
+        compliance_arr = np.concatenate(compliance)
     else:
         sticks = np.zeros((0, 2), np.int32)
         grid_class = np.zeros(0, np.int8)
         anchor = np.zeros((0, 2), np.int32)
-        stiffness_arr = np.zeros(0, np.float32)
+        compliance_arr = np.zeros(0, np.float32)
     # Rest lengths from the float64 layout, so that every stick of one direction has the same length.
     pos64 = positions.astype(np.float64)
     rest = np.linalg.norm(pos64[sticks[:, 1]] - pos64[sticks[:, 0]], axis=1).astype(np.float32)
@@ -134,7 +134,7 @@ def build_cloth(spec: ClothSpec) -> ClothTopology:
 
     return ClothTopology(
         name=spec.name, rows=rows, cols=cols, positions=positions, inv_mass=inv_mass, sticks=sticks,
-        rest_length=rest, stiffness=stiffness_arr, grid_class=grid_class, anchor=anchor, faces=faces,
+        rest_length=rest, compliance=compliance_arr, grid_class=grid_class, anchor=anchor, faces=faces,
         uvs=uvs, pinned=pinned,
     )
 

@@ -3,7 +3,7 @@
 Layout of a cache::
 
     /World                 Xform, the stage's defaultPrim
-    /World/<cloth>         Mesh (quads, UVs in primvars:st) or, for a rope, linear BasisCurves
+    /World/<cloth>         Mesh (faces of any size, UVs in primvars:st) or, for a rope, linear BasisCurves
     /World/Colliders/<n>   Sphere (time-sampled translate when it moves) or a large quad Mesh for a plane
 
 ``points`` and ``extent`` are time-sampled every frame; a time code is a frame number
@@ -29,6 +29,7 @@ import numpy as np
 from pxr import Sdf, Tf, Usd, UsdGeom, UsdValidation, Vt
 
 from .errors import OutputError
+from .faces import Faces, as_faces
 
 WORLD_PATH = Sdf.Path("/World")
 # A rope is drawn as a tube 5 mm across, expressed in stage units so it looks the same at any scale.
@@ -38,13 +39,20 @@ _EXTENSIONS = (".usd", ".usda", ".usdc")
 
 @dataclass(frozen=True)
 class CachedShape:
-    """The static part of one cloth in the cache."""
+    """The static part of one cloth in the cache.
+
+    ``faces`` may also be given as an (F, k) array of vertex indices (a grid's (F, 4) quads), a convenience
+    for callers that still hold one; it is converted with ``Faces.uniform``, so ``faces`` is always Faces.
+    """
 
     name: str  # USD prim name (already a valid identifier)
-    faces: np.ndarray  # (F, 4) int32 quads; F == 0 means a rope/strand
+    faces: Faces  # triangles, quads, n-gons, or a mix; no faces means a rope/strand
     uvs: np.ndarray  # (N, 2) float32
     point_count: int
     tears: bool = False  # can faces be hidden by tearing (time-sampled holeIndices)?
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "faces", as_faces(self.faces))
 
     @property
     def is_rope(self) -> bool:
@@ -95,15 +103,11 @@ def _check_shapes(shapes: Sequence[CachedShape]) -> None:
     for s in shapes:
         if not Sdf.Path.IsValidIdentifier(s.name):
             raise ValueError(f"shape name {s.name!r} is not a valid USD prim name")
-        faces = np.asarray(s.faces)
-        if faces.ndim != 2 or faces.shape[1] != 4:
-            raise ValueError(f"shape {s.name!r}: faces must be (F, 4) quads, got shape {faces.shape}")
         if s.is_rope:
             if s.point_count < 2:  # a linear curve needs two vertices
                 raise ValueError(f"rope {s.name!r} needs at least 2 points, got {s.point_count}")
             continue
-        if faces.min() < 0 or faces.max() >= s.point_count:
-            raise ValueError(f"shape {s.name!r}: face indices must lie in [0, {s.point_count})")
+        s.faces.validate(s.point_count, f"shape {s.name!r}")
         if np.shape(s.uvs) != (s.point_count, 2):
             raise ValueError(f"shape {s.name!r}: uvs must be ({s.point_count}, 2), got {np.shape(s.uvs)}")
 
@@ -209,13 +213,12 @@ class PointCacheWriter:
 
     @staticmethod
     def _define_mesh(stage: Usd.Stage, prim_path: Sdf.Path, shape: CachedShape) -> UsdGeom.Mesh:
-        faces = np.ascontiguousarray(shape.faces, dtype=np.int32)
         mesh = UsdGeom.Mesh.Define(stage, prim_path)
-        mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(len(faces), 4, np.int32)))
-        mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(faces.reshape(-1)))
+        mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(shape.faces.counts))
+        mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(shape.faces.indices))
         mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)  # the fallback, catmullClark, would smooth it
         mesh.CreateDoubleSidedAttr(True)  # cloth is seen from both sides
-        mesh.CreateOrientationAttr(UsdGeom.Tokens.rightHanded)  # faces wind counter-clockwise (topology.py)
+        mesh.CreateOrientationAttr(UsdGeom.Tokens.rightHanded)  # faces wind counter-clockwise (faces.py)
         st = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray,
                                                      UsdGeom.Tokens.vertex)
         st.Set(Vt.Vec2fArray.FromNumpy(np.ascontiguousarray(shape.uvs, dtype=np.float32)))
@@ -389,16 +392,22 @@ def _check_mesh(mesh: UsdGeom.Mesh, time_range: tuple[float, float]) -> list[str
     if n_points is None:
         return [f"{name}: has neither points nor primvars:st, so its point count is unknown"]
 
-    indices, counts = mesh.GetFaceVertexIndicesAttr().Get(), mesh.GetFaceVertexCountsAttr().Get()
-    ok, reason = UsdGeom.Mesh.ValidateTopology(indices or Vt.IntArray(), counts or Vt.IntArray(), n_points)
+    indices = mesh.GetFaceVertexIndicesAttr().Get() or Vt.IntArray()
+    counts = mesh.GetFaceVertexCountsAttr().Get() or Vt.IntArray()
+    ok, reason = UsdGeom.Mesh.ValidateTopology(indices, counts, n_points)
     if not ok:
         problems.append(f"{name}: invalid topology: {reason}")
+    else:  # USD accepts faces of 0, 1 or 2 corners, which no renderer draws; Faces.validate does not
+        try:
+            Faces(np.asarray(counts), np.asarray(indices)).validate(n_points, str(name))
+        except ValueError as e:
+            problems.append(str(e))
     if mesh.GetSubdivisionSchemeAttr().Get() != UsdGeom.Tokens.none:
         problems.append(f"{name}: subdivisionScheme is not 'none', so renderers would smooth the cloth")
     if st_values is not None and len(st_values) != n_points:
         problems.append(f"{name}: primvars:st has {len(st_values)} values for {n_points} points")
     holes = mesh.GetHoleIndicesAttr()
-    n_faces = len(counts) if counts else 0
+    n_faces = len(counts)
     for t in holes.GetTimeSamples():
         hidden = np.asarray(holes.Get(t), dtype=np.int64)
         if len(hidden) and (hidden.min() < 0 or hidden.max() >= n_faces):

@@ -1,0 +1,152 @@
+"""The Verlet solver: steps a State by dt with the stages of the table (warp_verlet/stages.py).
+
+A solver holds no simulation data of its own. It keeps, per State it has stepped, the launches recorded
+against that state's arrays (a cache, rebuilt for a new state), and scratch buffers that no step carries
+over to the next (Jacobi's new positions, XPBD tensions). So one solver can step any number of states of its
+model: a checkpoint and its clone give the same result.
+"""
+
+from __future__ import annotations
+
+import weakref
+from typing import Callable
+
+import numpy as np
+import warp as wp
+
+from warp_verlet.kernels.integrate import verlet_start
+
+from .cpu_team import COLOURED_SECONDS_PER_STICK, JACOBI_SECONDS_PER_ENTRY, PhaseTeam, auto_threads
+from .errors import WarpVerletError
+from .model import Model
+from .scene import SimulationSettings
+from .stages import STAGES, Need, Task
+from .state import State
+
+
+class VerletSolver:
+    """Verlet integration with graph-coloured (or Jacobi) relaxation, collider clamping and tearing.
+
+    ``need`` (stages.Need) says which stages run; ``threads`` is the CPU relaxation's thread count (None:
+    chosen from the cores and the work per colour; CUDA always 1).
+    """
+
+    def __init__(self, model: Model, settings: SimulationSettings, need: Need, threads: int | None = None):
+        self.model, self.settings, self.need = model, settings, need
+        accel = np.add(settings.gravity, settings.wind)
+        self.accel = wp.vec3(*accel)
+        self.accel_magnitude = float(np.linalg.norm(accel))
+        self.threads = self._thread_count(threads)
+        self.stage_names = tuple(s.name for s in STAGES if s.needed(need))
+        self._scratch: dict[str, wp.array] = {}
+        self._bound: weakref.WeakKeyDictionary[State, list] = weakref.WeakKeyDictionary()
+        self._teams: list[PhaseTeam] = []
+        self.min_dt = self._smallest_resolved_dt()
+
+    # ------------------------------------------------------------------ set-up
+    def _thread_count(self, threads: int | None) -> int:
+        if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or threads < 1):
+            raise WarpVerletError(f"threads must be a whole number >= 1, got {threads!r}")
+        device = self.model.device
+        if device.is_cuda:
+            if threads not in (None, 1):
+                raise WarpVerletError(f"threads = {threads} applies to the CPU only; on {device} the "
+                                      "relaxation runs in parallel on the device")
+            return 1
+        if threads is not None:
+            return threads
+        m = self.model
+        if self.settings.solver == "coloured":
+            phase = m.stick_count / max(m.colour_count, 1) * COLOURED_SECONDS_PER_STICK
+        else:
+            phase = m.stick_count * JACOBI_SECONDS_PER_ENTRY  # two entries per stick over two phases per sweep
+        return auto_threads(phase)
+
+    def scratch(self, name: str, count: int, dtype) -> wp.array:
+        """A buffer that no step carries over to the next, shared by every state this solver steps."""
+        if name not in self._scratch:
+            self._scratch[name] = wp.empty(count, dtype=dtype, device=self.model.device)
+        return self._scratch[name]
+
+    def team(self, phases: list[list[Task | None]]) -> PhaseTeam | None:
+        """A CPU thread team for the relaxation's phases, or None when it runs on one thread."""
+        if self.threads <= 1 or not phases:
+            return None
+        team = PhaseTeam([[t.run if t is not None else None for t in phase] for phase in phases],
+                         self.settings.iterations)
+        self._teams.append(team)
+        return team
+
+    def bind(self, state: State) -> list[tuple[str, Callable[[State, float], None]]]:
+        """The stages of one substep against ``state``'s arrays, as (name, run(state, dt)), recorded once per
+        state."""
+        if state.model is not self.model:
+            raise ValueError("this solver steps states of its own model only")
+        if state not in self._bound:
+            with wp.ScopedDevice(self.model.device):
+                self._bound[state] = [(s.name, s.bind(self.model, state, self)) for s in STAGES if s.needed(self.need)]
+        return [(name, bound.run) for name, bound in self._bound[state]]
+
+    def relax_phases(self, state: State) -> list[list[Task | None]]:
+        """One sweep's phases, each one task per CPU thread (None where a thread has nothing)."""
+        self.bind(state)
+        return next((bound.phases for name, bound in self._bound[state] if name == "relax"), [])
+
+    # ------------------------------------------------------------------ limits
+    def _smallest_resolved_dt(self) -> float:
+        """The smallest dt whose gravity-and-wind step |a| dt^2 is at least 4 float32 spacings of the scene's
+        coordinates. Below it, x + step rounds back to x, the relaxation corrects the rounding-level stick
+        errors, and that correction enters the implicit velocity and cancels the acceleration: a cloth at
+        dt = 1e-5 s does not fall at all, at 1e-4 s (|a| dt^2 below one spacing) it falls 1.8% short. Without
+        relaxation nothing feeds rounding back into velocity, so there is no limit."""
+        a = self.accel_magnitude
+        if "relax" not in self.stage_names or a == 0.0:
+            return 0.0
+        m = self.model
+        scale = float(np.abs(m.rest_positions).max()) if m.particle_count else 1.0
+        return float(np.sqrt(4.0 * np.spacing(np.float32(max(scale, 1e-3))) / a))
+
+    def check_step(self, state: State, dt: float) -> None:
+        """Raise one clear error for a dt this solver cannot take from ``state``."""
+        if not (dt > 0.0 and np.isfinite(dt)):
+            raise ValueError(f"dt must be a positive finite number of seconds, got {dt}")
+        if dt < self.min_dt:
+            raise WarpVerletError(self.too_small(dt))
+        if "relax" in self.stage_names and state.dt_prev is not None and dt * self.settings.max_dt_ratio < state.dt_prev:
+            # The relaxation leaves a residual stretch after each step; a much shorter step removes it within
+            # that step, and Verlet turns the move into velocity residual / dt: energy from nowhere (a drop
+            # from 1/240 s to 1e-5 s gave a hanging cloth 10x the kinetic energy gravity had released).
+            # Without relaxation there is no residual, and any sequence of steps is exact (test_integrate).
+            raise WarpVerletError(
+                f"dt fell from {state.dt_prev:.3g} s to {dt:.3g} s in one step; a step may shrink by at most a "
+                f"factor max_dt_ratio = {self.settings.max_dt_ratio:g} (shrink it over several steps), or the "
+                "relaxation's residual stretch would turn into spurious velocity")
+
+    def too_small(self, dt: float) -> str:
+        return (f"dt = {dt:.3g} s is too small for float32 positions: one step's acceleration moves a particle by "
+                f"|a| dt^2 = {self.accel_magnitude * dt * dt:.2g} m, "
+                f"under 4 float32 spacings of this scene's coordinates, so the relaxation's rounding would cancel "
+                f"it; the smallest dt resolved here is {self.min_dt:.3g} s")
+
+    # ------------------------------------------------------------------ stepping
+    def step(self, state: State, dt: float) -> None:
+        """Advance ``state`` by one substep of ``dt`` seconds (no checks: see :meth:`check_step`). Issues only
+        device work, so a sequence of steps can be captured and replayed."""
+        stages = self.bind(state)
+        with wp.ScopedDevice(self.model.device):
+            if state.dt_prev is None:
+                # Exact start for constant acceleration: x_prev = x0 - v0 dt + a dt^2 / 2.
+                wp.launch(verlet_start, self.model.particle_count,
+                          inputs=[state.particle_q, self.model.inv_mass, self.accel, dt],
+                          outputs=[state.particle_q_inertial, state.particle_dq])
+                state.dt_prev = dt
+            for _, run in stages:
+                run(state, dt)
+        state.dt_prev = dt
+        state.time += dt
+        state.steps += 1
+
+    def close(self) -> None:
+        """Stop the CPU thread teams (also done when the solver is collected)."""
+        for team in self._teams:
+            team.close()

@@ -1,0 +1,299 @@
+"""The one table of what a substep runs: its stages, and inside the relaxation its constraint sets.
+
+Every stage and constraint set is declared once, here, as a class that says
+
+- ``needed(need)``: whether a scene uses it, from its counts alone (before anything is built);
+- ``device_bytes(need)``: the device arrays it allocates, in the Model, the State and the solver;
+- ``bind(...)``: its launches, recorded against one State's arrays.
+
+From that one declaration the rest is derived: the solver runs the bound stages (the launches), the memory
+estimate sums ``device_bytes`` (warp_verlet/memory.py), the CPU thread team runs the constraint sets'
+phases, and ``Simulator.stages()`` names them. A new constraint kind is one kernel file, one class here
+(appended to CONSTRAINT_SETS) and its scene keys.
+
+This module does not import warp at the top, so that ``memory.estimate`` (and ``warp-verlet validate``)
+stays light; the binding code imports it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Callable
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .model import Model
+    from .scene import Scene
+    from .state import State
+
+VEC3, FLOAT, INT, VEC2I, FLOAT64 = 12, 4, 4, 8, 8
+
+
+@dataclass(frozen=True)
+class Need:
+    """What a scene asks of the step, known from its counts before anything is built."""
+
+    particles: int
+    sticks: int
+    solver: str
+    iterations: int
+    free_particles: bool
+    compliant: bool
+    tears: bool
+    spheres: int
+    sphere_keys: int  # keyframes over all spheres, when one moves (else 0)
+    planes: int
+
+    @classmethod
+    def of(cls, scene: "Scene") -> "Need":
+        from .memory import stick_count  # the grid's stick count, without building it
+
+        moving = any(s.moving for s in scene.spheres)
+        free = any(len(set(c.pins)) < c.particle_count for c in scene.cloths)
+        return cls(
+            particles=scene.particle_count, sticks=sum(stick_count(c) for c in scene.cloths),
+            solver=scene.simulation.solver, iterations=scene.simulation.iterations, free_particles=free,
+            compliant=scene.compliant, tears=scene.tears, spheres=len(scene.spheres),
+            sphere_keys=sum(len(s.keyframes) for s in scene.spheres) if moving else 0, planes=len(scene.planes),
+        )
+
+
+@dataclass(frozen=True)
+class Task:
+    """One launch of a phase, named by its kernel (or "copy" / "zero" for a memory operation)."""
+
+    kernel: str
+    run: Callable[[], None]
+    launch: object = None  # the recorded wp.Launch, whose parameters (dt) can be updated in place
+
+
+@dataclass
+class Bound:
+    """A stage's work against one State: ``run(state, dt)`` does it (the closures hold that state's arrays,
+    never the State itself, so a solver's cache does not keep a dropped state alive); ``phases`` (constraint
+    sets only) are the per-thread tasks of one sweep, phase after phase, which the CPU thread team may run
+    instead."""
+
+    run: Callable[["State", float], None] | None
+    phases: list[list[Task | None]] | None = None
+
+
+def recorded(kernel, dim: int, inputs: list, outputs: list | None = None) -> Task:
+    """A launch recorded once (replaying it skips ``wp.launch``'s argument packing, which dominates small
+    grids on the CPU: measured at 64^2, 2.5 -> 1.4 ms per 8 sweeps), as a Task."""
+    import warp as wp
+
+    launch = wp.launch(kernel, dim, inputs=inputs, outputs=outputs or [], record_cmd=True)
+    return Task(kernel.key, launch.launch, launch)
+
+
+def split_tasks(make: Callable[[int, int], Task], first: int, count: int, threads: int) -> list[Task | None]:
+    """``count`` items from ``first`` cut into one piece per thread (None for an empty piece)."""
+    from .cpu_team import split
+
+    return [make(f, n) if n else None for f, n in split(first, count, threads)]
+
+
+# ---------------------------------------------------------------------------------------------- stages
+class Integrate:
+    """The Verlet step (kernels/integrate.py): gravity and wind in one acceleration, damping per second."""
+
+    name = "integrate"
+
+    def needed(self, need: Need) -> bool:
+        return need.free_particles
+
+    def device_bytes(self, need: Need) -> int:
+        return 0  # it updates the State's positions, prediction and increment, which every scene has
+
+    def bind(self, model: "Model", state: "State", solver) -> Bound:
+        import warp as wp
+
+        from warp_verlet.kernels.integrate import verlet_step
+
+        settings, accel = solver.settings, solver.accel
+        x, x_inertial, dq, inv_mass, n = (state.particle_q, state.particle_q_inertial, state.particle_dq,
+                                          model.inv_mass, model.particle_count)
+
+        def run(state: "State", dt: float) -> None:
+            ratio = min(dt / state.dt_prev, settings.max_dt_ratio)
+            velocity_scale = math.exp(-settings.damping * dt) * ratio
+            accel_offset = accel * (dt * (dt + state.dt_prev) * 0.5)
+            wp.launch(verlet_step, n, inputs=[x, x_inertial, dq, inv_mass, velocity_scale, accel_offset])
+
+        return Bound(run)
+
+
+class Relax:
+    """``iterations`` sweeps; a sweep runs every constraint set of CONSTRAINT_SETS that the scene needs, in
+    table order (Gauss-Seidel across sets, and across colours inside a set)."""
+
+    name = "relax"
+
+    def needed(self, need: Need) -> bool:
+        return need.iterations > 0 and any(c.needed(need) for c in CONSTRAINT_SETS)
+
+    def device_bytes(self, need: Need) -> int:
+        return sum(c.device_bytes(need) for c in CONSTRAINT_SETS if c.needed(need))
+
+    def bind(self, model: "Model", state: "State", solver) -> Bound:
+        sets = [c.bind(model, state, solver) for c in CONSTRAINT_SETS if c.needed(solver.need)]
+        phases = [phase for bound in sets for phase in bound.phases]
+        before = [bound.run for bound in sets if bound.run is not None]  # per-substep set-up (dt, zeroing)
+        team = solver.team(phases)
+        sweep = [task.run for phase in phases for task in phase if task is not None]
+        iterations = solver.settings.iterations
+
+        def run(state: "State", dt: float) -> None:
+            for prepare in before:
+                prepare(state, dt)
+            if team is not None:
+                team.run()
+                return
+            for _ in range(iterations):
+                for task in sweep:
+                    task()
+
+        return Bound(run, phases)
+
+
+class Collide:
+    """Collider clamping after the sweeps (kernels/collide.py): spheres first, planes last, so that a sphere
+    resting on the ground cannot push cloth through the ground; moving spheres are first placed on the
+    device clock."""
+
+    name = "collide"
+
+    def needed(self, need: Need) -> bool:
+        return bool(need.spheres or need.planes)
+
+    def device_bytes(self, need: Need) -> int:
+        planes = need.planes * (2 * VEC3 + 2 * FLOAT)  # points, normals, thickness, friction
+        spheres = need.spheres * (VEC3 + 2 * FLOAT + VEC3)  # start centre, reach, friction; the State's centre
+        moving = ((need.spheres + 1) * INT + need.sphere_keys * (FLOAT + VEC3) + FLOAT64) if need.sphere_keys else 0
+        return planes + spheres + moving
+
+    def bind(self, model: "Model", state: "State", solver) -> Bound:
+        import warp as wp
+
+        from warp_verlet.kernels.collide import advance_clock, collide_planes, collide_spheres, place_spheres
+
+        c, n, clock = model.colliders, model.particle_count, state.collider_clock
+        tasks = []
+        if c.moving:
+            tasks.append(recorded(place_spheres, len(c.spheres), [state.collider_clock, c.key_start, c.key_times,
+                                                                  c.key_centres], [state.sphere_centres]))
+        if c.spheres:
+            tasks.append(recorded(collide_spheres, n, [state.particle_q, state.particle_q_inertial, state.particle_dq,
+                                                       model.inv_mass, state.sphere_centres, c.sphere_reach,
+                                                       c.sphere_friction]))
+        if c.planes:
+            tasks.append(recorded(collide_planes, n, [state.particle_q, state.particle_q_inertial, state.particle_dq,
+                                                      model.inv_mass, c.plane_points, c.plane_normals,
+                                                      c.plane_thickness, c.plane_friction]))
+
+        def run(state: "State", dt: float) -> None:
+            if clock is not None:
+                wp.launch(advance_clock, 1, inputs=[clock, wp.float64(dt)])
+            for task in tasks:
+                task.run()
+
+        return Bound(run)
+
+
+class Tear:
+    """Threshold tearing after the clamping (kernels/tear.py): zeroes the State's weight of an overlong
+    stick."""
+
+    name = "tear"
+
+    def needed(self, need: Need) -> bool:
+        return need.tears
+
+    def device_bytes(self, need: Need) -> int:
+        # Per entry a tear length (Model) and a live weight (State); Jacobi has two entries per stick and keeps
+        # their ends.
+        return need.sticks * (2 * FLOAT if need.solver == "coloured" else 2 * (2 * FLOAT + VEC2I))
+
+    def bind(self, model: "Model", state: "State", solver) -> Bound:
+        from warp_verlet.kernels.tear import tear_sticks
+
+        task = recorded(tear_sticks, model.tear_ends.shape[0], [state.particle_q, model.tear_ends, model.tear_length],
+                        [state.stick_weight, state.torn_entries])
+        return Bound(lambda state, dt: task.run())
+
+
+# ------------------------------------------------------------------------------------- constraint sets
+class Sticks:
+    """Distance sticks (kernels/relax.py). Coloured: one launch per colour, XPBD where a stick is soft.
+    Jacobi: a gather into a scratch buffer and a copy back, cut by particle."""
+
+    name = "sticks"
+
+    def needed(self, need: Need) -> bool:
+        return need.sticks > 0
+
+    def device_bytes(self, need: Need) -> int:
+        if need.solver == "coloured":
+            # ends, rest, weight; soft sticks add a compliance (Model) and a tension (solver scratch)
+            return need.sticks * (VEC2I + 2 * FLOAT + (2 * FLOAT if need.compliant else 0))
+        # neighbour, rest and weight for both ends; a scratch position and a row start per particle
+        return need.sticks * 2 * (INT + 2 * FLOAT) + need.particles * (VEC3 + INT)
+
+    def bind(self, model: "Model", state: "State", solver) -> Bound:
+        import warp as wp
+
+        from warp_verlet.kernels.relax import relax_colour, relax_colour_compliant, relax_jacobi
+
+        m, x, threads = model, state.particle_q, solver.threads
+        if m.solver == "coloured":
+            weight = state.stick_weight if m.tears else m.stick_weight
+            if not m.compliant:
+                def make(f, n):
+                    return recorded(relax_colour, n, [x, m.inv_mass, m.stick_ends, m.stick_rest, weight, f])
+                return Bound(None, [split_tasks(make, first, count, threads) for first, count in m.colour_ranges])
+            tension = solver.scratch("stick_tension", m.stick_count, float)
+
+            def make_soft(f, n):
+                return recorded(relax_colour_compliant, n, [x, m.inv_mass, m.stick_ends, m.stick_rest, weight,
+                                                            m.stick_compliance, 0.0, f], [tension])
+            phases = [split_tasks(make_soft, first, count, threads) for first, count in m.colour_ranges]
+            launches = [task.launch for phase in phases for task in phase if task is not None]
+
+            def prepare(state: "State", dt: float) -> None:
+                inv_dt2 = 1.0 / (dt * dt)
+                for launch in launches:
+                    launch.set_param_by_name("inv_dt2", inv_dt2)
+                tension.zero_()
+
+            return Bound(prepare, phases)
+
+        weight = state.stick_weight if m.tears else m.neighbour_weight
+        scratch = solver.scratch("jacobi_positions", m.particle_count, wp.vec3)
+
+        def gather(f, n):
+            return recorded(relax_jacobi, n, [x, m.inv_mass, m.neighbour_start, m.neighbour, m.neighbour_rest,
+                                              weight, f, scratch])
+
+        def copy_back(f, n):
+            # The task holds the arrays, not the solver: worker threads keep their tasks alive, and must not
+            # keep a solver alive.
+            return Task("copy", lambda: wp.copy(x, scratch, dest_offset=f, src_offset=f, count=n))
+
+        return Bound(None, [split_tasks(gather, 0, m.particle_count, threads),
+                            split_tasks(copy_back, 0, m.particle_count, threads)])
+
+
+CONSTRAINT_SETS = (Sticks(),)
+"""Constraint sets in the order a sweep projects them."""
+
+STAGES = (Integrate(), Relax(), Collide(), Tear())
+"""The stages of a substep, in order."""
+
+PARTICLE_BYTES = 3 * VEC3 + FLOAT
+"""Every scene's per-particle arrays: the State's positions, prediction and increment, the Model's inverse mass."""
+
+
+def device_bytes(need: Need) -> int:
+    """The device memory a scene's arrays take: the sum of what its stages declare."""
+    return need.particles * PARTICLE_BYTES + sum(s.device_bytes(need) for s in STAGES if s.needed(need))

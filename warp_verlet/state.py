@@ -1,0 +1,113 @@
+"""Everything that changes while a scene runs, apart from the immutable :class:`~warp_verlet.model.Model`.
+
+A solver steps a ``State`` by dt; nothing else about a run is hidden anywhere. So a state can be cloned (a
+checkpoint), assigned back (a rollback, or a reset to a clone of the start) and given an initial velocity.
+
+Arrays exist only when the scene needs them (a state of a scene that cannot tear has no live-stick
+weights, one with no moving sphere has no clock), as in Newton's ``State``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import warp as wp
+
+from .model import Model
+
+
+class State:
+    """The time-varying data of one scene on one device.
+
+    Attributes (N particles, E tear entries: one per stick for the coloured solver, two for Jacobi):
+
+    - ``particle_q``: (N,) ``wp.vec3`` float32, m. Positions.
+    - ``particle_q_inertial``: (N,) ``wp.vec3``, m. The position the last Verlet step predicted (summed form,
+      kernels/integrate.py): x - x_prev = ``particle_dq`` + (x - x_inertial).
+    - ``particle_dq``: (N,) ``wp.vec3``, m. The last step's increment. Before the first step it holds the
+      initial velocity in m/s instead (see :meth:`set_velocity`); the exact start turns it into an increment.
+    - ``stick_weight``: (E,) float32, dimensionless, or None. Per tear entry, 1 while the stick holds and 0
+      once torn; only when a cloth can tear. The relaxation multiplies a stick's correction by it.
+    - ``torn_entries``: (1,) int32, or None. Tear entries zeroed so far; only when a cloth can tear.
+    - ``collider_clock``: (1,) float64, s, or None. Simulated time on the device, which places the moving
+      spheres inside a captured frame; only when a sphere moves.
+    - ``sphere_centres``: (S,) ``wp.vec3``, m, or None. Where each sphere is now; only when there are spheres.
+
+    Host scalars: ``time`` (s simulated), ``steps`` (substeps taken) and ``dt_prev`` (s, the last step's dt,
+    None before the first step: the next step then runs the exact start).
+    """
+
+    _ARRAYS = ("particle_q", "particle_q_inertial", "particle_dq", "stick_weight", "torn_entries",
+               "collider_clock", "sphere_centres")
+
+    def __init__(self, model: Model):
+        self.model = model
+        with wp.ScopedDevice(model.device):
+            self.particle_q = wp.array(model.rest_positions, dtype=wp.vec3)
+            self.particle_q_inertial = wp.empty_like(self.particle_q)
+            self.particle_dq = wp.zeros_like(self.particle_q)  # no initial velocity
+            self.stick_weight = wp.clone(model.tear_weight_start) if model.tears else None
+            self.torn_entries = wp.zeros(1, dtype=int) if model.tears else None
+            colliders = model.colliders
+            self.collider_clock = wp.zeros(1, dtype=wp.float64) if colliders.moving else None
+            self.sphere_centres = wp.clone(colliders.sphere_start) if colliders.spheres else None
+        self.time = 0.0
+        self.steps = 0
+        self.dt_prev: float | None = None
+
+    def arrays(self) -> dict[str, wp.array]:
+        """The device arrays this state holds, by name (absent ones left out)."""
+        return {name: getattr(self, name) for name in self._ARRAYS if getattr(self, name) is not None}
+
+    def clone(self) -> "State":
+        """An independent copy: stepping one does not touch the other."""
+        other = State.__new__(State)
+        other.model = self.model
+        with wp.ScopedDevice(self.model.device):
+            for name in self._ARRAYS:
+                value = getattr(self, name)
+                setattr(other, name, None if value is None else wp.clone(value))
+        other.time, other.steps, other.dt_prev = self.time, self.steps, self.dt_prev
+        return other
+
+    def assign(self, other: "State") -> None:
+        """Copy ``other`` into this state in place (its arrays keep their addresses, so launches recorded
+        against this state, and a captured frame, stay valid)."""
+        if other.model is not self.model:
+            raise ValueError("a state can only be assigned from a state of the same model")
+        for name in self._ARRAYS:
+            mine = getattr(self, name)
+            if mine is not None:
+                wp.copy(mine, getattr(other, name))
+        self.time, self.steps, self.dt_prev = other.time, other.steps, other.dt_prev
+
+    def set_velocity(self, velocity) -> None:
+        """Start from rest positions moving at ``velocity`` (m/s): one (3,) vector for every particle, or
+        (N, 3). Pinned particles stay at rest. The next step runs the exact start (x = x0 + v0 dt + a dt^2 / 2
+        for a constant acceleration a)."""
+        n = self.model.particle_count
+        v = np.broadcast_to(np.asarray(velocity, dtype=np.float32), (n, 3))
+        if not np.isfinite(v).all():
+            raise ValueError("velocity must be finite")
+        v = np.where(self.model.host_inv_mass[:, None] > 0, v, 0.0).astype(np.float32)
+        self.particle_dq.assign(v)
+        self.dt_prev = None
+
+    def positions(self) -> np.ndarray:
+        """Particle positions, (N, 3) float32, m: a host snapshot that later steps do not change."""
+        points = self.particle_q.numpy()
+        return points.copy() if self.model.device.is_cpu else points  # on the CPU numpy() is a live view
+
+    def set_positions(self, points) -> None:
+        """Overwrite the positions, (N, 3) m, keeping the implicit velocity x - x_prev of every particle."""
+        points = np.asarray(points, dtype=np.float32).reshape(self.model.particle_count, 3)
+        if self.dt_prev is None:
+            self.particle_q.assign(points)
+            return
+        # x - x_prev = dq + (x - x_inertial): move x_inertial with x so that the difference stays.
+        shift = points - self.particle_q.numpy()
+        self.particle_q.assign(points)
+        self.particle_q_inertial.assign(self.particle_q_inertial.numpy() + shift)
+
+    def previous_positions(self) -> np.ndarray:
+        """Positions at the end of the previous substep (x_prev of the textbook form)."""
+        return self.particle_q_inertial.numpy() - self.particle_dq.numpy()
