@@ -13,7 +13,10 @@ from pxr import Usd, UsdGeom, Vt
 
 from warp_verlet import preview
 from warp_verlet.cli import main, parse_frame_slice, parse_size
+from warp_verlet.faces import Faces
 from warp_verlet.usd_writer import CachedPlane, CachedShape, CachedSphere, PointCacheWriter
+
+from meshes import HOUSE, HOUSE_POINTS  # tests/meshes.py (pytest puts tests/ on sys.path)
 
 FRAMES = 6  # frames 0..6
 
@@ -174,6 +177,75 @@ def test_small_grids_are_drawn_whole_and_other_meshes_face_by_face():
     assert preview.grid_shape(np.zeros((0, 4), int), 5) is None
     drawn = preview.visible_polygons(points, shuffled, hidden=[0, 1])
     assert as_set(drawn) == as_set(points[shuffled[2:]])
+
+
+def house_points(frame: int) -> np.ndarray:
+    """The house in the XY plane, leaning further back along -z frame by frame."""
+    p = HOUSE_POINTS.copy()
+    p[:, 2] = -0.1 * frame * p[:, 1]
+    return p
+
+
+def house_polygons(frame: int, faces: list[int]) -> set:
+    points = house_points(frame)
+    return as_set([points[HOUSE.indices[HOUSE.offsets[f]:HOUSE.offsets[f + 1]]] for f in faces])
+
+
+def write_house_cache(path):
+    shape = CachedShape("cloth", HOUSE, np.zeros((len(HOUSE_POINTS), 2), np.float32), len(HOUSE_POINTS), tears=True)
+    with PointCacheWriter(path, [shape], fps=30.0) as writer:
+        for f in range(FRAMES + 1):
+            writer.write_frame(f, [house_points(f)], hidden_faces=[[0] if f >= 3 else None])
+    return path
+
+
+def test_a_mixed_mesh_is_drawn_face_by_face_and_its_hidden_pentagon_left_out(tmp_path):
+    cache = preview.open_cache(write_house_cache(tmp_path / "house.usdc"))
+    assert cache.cloths[0].grid is None and cache.cloths[0].faces == HOUSE
+    for frame in (0, 2):
+        drawn = preview.read_frame(cache, frame).cloths[0]
+        assert [len(p) for p in drawn] == [5, 4, 3]
+        assert as_set(drawn) == house_polygons(frame, [0, 1, 2])
+    for frame in (3, 6):  # the pentagon is hidden from frame 3 on: sampled at 3, held at 6
+        drawn = preview.read_frame(cache, frame).cloths[0]
+        assert [len(p) for p in drawn] == [4, 3]
+        assert as_set(drawn) == house_polygons(frame, [1, 2])
+
+
+def test_a_mixed_mesh_renders_to_png(tmp_path, capsys):
+    cache = write_house_cache(tmp_path / "house.usdc")
+    whole, torn = tmp_path / "whole.png", tmp_path / "torn.png"
+    assert main(["preview", str(cache), "-o", str(whole), "--size", "320x240", "--frames", "0"]) == 0
+    assert main(["preview", str(cache), "-o", str(torn), "--size", "320x240", "--frames", "3"]) == 0
+    assert "error" not in capsys.readouterr().err
+    for png in (whole, torn):
+        pixels = load_rgb(png)
+        assert Image.open(png).size == (320, 240) and pixels.std() > 20
+        assert ((pixels[..., 0] - pixels[..., 2]) > 60).sum() > 100  # the cloth's red
+    # The hidden pentagon is most of the house: far fewer red pixels without it.
+    red = [((load_rgb(png)[..., 0] - load_rgb(png)[..., 2]) > 60).sum() for png in (whole, torn)]
+    assert red[1] < 0.8 * red[0]
+
+
+def test_uniform_non_grid_faces_stay_one_array():
+    triangles = Faces.uniform(np.array([[0, 1, 2], [0, 2, 4], [1, 5, 6]]))
+    drawn = preview.visible_polygons(HOUSE_POINTS, triangles, hidden=[1])
+    assert isinstance(drawn, np.ndarray) and drawn.shape == (2, 3, 3)
+    np.testing.assert_array_equal(drawn, HOUSE_POINTS[[[0, 1, 2], [1, 5, 6]]])
+    assert preview.grid_shape(triangles, len(HOUSE_POINTS)) is None
+    assert preview.visible_polygons(HOUSE_POINTS, HOUSE, hidden=[0, 1, 2]) == []
+
+
+def test_flat_faces_of_any_size_are_shaded_alike():
+    tilt = np.array([[1.0, 0.0, 0.0], [0.0, 0.8, 0.6], [0.0, -0.6, 0.8]])  # a plane facing neither axis
+    points = HOUSE_POINTS @ tilt.T + [3.0, -2.0, 5.0]
+    polygons = preview.visible_polygons(points, HOUSE)
+    colours = preview._shade(polygons, (0.8, 0.3, 0.2))
+    np.testing.assert_allclose(colours, np.repeat(colours[:1], 3, axis=0), rtol=1e-12)
+    # A quad's shade is its mean normal's, the cross product of its diagonals, as for any grid.
+    bent = np.array([[[0.0, 0.0, 0.0], [1.0, 0.0, 0.3], [1.0, 1.0, 0.0], [0.0, 1.0, 0.2]]])
+    diagonals = np.cross(bent[0, 2] - bent[0, 0], bent[0, 3] - bent[0, 1])
+    np.testing.assert_allclose(preview._normals(bent)[0], diagonals, rtol=1e-12)
 
 
 def test_a_huge_ground_plane_is_clipped_to_the_cloth(cache):

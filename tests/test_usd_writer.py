@@ -12,7 +12,10 @@ import pytest
 from pxr import Usd, UsdGeom, Vt
 
 from warp_verlet.errors import OutputError
+from warp_verlet.faces import Faces
 from warp_verlet.usd_writer import CachedShape, PointCacheWriter, validate_cache
+
+from meshes import HOUSE  # tests/meshes.py (pytest puts tests/ on sys.path)
 
 ROWS, COLS, ROPE_N = 3, 4, 5
 
@@ -69,7 +72,7 @@ def test_round_trip(tmp_path, ext):
     for attr in (mesh.GetFaceVertexCountsAttr(), mesh.GetFaceVertexIndicesAttr()):
         assert attr.GetNumTimeSamples() == 0
     assert list(mesh.GetFaceVertexCountsAttr().Get()) == [4] * len(shapes[0].faces)
-    np.testing.assert_array_equal(np.asarray(mesh.GetFaceVertexIndicesAttr().Get()), shapes[0].faces.ravel())
+    np.testing.assert_array_equal(np.asarray(mesh.GetFaceVertexIndicesAttr().Get()), shapes[0].faces.indices)
     st = UsdGeom.PrimvarsAPI(mesh).GetPrimvar("st")
     assert st.GetTypeName() == "texCoord2f[]" and st.GetInterpolation() == UsdGeom.Tokens.vertex
     np.testing.assert_array_equal(np.asarray(st.Get()), shapes[0].uvs)  # exact: float32 in, float32 out
@@ -324,3 +327,73 @@ def test_validate_cache_finds_hole_indices_outside_the_mesh(tmp_path):
     stage.GetRootLayer().Save()
     del stage
     assert any("holeIndices" in p for p in validate_cache(path))
+
+
+# ------------------------------------------------------------------------------- faces of any size
+
+
+def triangulated_grid(rows: int = ROWS, cols: int = COLS) -> Faces:
+    """The grid's quads, each cut into two triangles along its (r,c)-(r+1,c+1) diagonal."""
+    quads = grid_shape(rows=rows, cols=cols).faces.as_uniform()
+    return Faces.uniform(np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]]))
+
+
+@pytest.mark.parametrize("faces, point_count, hidden", [
+    (triangulated_grid(), ROWS * COLS, [1, 7]),
+    (HOUSE, 7, [0]),
+], ids=["triangles", "tri-quad-pentagon"])
+def test_faces_of_any_size_round_trip(tmp_path, faces, point_count, hidden):
+    path = tmp_path / "mesh.usda"
+    uvs = np.random.default_rng(8).random((point_count, 2)).astype(np.float32)
+    shape = CachedShape("mesh", faces, uvs, point_count, tears=True)
+    frames = random_frames(np.random.default_rng(9), [shape], 3)
+    with PointCacheWriter(path, [shape], fps=24.0) as w:
+        for f, (pts, holes) in enumerate(zip(frames, [None, hidden, None])):
+            w.write_frame(f, pts, hidden_faces=[holes])
+    assert validate_cache(path) == []
+
+    stage = Usd.Stage.Open(str(path))
+    mesh = UsdGeom.Mesh.Get(stage, "/World/mesh")
+    np.testing.assert_array_equal(np.asarray(mesh.GetFaceVertexCountsAttr().Get()), faces.counts)
+    np.testing.assert_array_equal(np.asarray(mesh.GetFaceVertexIndicesAttr().Get()), faces.indices)
+    np.testing.assert_array_equal(np.asarray(UsdGeom.PrimvarsAPI(mesh).GetPrimvar("st").Get()), uvs)
+    for f, pts in enumerate(frames):
+        np.testing.assert_array_equal(np.asarray(mesh.GetPointsAttr().Get(f)), pts[0])
+    holes = mesh.GetHoleIndicesAttr()
+    assert samples(holes) == [0.0, 1.0]
+    assert list(holes.Get(0)) == [] and list(holes.Get(1)) == hidden and list(holes.Get(2)) == hidden
+
+
+def test_an_f_by_k_array_is_taken_as_uniform_faces():
+    triangles = np.array([[0, 1, 2], [0, 2, 3]], np.int64)
+    shape = CachedShape("tris", triangles, np.zeros((4, 2), np.float32), 4)
+    assert isinstance(shape.faces, Faces) and shape.faces == Faces.uniform(triangles)
+    assert not shape.is_rope and len(shape.faces) == 2
+    assert rope_shape().is_rope and rope_shape().faces == Faces.empty()
+
+
+@pytest.mark.parametrize("faces, words", [
+    (Faces([3, 2], [0, 1, 2, 2, 3]), "face 1 of 2 has 2"),
+    (Faces([3, 4], [0, 1, 2, 2, 1, 3, 4]), "face 1 of 2 uses vertex 4; vertex indices must be in [0, 4)"),
+    (Faces([4], [0, 1, 2]), "1 faces with 4 corners in all need 4 vertex indices, got 3"),
+])
+def test_bad_faces_are_refused_naming_the_shape(tmp_path, faces, words):
+    shape = CachedShape("bad", faces, np.zeros((4, 2), np.float32), 4)
+    with pytest.raises(ValueError) as err:
+        PointCacheWriter(tmp_path / "c.usdc", [shape], fps=24.0)
+    assert str(err.value).startswith("shape 'bad': ") and words in str(err.value)
+    assert not (tmp_path / "c.usdc").exists()
+
+
+def test_validate_cache_finds_faces_of_fewer_than_three_corners(tmp_path):
+    path = tmp_path / "cache.usdc"
+    shape = CachedShape("cloth", HOUSE, np.zeros((7, 2), np.float32), 7)
+    with PointCacheWriter(path, [shape], fps=30.0) as w:
+        w.write_frame(0, random_frames(np.random.default_rng(10), [shape], 1)[0])
+    stage = Usd.Stage.Open(str(path))
+    mesh = UsdGeom.Mesh.Get(stage, "/World/cloth")
+    mesh.GetFaceVertexCountsAttr().Set(Vt.IntArray([5, 4, 1, 2]))  # USD's own topology check accepts these
+    stage.GetRootLayer().Save()
+    del mesh, stage
+    problems = validate_cache(path)
+    assert any("/World/cloth" in p and "at least 3 corners" in p and "face 2 of 4 has 1" in p for p in problems)

@@ -199,8 +199,8 @@ def open_cache(path: str | os.PathLike[str]) -> PointCache:
 
 
 def _cloth_prim(path: Path, mesh: UsdGeom.Mesh) -> ClothPrim:
-    counts = np.asarray(mesh.GetFaceVertexCountsAttr().Get() or [], dtype=np.int64)
-    indices = np.asarray(mesh.GetFaceVertexIndicesAttr().Get() or [], dtype=np.int64)
+    counts = np.asarray(mesh.GetFaceVertexCountsAttr().Get() or [], dtype=np.int32)  # USD's int: no copy
+    indices = np.asarray(mesh.GetFaceVertexIndicesAttr().Get() or [], dtype=np.int32)
     try:
         faces = Faces(counts, indices)
         faces.validate(None, f"mesh {mesh.GetPath()}")  # the point count may differ from frame to frame
