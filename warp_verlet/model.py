@@ -21,6 +21,7 @@ import warp as wp
 
 from .colliders import ColliderModel
 from .colouring import Colouring, check_partition, graph_colouring, grid_colouring
+from .tethers import TetherTable, build_tethers
 from .scene import Scene
 from .topology import STRUCT_H, STRUCT_V, ClothTopology, build_cloth, faces_beside_sticks
 
@@ -55,6 +56,9 @@ class Model:
     (first, count) of each colour. Jacobi solver: the per-particle CSR ``neighbour_start`` (N + 1,),
     ``neighbour``, ``neighbour_rest`` and ``neighbour_weight`` (2M,) instead. Tearing (only when a cloth can
     tear): ``tear_ends`` and ``tear_length`` (E,), one entry per stick (coloured) or per stick end (Jacobi).
+    Tethers (only when a cloth uses them; T tethered particles, K pins each): ``tether_particle`` (T,) int32,
+    ``tether_pin`` (T, K) int32 (-1: none) and ``tether_length`` (T, K) float32 m, the rest-pose lengths a
+    State's copy starts from when a cloth can tear.
     """
 
     def __init__(self, scene: Scene, device, colouring: str = "auto"):
@@ -122,6 +126,12 @@ class Model:
         if self.tears:
             self._build_tearing(tear_length, grid_class, anchor, owner, device, csr_stick, csr_ends)
         self.colliders = ColliderModel(scene, device)
+        self.tether_table: TetherTable | None = build_tethers(self.cloths, scene.cloths, scene.tethers_per_particle)
+        if self.tether_table is not None:
+            table = self.tether_table
+            self.tether_particle = wp.array(table.particle, dtype=int, device=device)
+            self.tether_pin = wp.array2d(table.pin, dtype=int, device=device)
+            self.tether_length = wp.array2d(table.length, dtype=float, device=device)
         self._frozen = True
 
     def __setattr__(self, name, value):

@@ -107,7 +107,7 @@ def run_scene(
     start = time.perf_counter()
     points = sim.positions()
     with writer:
-        writer.write_frame(0, model.split(points), sim.colliders.moving_centres())
+        writer.write_frame(0, model.split(points), model.colliders.moving_centres(sim.state))
         background = BackgroundWriter(writer.write_frame) if overlap else None
         write = background.submit if background else writer.write_frame
         try:
@@ -146,7 +146,7 @@ def _step_loop(sim, settings, write: Callable[..., None], progress: Callable[[in
             count = sim.torn_count()
             if count != torn:
                 torn = count
-                hidden = model.hidden_faces(sim.torn_sticks())
-        write(frame, model.split(points), sim.colliders.moving_centres(), hidden)
+                hidden = model.hidden_faces(sim.sync_tears())
+        write(frame, model.split(points), model.colliders.moving_centres(sim.state), hidden)
         if progress is not None:
             progress(frame)

@@ -82,6 +82,22 @@ class ClothSpec:
     pins: tuple[tuple[int, int], ...] = ()
     tear_threshold: float | None = None  # a stick tears beyond this multiple of its rest length; None: never
     particle_masses: tuple[tuple[int, int, float], ...] = ()  # (row, col, kg): overrides of the even share
+    tethers: bool | None = None  # None: on when the cloth has pins and cannot tear
+    tether_scale: float = 1.0  # tether length / rest-pose distance to the pin (> 1: slack for a soft cloth)
+
+    @property
+    def uses_tethers(self) -> bool:
+        """Tethers are on by default for a pinned cloth that cannot tear. A tether holds a particle within its
+        rest distance of a pin, so the sticks it guards could never reach a stretch threshold: a tearing cloth
+        gets them only when asked (with a tether_scale above its tear_threshold, to tear at all)."""
+        if self.tethers is not None:
+            return self.tethers
+        return bool(self.pins) and self.tear_threshold is None
+
+    @property
+    def tethers_per_particle(self) -> int:
+        """Each tethered particle is tied to its nearest one or two pins."""
+        return min(2, len(self.pins)) if self.uses_tethers else 0
 
     @property
     def particle_count(self) -> int:
@@ -149,6 +165,15 @@ class Scene:
     @property
     def tears(self) -> bool:
         return any(c.tear_threshold is not None for c in self.cloths)
+
+    @property
+    def tethered_particles(self) -> int:
+        """Free particles of the cloths that use tethers: one tether thread each."""
+        return sum(c.particle_count - len(set(c.pins)) for c in self.cloths if c.uses_tethers)
+
+    @property
+    def tethers_per_particle(self) -> int:
+        return max((c.tethers_per_particle for c in self.cloths), default=0)
 
     @property
     def compliant(self) -> bool:
@@ -275,6 +300,12 @@ def choice(options: tuple[str, ...]):
         return value
 
     return parse
+
+
+def _boolean(value: Any, key: str) -> bool:
+    if not isinstance(value, bool):
+        raise _Invalid(f"expected true or false, got {_describe(value)}")
+    return value
 
 
 def text(value: Any, key: str) -> str:
@@ -464,8 +495,12 @@ def _read_cloth(file: str, index: int, data: Any) -> ClothSpec:
         pins=t.take("pins", lambda v, k: _read_pins(v, k, rows, cols), ()),
         tear_threshold=t.take("tear_threshold", real(1.0, lo_open=True), None),
         particle_masses=t.take("particle_masses", lambda v, k: _read_particle_masses(v, k, rows, cols), ()),
+        tethers=t.take("tethers", _boolean, None),
+        tether_scale=t.take("tether_scale", real(1.0), 1.0),
     )
     t.finish()
+    if spec.tethers and not spec.pins:
+        raise t.error("tethers", "expected pins: a tether ties a particle to a pin, and this cloth has none")
     missing = sorted(set(spec.compliance) - set(spec.sticks))
     if missing:
         raise t.error(f"compliance.{missing[0]}", f"gives a compliance to the {missing[0]} family, which sticks = "

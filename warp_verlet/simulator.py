@@ -31,7 +31,7 @@ from .memory import available_host_bytes, check_fits
 from .model import Model
 from .scene import Scene
 from .solver import VerletSolver
-from .stages import Need
+from .stages import CONSTRAINT_SETS, Need
 from .state import State
 
 
@@ -208,6 +208,17 @@ class Simulator:
         if not self.model.tears:
             return np.zeros(self.model.stick_count, bool)
         return self.model.torn_sticks(self.state.stick_weight.numpy())
+
+    def sync_tears(self) -> np.ndarray:
+        """Let the constraint sets react to the sticks torn so far (tethers cut off from their pin are
+        dropped), and return which sticks are torn. Call it when ``torn_count()`` has changed; the runner does,
+        once per frame."""
+        torn = self.torn_sticks()
+        for constraint_set in CONSTRAINT_SETS:
+            react = getattr(constraint_set, "on_tear", None)
+            if react is not None and constraint_set.needed(self.solver.need):
+                react(self.model, self.state, torn)
+        return torn
 
     def stretch(self, points: np.ndarray | None = None) -> StretchStats:
         """Stretch over the structural sticks that are not torn."""

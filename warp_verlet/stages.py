@@ -22,6 +22,8 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Callable
 
 if TYPE_CHECKING:  # pragma: no cover
+    import numpy as np
+
     from .model import Model
     from .scene import Scene
     from .state import State
@@ -43,6 +45,8 @@ class Need:
     spheres: int
     sphere_keys: int  # keyframes over all spheres, when one moves (else 0)
     planes: int
+    tethered: int = 0  # free particles of tethered cloths
+    tethers_per_particle: int = 0
 
     @classmethod
     def of(cls, scene: "Scene") -> "Need":
@@ -55,6 +59,7 @@ class Need:
             solver=scene.simulation.solver, iterations=scene.simulation.iterations, free_particles=free,
             compliant=scene.compliant, tears=scene.tears, spheres=len(scene.spheres),
             sphere_keys=sum(len(s.keyframes) for s in scene.spheres) if moving else 0, planes=len(scene.planes),
+            tethered=scene.tethered_particles, tethers_per_particle=scene.tethers_per_particle,
         )
 
 
@@ -284,7 +289,43 @@ class Sticks:
                             split_tasks(copy_back, 0, m.particle_count, threads)])
 
 
-CONSTRAINT_SETS = (Sticks(),)
+class Tethers:
+    """Long-range attachments (kernels/tether.py): one launch per sweep, before the sticks, so that every sweep
+    starts from particles within reach of their pins. When the torn set changes, tethers cut off from their
+    pin are dropped (warp_verlet/tethers.py)."""
+
+    name = "tethers"
+
+    def needed(self, need: Need) -> bool:
+        return need.tethered > 0
+
+    def device_bytes(self, need: Need) -> int:
+        per_particle = INT + need.tethers_per_particle * (INT + FLOAT)  # particle; pin and length per tether
+        live = need.tethers_per_particle * FLOAT if need.tears else 0  # the State's lengths, cut by tears
+        return need.tethered * (per_particle + live)
+
+    def bind(self, model: "Model", state: "State", solver) -> Bound:
+        from warp_verlet.kernels.tether import pull_tethers
+
+        length = state.tether_length if state.tether_length is not None else model.tether_length
+        x, n = state.particle_q, model.tether_particle.shape[0]
+
+        def make(f, count):
+            return recorded(pull_tethers, count, [x, model.tether_particle[f:f + count], model.tether_pin[f:f + count],
+                                                  length[f:f + count]])
+        return Bound(None, [split_tasks(make, 0, n, solver.threads)])
+
+    @staticmethod
+    def on_tear(model: "Model", state: "State", torn: "np.ndarray") -> None:
+        """Drop the tethers whose particle a tear has cut off from its pin."""
+        if state.tether_length is None:
+            return
+        from .tethers import cut_tethers
+
+        state.tether_length.assign(cut_tethers(model.tether_table, model.particle_count, model.host_sticks[~torn]))
+
+
+CONSTRAINT_SETS = (Tethers(), Sticks())
 """Constraint sets in the order a sweep projects them."""
 
 STAGES = (Integrate(), Relax(), Collide(), Tear())

@@ -28,6 +28,8 @@ class State:
     - ``stick_weight``: (E,) float32, dimensionless, or None. Per tear entry, 1 while the stick holds and 0
       once torn; only when a cloth can tear. The relaxation multiplies a stick's correction by it.
     - ``torn_entries``: (1,) int32, or None. Tear entries zeroed so far; only when a cloth can tear.
+    - ``tether_length``: (T, K) float32, m, or None. Live tether lengths (+inf once a tear cuts a particle off
+      from its pin); only when a tethered cloth can tear, otherwise the Model's lengths serve.
     - ``collider_clock``: (1,) float64, s, or None. Simulated time on the device, which places the moving
       spheres inside a captured frame; only when a sphere moves.
     - ``sphere_centres``: (S,) ``wp.vec3``, m, or None. Where each sphere is now; only when there are spheres.
@@ -37,7 +39,7 @@ class State:
     """
 
     _ARRAYS = ("particle_q", "particle_q_inertial", "particle_dq", "stick_weight", "torn_entries",
-               "collider_clock", "sphere_centres")
+               "tether_length", "collider_clock", "sphere_centres")
 
     def __init__(self, model: Model):
         self.model = model
@@ -47,6 +49,8 @@ class State:
             self.particle_dq = wp.zeros_like(self.particle_q)  # no initial velocity
             self.stick_weight = wp.clone(model.tear_weight_start) if model.tears else None
             self.torn_entries = wp.zeros(1, dtype=int) if model.tears else None
+            cuttable = model.tears and model.tether_table is not None
+            self.tether_length = wp.clone(model.tether_length) if cuttable else None
             colliders = model.colliders
             self.collider_clock = wp.zeros(1, dtype=wp.float64) if colliders.moving else None
             self.sphere_centres = wp.clone(colliders.sphere_start) if colliders.spheres else None

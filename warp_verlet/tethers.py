@@ -1,0 +1,99 @@
+"""Tether construction on the host: which pins each free particle is tied to, and how far it may go.
+
+For a flat grid the straight rest-pose distance to a pin is the geodesic along the cloth (the sheet is flat
+and convex), so that is the tether length. Tearing changes the geodesics: a piece torn off must not hang on a
+stale tether, so when the torn set changes, tethers whose particle is no longer connected to its pin through
+intact sticks are dropped (:func:`cut_tethers`). A tether whose shortest path merely detours around a tear
+keeps its straight length: it may then hold that particle tighter than the torn cloth would.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+# Distances are computed for this many (particle, pin) pairs at a time, to bound the temporary memory.
+PAIRS_PER_CHUNK = 1 << 22
+
+
+@dataclass(frozen=True)
+class TetherTable:
+    """T tethered particles, each tied to K pins (global particle indices; -1 where a particle has fewer)."""
+
+    particle: np.ndarray  # (T,) int32
+    pin: np.ndarray  # (T, K) int32
+    length: np.ndarray  # (T, K) float32, m
+
+    @property
+    def count(self) -> int:
+        return len(self.particle)
+
+
+def nearest_pins(points: np.ndarray, pins: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """For each point, the indices (into ``pins``) of its k nearest pins and their distances, nearest first;
+    ties go to the lower pin index, so the choice is deterministic."""
+    pins64 = pins.astype(np.float64)
+    index = np.empty((len(points), k), np.int64)
+    distance = np.empty((len(points), k), np.float64)
+    step = max(1, PAIRS_PER_CHUNK // max(len(pins), 1))
+    for start in range(0, len(points), step):
+        p = points[start:start + step].astype(np.float64)
+        d = np.linalg.norm(p[:, None, :] - pins64[None, :, :], axis=2)
+        order = np.argsort(d, axis=1, kind="stable")[:, :k]
+        index[start:start + step] = order
+        distance[start:start + step] = np.take_along_axis(d, order, axis=1)
+    return index, distance
+
+
+def build_tethers(cloths, specs, k: int) -> TetherTable | None:
+    """Tethers of every cloth that uses them (``cloths``: the model's ClothSlots, ``specs`` their ClothSpecs),
+    ``k`` per particle (the model-wide count; a cloth with one pin leaves its second column at -1)."""
+    particles, pins, lengths = [], [], []
+    for slot, spec in zip(cloths, specs):
+        if not spec.uses_tethers:
+            continue
+        top = slot.topology
+        pinned = np.asarray(top.pinned, np.int64)
+        free = np.flatnonzero(top.inv_mass > 0)
+        mine = min(k, len(pinned))
+        index, distance = nearest_pins(top.positions[free], top.positions[pinned], mine)
+        pin = np.full((len(free), k), -1, np.int64)
+        length = np.full((len(free), k), np.inf, np.float64)
+        pin[:, :mine] = pinned[index] + slot.first
+        length[:, :mine] = distance * spec.tether_scale
+        particles.append(free + slot.first)
+        pins.append(pin)
+        lengths.append(length)
+    if not particles:
+        return None
+    return TetherTable(np.concatenate(particles).astype(np.int32), np.concatenate(pins).astype(np.int32),
+                       np.concatenate(lengths).astype(np.float32))
+
+
+def connected_labels(particle_count: int, sticks: np.ndarray) -> np.ndarray:
+    """Label of each particle's connected component through ``sticks`` (the lowest particle index in it):
+    label propagation with pointer jumping, vectorised."""
+    labels = np.arange(particle_count, dtype=np.int64)
+    if len(sticks) == 0:
+        return labels
+    a, b = sticks[:, 0].astype(np.int64), sticks[:, 1].astype(np.int64)
+    while True:
+        low = np.minimum(labels[a], labels[b])
+        before = labels.copy()
+        np.minimum.at(labels, a, low)
+        np.minimum.at(labels, b, low)
+        labels = labels[labels]  # jump to the label's own label: halves the remaining path each round
+        if np.array_equal(labels, before):
+            return labels
+
+
+def cut_tethers(table: TetherTable, particle_count: int, intact_sticks: np.ndarray) -> np.ndarray:
+    """The tether lengths with every tether whose particle is cut off from its pin set to +inf (off)."""
+    labels = connected_labels(particle_count, intact_sticks)
+    length = table.length.copy()
+    has_pin = table.pin >= 0
+    same = np.zeros_like(has_pin)
+    same[has_pin] = labels[table.particle[:, None].repeat(table.pin.shape[1], 1)[has_pin]] == labels[table.pin[has_pin]]
+    length[~same] = np.inf
+    return length
