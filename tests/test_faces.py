@@ -8,7 +8,7 @@ import pytest
 
 from warp_verlet.faces import Faces, as_faces, edge_faces, grid_faces, next_corner
 from warp_verlet.scene import ClothSpec
-from warp_verlet.topology import build_cloth, faces_beside_sticks
+from warp_verlet.topology import STRUCT_H, STRUCT_V, build_cloth
 
 from meshes import HOUSE, HOUSE_POINTS  # tests/meshes.py (pytest puts tests/ on sys.path)
 
@@ -29,6 +29,21 @@ HOUSE_EDGES = {
 }
 
 BIG = np.iinfo(np.int32).max
+
+
+def faces_beside_sticks(rows: int, cols: int, grid_class: np.ndarray, anchor: np.ndarray) -> np.ndarray:
+    """The grid's own answer, written from rows and columns (what the simulator used before faces): a horizontal
+    stick (r, c)-(r, c+1) borders faces (r-1, c) and (r, c); a vertical stick (r, c)-(r+1, c) borders faces
+    (r, c-1) and (r, c), face (r, c) having index r * (cols - 1) + c; -1 beyond the border."""
+    out = np.full((len(grid_class), 2), -1, np.int32)
+    if rows < 2 or cols < 2:
+        return out
+    r, c = anchor[:, 0].astype(np.int64), anchor[:, 1].astype(np.int64)
+    per_row = cols - 1
+    h, v = grid_class == STRUCT_H, grid_class == STRUCT_V
+    out[:, 0] = np.where(h & (r > 0), (r - 1) * per_row + c, np.where(v & (c > 0), r * per_row + c - 1, -1))
+    out[:, 1] = np.where(h & (r < rows - 1), r * per_row + c, np.where(v & (c < cols - 1), r * per_row + c, -1))
+    return out
 
 
 def by_face(pairs: np.ndarray) -> np.ndarray:

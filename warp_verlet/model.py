@@ -23,7 +23,8 @@ from .colliders import ColliderModel
 from .colouring import Colouring, check_partition, graph_colouring, grid_colouring
 from .tethers import TetherTable, build_tethers
 from .scene import Scene
-from .topology import STRUCT_H, STRUCT_V, ClothTopology, build_cloth, faces_beside_sticks
+from .faces import edge_faces
+from .topology import STRUCT_H, STRUCT_V, ClothTopology, build_cloth
 
 
 @dataclass(frozen=True)
@@ -164,8 +165,8 @@ class Model:
         self.stick_faces = np.full((self.stick_count, 2), -1, np.int32)
         for k, slot in enumerate(self.cloths):
             mine = owner == k
-            self.stick_faces[mine] = faces_beside_sticks(slot.topology.rows, slot.topology.cols,
-                                                         grid_class[mine], anchor[mine])
+            # Only a face's sides have faces beside them: shear and bend sticks get -1 from edge_faces.
+            self.stick_faces[mine] = edge_faces(slot.topology.faces, self.host_sticks[mine] - slot.first)
 
     def _build_neighbours(self, sticks, rest, device) -> tuple[np.ndarray, np.ndarray]:
         """CSR list of (neighbour, rest, weight) per particle for the gather-form Jacobi solver. Returns,

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .faces import Faces, grid_faces
 from .scene import ClothSpec
 
 # Grid classes, in the order the analytic colouring numbers them.
@@ -40,7 +41,7 @@ class ClothTopology:
     compliance: np.ndarray  # (M,) float32, m/N (XPBD): 0 for a rigid stick
     grid_class: np.ndarray  # (M,) int8, one of the six classes above
     anchor: np.ndarray  # (M, 2) int32 (row, col) of the stick's first particle
-    faces: np.ndarray  # (F, 4) int32 quads, counter-clockwise seen from the front (+Z for vertical)
+    faces: Faces  # faces of any size, counter-clockwise seen from the front (+Z for vertical); none for a rope
     uvs: np.ndarray  # (N, 2) float32 in [0, 1]
     pinned: np.ndarray  # (P,) int32 indices of pinned particles
 
@@ -119,14 +120,9 @@ def build_cloth(spec: ClothSpec) -> ClothTopology:
     pinned = np.array([r * cols + c for r, c in spec.pins], dtype=np.int32)
     inv_mass[pinned] = 0.0
 
-    if rows > 1 and cols > 1:
-        r, c = np.meshgrid(np.arange(rows - 1), np.arange(cols - 1), indexing="ij")
-        a = (r * cols + c).ravel()
-        # (r,c) -> (r+1,c) -> (r+1,c+1) -> (r,c+1): counter-clockwise seen from +Z for a vertical cloth
-        # (rows run down -Y, columns along +X), so the front face looks at +Z.
-        faces = np.stack([a, a + cols, a + cols + 1, a + 1], axis=1).astype(np.int32)
-    else:
-        faces = np.zeros((0, 4), np.int32)  # a rope has no surface
+    # (r,c) -> (r+1,c) -> (r+1,c+1) -> (r,c+1): counter-clockwise seen from +Z for a vertical cloth (rows run
+    # down -Y, columns along +X), so the front face looks at +Z. A rope has no surface: no faces.
+    faces = grid_faces(rows, cols)
     u = np.arange(cols) / max(cols - 1, 1)
     v = 1.0 - np.arange(rows) / max(rows - 1, 1)
     uu, vv = np.meshgrid(u, v, indexing="xy")
@@ -137,20 +133,3 @@ def build_cloth(spec: ClothSpec) -> ClothTopology:
         rest_length=rest, compliance=compliance_arr, grid_class=grid_class, anchor=anchor, faces=faces,
         uvs=uvs, pinned=pinned,
     )
-
-
-def faces_beside_sticks(rows: int, cols: int, grid_class: np.ndarray, anchor: np.ndarray) -> np.ndarray:
-    """(M, 2) indices of the quads on either side of each structural stick, -1 where there is none (the
-    grid's border, a rope, or a stick that is not structural). Face (r, c) has index r * (cols - 1) + c.
-
-    A horizontal stick (r, c)-(r, c+1) borders faces (r-1, c) and (r, c); a vertical stick (r, c)-(r+1, c)
-    borders faces (r, c-1) and (r, c)."""
-    out = np.full((len(grid_class), 2), -1, np.int32)
-    if rows < 2 or cols < 2:
-        return out
-    r, c = anchor[:, 0].astype(np.int64), anchor[:, 1].astype(np.int64)
-    per_row = cols - 1
-    h, v = grid_class == STRUCT_H, grid_class == STRUCT_V
-    out[:, 0] = np.where(h & (r > 0), (r - 1) * per_row + c, np.where(v & (c > 0), r * per_row + c - 1, -1))
-    out[:, 1] = np.where(h & (r < rows - 1), r * per_row + c, np.where(v & (c < cols - 1), r * per_row + c, -1))
-    return out
