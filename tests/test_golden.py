@@ -2,7 +2,7 @@
 positions at every frame as the code before the split (tests/data/golden_rigid.json, recorded by
 tests/data/record_golden_rigid.py with that code).
 
-Rigid sticks, because soft sticks changed meaning on purpose (a per-sweep stiffness became an XPBD
+Rigid sticks and no tethers (new since), because soft sticks changed meaning on purpose (a per-sweep stiffness became an XPBD
 compliance; tests/test_compliance.py checks the new meaning against the spring it models). The old per-substep
 drag d becomes the damping rate -ln(d) / dt, which gives back d per substep to float64 precision, so the
 float32 the kernel sees is the same.
@@ -47,6 +47,7 @@ def rigid_scene(case: str):
     data["simulation"]["damping"] = -math.log(record["drag"]) / record["dt"]
     for cloth in data["cloth"]:
         cloth.pop("compliance", None)
+        cloth["tethers"] = False  # a new constraint, which the old code did not have
     scene = parse_scene(data, str(path), path)
     return replace(scene, simulation=replace(scene.simulation, frames=record["frames"],
                                              solver=record.get("solver", "coloured")))
