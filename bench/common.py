@@ -1,39 +1,109 @@
-"""Helpers shared by the benchmark scripts: scene construction, timing and table output."""
+"""What the benchmark scripts share: scenes, the one way into a simulator's state, timing, the machine
+description and the table writer."""
 
 from __future__ import annotations
 
+import argparse
 import csv
+import os
 import platform
+import shlex
 import statistics
+import sys
 import time
+from dataclasses import dataclass
+from datetime import datetime
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 import warp as wp
 
-from warp_verlet.scene import parse_scene
+from warp_verlet.scene import Scene, parse_scene
 
 
-def hanging_cloth(n: int, substeps: int = 4, iterations: int = 8, solver: str = "coloured", frames: int = 60):
-    """The benchmark scene: an n x n, 1 m cloth pinned at its top corners, all three stick families."""
-    return parse_scene({
-        "simulation": {"fps": 60, "frames": frames, "substeps": substeps, "iterations": iterations,
-                       "drag": 0.999, "solver": solver},
-        "cloth": [{"name": "sheet", "resolution": [n, n], "size": [1.0, 1.0], "origin": [-0.5, 1.0, 0.0],
-                   "mass": 0.2, "pins": ["top-left", "top-right"],
-                   "sticks": {"structural": 1.0, "shear": 1.0, "bend": 0.5}}],
-    }, file=f"<hanging cloth {n}x{n}>")
+def arg_parser(module: str, doc: str) -> argparse.ArgumentParser:
+    """The command line of ``python -m module``: the usage line names that command, --help shows ``doc`` as written."""
+    return argparse.ArgumentParser(prog=f"python -m {module}", description=doc,
+                                   formatter_class=argparse.RawDescriptionHelpFormatter)
 
 
-def time_frames(sim, frames: int, repeats: int) -> list[float]:
-    """Seconds per frame for ``repeats`` batches of ``frames`` frames, synchronised around each batch."""
+def quiet_warp() -> None:
+    """Silence Warp's banner and module-load lines: ``config.quiet`` up to Warp 1.x, ``log_level`` after."""
+    wp.config.quiet = True
+    if hasattr(wp.config, "log_level") and hasattr(wp, "LOG_WARNING"):
+        wp.config.log_level = wp.LOG_WARNING
+
+
+# ---------------------------------------------------------------- scenes
+
+HANGING_STICKS = {"structural": 1.0, "shear": 1.0, "bend": 0.5}
+
+
+def scene(simulation: dict, cloths: dict | list, colliders: list | None = None, name: str = "<bench>") -> Scene:
+    """A scene from the tables of a scene file (``cloths`` one [[cloth]] table or a list of them); 60 fps and
+    4 substeps unless ``simulation`` says otherwise. ``name`` stands for the file in error messages."""
+    return parse_scene({"simulation": {"fps": 60, "substeps": 4, **simulation},
+                        "cloth": cloths if isinstance(cloths, list) else [cloths],
+                        "collider": colliders or []}, file=name)
+
+
+def hanging_sheet(n: int, **cloth) -> dict:
+    """The [[cloth]] table of the benchmark cloth: n x n particles, 1 m, 0.2 kg, pinned at its top corners, all
+    three stick families; keyword arguments override its entries."""
+    return {"name": "sheet", "resolution": [n, n], "size": [1.0, 1.0], "origin": [-0.5, 1.0, 0.0], "mass": 0.2,
+            "pins": ["top-left", "top-right"], "sticks": HANGING_STICKS, **cloth}
+
+
+def hanging_cloth(n: int, substeps: int = 4, iterations: int = 8, solver: str = "coloured", frames: int = 60) -> Scene:
+    """The benchmark scene: the hanging sheet, vertical, drag 0.999."""
+    return scene({"frames": frames, "substeps": substeps, "iterations": iterations, "drag": 0.999, "solver": solver},
+                 hanging_sheet(n), name=f"<hanging cloth {n}x{n}>")
+
+
+def cloth_size(scene: Scene) -> float:
+    """The largest ``size`` entry of any cloth (m): what position errors are divided by."""
+    return max(max(c.size) for c in scene.cloths)
+
+
+# ---------------------------------------------------------------- the simulator's state
+
+class VerletState(NamedTuple):
+    """The simulator's live summed-form Verlet arrays (kernels/integrate.py): positions, what the last step
+    predicted, and its increment; x - x_prev = delta + (x - x_inertial)."""
+    x: wp.array
+    x_inertial: wp.array
+    delta: wp.array
+
+
+def verlet_state(sim) -> VerletState:
+    """The one place the benchmarks reach past ``Simulator``'s public methods (``positions()``, ``stretch()``,
+    ``step()``): its live state arrays, to read the implicit velocity or to put particles somewhere else."""
+    return VerletState(sim.x, sim.x_inertial, sim.delta)
+
+
+def set_positions(sim, points: np.ndarray) -> None:
+    """Overwrite every particle's position (before the first step: the cloth then starts from there at rest)."""
+    verlet_state(sim).x.assign(points)
+
+
+# ---------------------------------------------------------------- timing
+
+def time_frames(stepper, frames: int, repeats: int, warm_up: int = 0) -> list[float]:
+    """Seconds per frame of ``repeats`` batches of ``frames`` ``stepper.step_frame()`` calls, after ``warm_up``
+    untimed frames; each batch is synchronised with the stepper's Warp device when it has one."""
+    device = getattr(stepper, "device", None)
+    for _ in range(warm_up):
+        stepper.step_frame()
     out = []
     for _ in range(repeats):
-        wp.synchronize_device(sim.device)
+        if device is not None:
+            wp.synchronize_device(device)
         start = time.perf_counter()
         for _ in range(frames):
-            sim.step_frame()
-        wp.synchronize_device(sim.device)
+            stepper.step_frame()
+        if device is not None:
+            wp.synchronize_device(device)
         out.append((time.perf_counter() - start) / frames)
     return out
 
@@ -42,12 +112,6 @@ def median_spread(values: list[float]) -> tuple[float, float]:
     """Median and half the range, as a fraction of the median."""
     med = statistics.median(values)
     return med, (max(values) - min(values)) / (2 * med) if med else 0.0
-
-
-def machine(device) -> str:
-    if device.is_cuda:
-        return f"{device.name} (CUDA), Warp {wp.__version__}"
-    return f"CPU {platform.processor() or platform.machine()}, Warp {wp.__version__}"
 
 
 def copy_bandwidth(device, mib: int = 1024, repeats: int = 20) -> float:
@@ -64,31 +128,7 @@ def copy_bandwidth(device, mib: int = 1024, repeats: int = 20) -> float:
     return 2 * src.capacity * repeats / (time.perf_counter() - start) / 1e9
 
 
-def write_table(rows: list[dict], out_dir: Path | None, stem: str, title: str) -> str:
-    """Print a markdown table and, with ``out_dir``, write it as .md and .csv."""
-    keys = list(rows[0])
-    lines = [f"### {title}", "", "| " + " | ".join(keys) + " |", "|" + "---|" * len(keys)]
-    lines += ["| " + " | ".join(str(r[k]) for k in keys) + " |" for r in rows]
-    text = "\n".join(lines) + "\n"
-    print(text)
-    if out_dir is not None:
-        out_dir.mkdir(parents=True, exist_ok=True)
-        (out_dir / f"{stem}.md").write_text(text)
-        with open(out_dir / f"{stem}.csv", "w", newline="") as f:
-            writer = csv.DictWriter(f, fieldnames=keys)
-            writer.writeheader()
-            writer.writerows(rows)
-    return text
-
-
-# ---------------------------------------------------------------- additions for work_precision / cpu_reference
-
-def quiet_warp() -> None:
-    """Silence Warp's banner and module-load lines: ``config.quiet`` up to Warp 1.x, ``log_level`` after."""
-    wp.config.quiet = True
-    if hasattr(wp.config, "log_level") and hasattr(wp, "LOG_WARNING"):
-        wp.config.log_level = wp.LOG_WARNING
-
+# ---------------------------------------------------------------- the machine
 
 def cpu_model() -> str:
     """The CPU's model name from /proc/cpuinfo (Linux), else what the platform module says."""
@@ -101,24 +141,75 @@ def cpu_model() -> str:
     return platform.processor() or platform.machine()
 
 
-def machine_lines(command: list[str] | None = None) -> list[str]:
-    """Markdown bullet lines describing where and how a CPU benchmark ran."""
-    import os
-    import shlex
-    import sys
-    from datetime import datetime
+@dataclass(frozen=True)
+class Machine:
+    """Where a benchmark ran: ``str()`` gives one line for a table title, ``lines()`` markdown bullets."""
+    gpu: str | None  # the CUDA device's name, None on the CPU
+    cpu: str
+    cpus: int | None
+    load: str
+    versions: str
+    when: datetime
 
+    def __str__(self) -> str:
+        where = f"{self.gpu} (CUDA)" if self.gpu else f"CPU {self.cpu}, {self.cpus} logical CPUs"
+        return f"{where}, Warp {wp.__version__}, {self.when.date()}"
+
+    def lines(self, command: list[str] | None = None) -> list[str]:
+        """Bullets; with ``command`` (the module and its arguments) the command line, run with ``python -m``."""
+        if self.gpu:
+            where = f"- GPU: {self.gpu} (CUDA); host CPU: {self.cpu}, {self.cpus} logical CPUs"
+        else:
+            where = (f"- CPU: {self.cpu}, {self.cpus} logical CPUs; Warp runs one CPU launch on one thread, "
+                     "warp_verlet cuts each colour over its relaxation threads")
+        lines = [where, f"- load average (1 / 5 / 15 min) at the end: {self.load}", f"- {self.versions}",
+                 f"- date: {self.when.isoformat(timespec='seconds')}"]
+        if command is not None:
+            lines.append(f"- command: `{shlex.join([Path(sys.executable).name, '-m', *command])}`")
+        return lines
+
+
+def machine(device=None) -> Machine:
+    """The machine, now: CPU model and logical CPUs, the CUDA device's name when ``device`` is one (default:
+    Warp's default device), load average, Warp / numpy / Python versions and the date."""
+    d = wp.get_device(device)
     try:
         load = " / ".join(f"{v:.2f}" for v in os.getloadavg())
     except OSError:
         load = "n/a"
-    lines = [
-        f"- CPU: {cpu_model()}, {os.cpu_count()} logical CPUs; Warp runs one CPU launch on one thread, "
-        "warp_verlet cuts each colour over its relaxation threads",
-        f"- load average (1 / 5 / 15 min) at the end: {load}",
-        f"- Warp {wp.__version__}, numpy {np.__version__}, Python {platform.python_version()}, {platform.system()}",
-        f"- date: {datetime.now().isoformat(timespec='seconds')}",
-    ]
-    if command is not None:
-        lines.append(f"- command: `{shlex.join([Path(sys.executable).name] + command)}`")
-    return lines
+    versions = (f"Warp {wp.__version__}, numpy {np.__version__}, Python {platform.python_version()}, "
+                f"{platform.system()}")
+    return Machine(d.name if d.is_cuda else None, cpu_model(), os.cpu_count(), load, versions, datetime.now())
+
+
+# ---------------------------------------------------------------- tables
+
+def markdown_table(rows: list[dict], columns: list[str] | None = None) -> str:
+    """A markdown table of ``rows`` (dicts), one column per key of the first row unless ``columns`` is given;
+    a "|" in a cell becomes "/". Its lines, without a newline after the last."""
+    keys = columns or list(rows[0])
+    lines = ["| " + " | ".join(keys) + " |", "|" + "---|" * len(keys)]
+    lines += ["| " + " | ".join(str(r[k]).replace("|", "/") for k in keys) + " |" for r in rows]
+    return "\n".join(lines)
+
+
+def write_csv(path: Path, rows: list[dict], columns: list[str] | None = None) -> Path:
+    """``rows`` as CSV with a header line, one column per key of the first row unless ``columns`` is given."""
+    with open(path, "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=columns or list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    return path
+
+
+def write_table(rows: list[dict], out_dir: Path | None, stem: str, title: str,
+                columns: list[str] | None = None) -> str:
+    """Print ``### title`` and the markdown table of ``rows``; with ``out_dir``, also write that text to
+    ``stem``.md and the rows to ``stem``.csv. The title may run over several paragraphs."""
+    text = f"### {title}\n\n{markdown_table(rows, columns)}\n"
+    print(text)
+    if out_dir is not None:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        (out_dir / f"{stem}.md").write_text(text)
+        write_csv(out_dir / f"{stem}.csv", rows, columns)
+    return text

@@ -1,8 +1,8 @@
 """Warp's CPU simulator against a single-threaded C reference and a plain numpy baseline, in one run.
 
-    python bench/cpu_reference.py [--size 256] [--frames 10] [--repeats 3] [--out bench/results/cpu_reference]
+    python -m bench.cpu_reference [--size 256] [--frames 10] [--repeats 3] [--out bench/results/cpu_reference]
 
-The README's throughput setup (bench/throughput.py): an n x n, 1 m hanging cloth pinned at its top corners,
+The README's throughput setup (bench.throughput): an n x n, 1 m hanging cloth pinned at its top corners,
 structural + shear + bend sticks, 4 substeps x 8 iterations at 60 fps. Each contender runs from the initial
 state: ``--warm-up`` frames (Warp compiles its kernels there), then ``--repeats`` timed batches of ``--frames``
 frames; the median batch gives ms/frame, and stick projections/s = sticks x substeps x iterations / (s/frame).
@@ -16,7 +16,7 @@ frames; the median batch gives ms/frame, and stick projections/s = sticks x subs
 - C: bench/c_reference/relax.c, compiled here with ``cc -O3 -march=native -shared -fPIC`` (``$CC`` if set) into
   a temporary directory and called through ctypes once per frame: Verlet plus Gauss-Seidel sweeps over the
   simulator's own sticks in its colour order, one thread. Skipped, with a message, if there is no compiler.
-- numpy jacobi / numpy coloured: bench/numpy_baseline.py, fewer frames (``--numpy-frames``): it is slow.
+- numpy jacobi / numpy coloured: bench.numpy_baseline, fewer frames (``--numpy-frames``): it is slow.
 
 Same-physics check: Warp coloured and C run the same number of frames from the same start, and the largest
 particle distance between them is reported (and checked against ``--tolerance``, as a fraction of the cloth
@@ -25,8 +25,6 @@ size). Written: cpu_reference.csv and cpu_reference.md under ``--out``.
 
 from __future__ import annotations
 
-import argparse
-import csv
 import ctypes
 import dataclasses
 import os
@@ -34,20 +32,17 @@ import shutil
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
-import warp as wp
+
+from warp_verlet.cpu_team import usable_cores
+from warp_verlet.simulator import Simulator
+
+from .common import arg_parser, cloth_size, hanging_cloth, machine, markdown_table, quiet_warp, time_frames, write_csv
+from .numpy_baseline import NumpyCloth
 
 HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE))
-from common import hanging_cloth, machine_lines, quiet_warp  # noqa: E402
-from numpy_baseline import NumpyCloth  # noqa: E402
-
-from warp_verlet.cpu_team import usable_cores  # noqa: E402
-from warp_verlet.simulator import Simulator  # noqa: E402
-
 C_SOURCE = HERE / "c_reference" / "relax.c"
 C_FLAGS = ["-O3", "-march=native", "-shared", "-fPIC"]
 _F32P = np.ctypeslib.ndpointer(np.float32, flags="C_CONTIGUOUS")
@@ -115,30 +110,13 @@ class CCloth:
         return self.x.copy()
 
 
-# ---------------------------------------------------------------- timing
-
-def time_contender(step_frame, warm_up: int, frames: int, repeats: int, sync=None) -> list[float]:
-    """Seconds per frame of ``repeats`` batches of ``frames`` frames, after ``warm_up`` frames."""
-    for _ in range(warm_up):
-        step_frame()
-    out = []
-    for _ in range(repeats):
-        if sync:
-            sync()
-        start = time.perf_counter()
-        for _ in range(frames):
-            step_frame()
-        if sync:
-            sync()
-        out.append((time.perf_counter() - start) / frames)
-    return out
-
+# ---------------------------------------------------------------- the contenders, timed
 
 def run(size: int = 256, frames: int = 10, repeats: int = 3, warm_up: int = 2, numpy_frames: int = 2,
         substeps: int = 4, iterations: int = 8, with_c: bool = True, threads: int | None = None, log=print) -> dict:
     """Measure every contender; returns {"rows": [...], "check": {...} or None, "compiler": str or None}."""
     scene = hanging_cloth(size, substeps, iterations)
-    jacobi = dataclasses.replace(scene, simulation=dataclasses.replace(scene.simulation, solver="jacobi"))
+    jacobi = hanging_cloth(size, substeps, iterations, "jacobi")
     rows, finals = [], {}
 
     def record(name, times, sticks, frames_run):
@@ -156,7 +134,7 @@ def run(size: int = 256, frames: int = 10, repeats: int = 3, warm_up: int = 2, n
         for count in sorted({1, threads}):
             name = f"warp {solver}, {count} thread" + ("s" if count > 1 else "")
             sim = Simulator(sc, device="cpu", threads=count)
-            times = time_contender(sim.step_frame, warm_up, frames, repeats, lambda: wp.synchronize_device(sim.device))
+            times = time_frames(sim, frames, repeats, warm_up)
             record(name, times, sim.model.stick_count, frames * repeats)
             finals[name] = (sim, sim.positions())
     threaded_identical = all(
@@ -171,13 +149,12 @@ def run(size: int = 256, frames: int = 10, repeats: int = 3, warm_up: int = 2, n
         else:
             lib, compiler = built
             c = CCloth(lib, scene)
-            record("C (1 thread)", time_contender(c.step_frame, warm_up, frames, repeats), c.stick_count,
-                   frames * repeats)
+            record("C (1 thread)", time_frames(c, frames, repeats, warm_up), c.stick_count, frames * repeats)
             finals["C (1 thread)"] = (None, c.positions())
 
     for name, solver in (("numpy jacobi", "jacobi"), ("numpy coloured", "coloured")):
         cloth = NumpyCloth.from_scene(scene, solver)
-        record(name, time_contender(cloth.step_frame, 1, numpy_frames, repeats), cloth.stick_count,
+        record(name, time_frames(cloth, numpy_frames, repeats, warm_up=1), cloth.stick_count,
                numpy_frames * repeats)
 
     check = None
@@ -185,9 +162,8 @@ def run(size: int = 256, frames: int = 10, repeats: int = 3, warm_up: int = 2, n
         sim, xw = finals["warp coloured, 1 thread"]
         xc = finals["C (1 thread)"][1]
         dist = np.linalg.norm(xw.astype(np.float64) - xc, axis=1)
-        cloth_size = max(max(c.size) for c in scene.cloths)
         check = {"frames": warm_up + frames * repeats, "max_diff": float(dist.max()),
-                 "rms_diff": float(np.sqrt(np.mean(dist**2))), "cloth_size": cloth_size,
+                 "rms_diff": float(np.sqrt(np.mean(dist**2))), "cloth_size": cloth_size(scene),
                  "stretch_rms_warp": sim.stretch(xw).rms, "stretch_rms_c": sim.stretch(xc).rms}
     return {"rows": rows, "check": check, "compiler": compiler, "threaded_identical": threaded_identical,
             "threads": threads}
@@ -212,19 +188,15 @@ def ratios(rows: list[dict]) -> dict[str, float]:
 def write(res: dict, out: Path, size: int, argv: list[str], tolerance: float) -> str:
     out.mkdir(parents=True, exist_ok=True)
     rows = res["rows"]
-    with open(out / "cpu_reference.csv", "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
+    write_csv(out / "cpu_reference.csv", rows)
     r0 = rows[0]
+    shown = [{"contender": r["contender"], "sticks": f"{r['sticks']:,}", "frames timed": r["frames_timed"],
+              "ms/frame (median)": f"{r['ms_per_frame']:.2f}", "min..max": f"{r['ms_min']:.2f}..{r['ms_max']:.2f}",
+              "M projections/s": f"{r['Mproj_per_s']:.1f}"} for r in rows]
     lines = [f"# CPU reference: {size}x{size} hanging cloth, {r0['substeps']} substeps x {r0['iterations']} iterations",
-             "", *machine_lines(argv), f"- C compiler: {res['compiler'] or 'none found: C skipped'}", "",
-             "| contender | sticks | frames timed | ms/frame (median) | min..max | M projections/s |",
-             "|---|---|---|---|---|---|"]
-    lines += [f"| {r['contender']} | {r['sticks']:,} | {r['frames_timed']} | {r['ms_per_frame']:.2f} | "
-              f"{r['ms_min']:.2f}..{r['ms_max']:.2f} | {r['Mproj_per_s']:.1f} |" for r in rows]
-    lines += ["", "| ratio of projection rates | value |", "|---|---|"]
-    lines += [f"| {k} | {v:.2f} |" for k, v in ratios(rows).items()]
+             "", *machine("cpu").lines(argv), f"- C compiler: {res['compiler'] or 'none found: C skipped'}", "",
+             markdown_table(shown), "",
+             markdown_table([{"ratio of projection rates": k, "value": f"{v:.2f}"} for k, v in ratios(rows).items()])]
     c = res["check"]
     if c:
         verdict = "within" if c["max_diff"] <= tolerance * c["cloth_size"] else "NOT within"
@@ -242,7 +214,7 @@ def write(res: dict, out: Path, size: int, argv: list[str], tolerance: float) ->
 
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = arg_parser("bench.cpu_reference", __doc__)
     p.add_argument("--size", type=int, default=256)
     p.add_argument("--frames", type=int, default=10, help="frames per timed batch (Warp, C)")
     p.add_argument("--numpy-frames", type=int, default=2, help="frames per timed batch (numpy)")
@@ -262,7 +234,7 @@ def main(argv=None) -> int:
     print(f"{args.size}x{args.size} hanging cloth, {args.substeps} x {args.iterations}:", flush=True)
     res = run(args.size, args.frames, args.repeats, args.warm_up, args.numpy_frames, args.substeps, args.iterations,
               with_c=not args.no_c, threads=args.threads)
-    print(write(res, args.out, args.size, ["bench/cpu_reference.py", *argv], args.tolerance))
+    print(write(res, args.out, args.size, ["bench.cpu_reference", *argv], args.tolerance))
     c = res["check"]
     if c and c["max_diff"] > args.tolerance * c["cloth_size"]:
         print("error: the C reference and Warp disagree beyond the tolerance", file=sys.stderr)

@@ -1,6 +1,6 @@
 """Four integrators on the same problems: the seed article's claims, checked with numbers.
 
-    python bench/integrators.py [--out bench/results/integrators] [--quick] [--no-plots]
+    python -m bench.integrators [--out bench/results/integrators] [--quick] [--no-plots]
 
 Explicit Euler, semi-implicit (symplectic) Euler, position Verlet and classic RK4, in plain float64 numpy:
 
@@ -19,11 +19,11 @@ energy uses the central difference (x_{n+1} - x_{n-1}) / (2 dt).
 
 from __future__ import annotations
 
-import argparse
-import csv
 from pathlib import Path
 
 import numpy as np
+
+from .common import arg_parser, markdown_table, write_csv
 
 G, L, THETA0 = 9.81, 1.0, 1.0                    # pendulum
 N_CHAIN, K_SPRING, MASS, REST = 5, 2000.0, 0.1, 0.2  # chain
@@ -213,16 +213,16 @@ def markdown(res: dict) -> str:
              "", "Drift = |E - E0| / (E0 - E_min), max over the run; final is signed (E - E0) / (E0 - E_min). "
              "Order = log-log slope of the T = 2 s pendulum position error over the errors in "
              f"[{FIT_WINDOW[0]:g}, {FIT_WINDOW[1]:g}].", "",
-             "| " + " | ".join(keys) + " |", "|" + "---|" * len(keys)]
-    lines += ["| " + " | ".join(fmt(r[k]) for k in keys) + " |" for r in res["summary"].values()]
-    lines += ["", "Mean signed (E - E0) / (E0 - E_min) over each quarter of the run (a ramp is secular drift):", "",
-              "| integrator | problem | Q1 | Q2 | Q3 | Q4 |", "|---|---|---|---|---|---|"]
+             markdown_table([{k: fmt(r[k]) for k in keys} for r in res["summary"].values()]), "",
+             "Mean signed (E - E0) / (E0 - E_min) over each quarter of the run (a ramp is secular drift):", "",
+             markdown_table([{"integrator": m, "problem": problem,
+                              **{f"Q{i}": fmt(v) for i, v in enumerate(res[problem][m]["quarter_means"], 1)}}
+                             for problem in ("pendulum", "chain") for m in METHODS])]
     notes = []
     for problem in ("pendulum", "chain"):
         t = res[problem]["t"]
         for m in METHODS:
             d = res[problem][m]
-            lines.append(f"| {m} | {problem} | " + " | ".join(fmt(v) for v in d["quarter_means"]) + " |")
             if d["doubled_at"] is not None:
                 end = "." if d["diverged_at"] is None else f", non-finite from t = {t[d['diverged_at']]:.3f} s."
                 notes.append(f"{m} on the {problem}: |E - E0| passed E0 - E_min at t = {t[d['doubled_at']]:.3f} s"
@@ -234,15 +234,8 @@ def write_outputs(res: dict, out: Path) -> list[Path]:
     out.mkdir(parents=True, exist_ok=True)
     files = [out / "summary.csv", out / "convergence.csv", out / "energy_pendulum.csv", out / "energy_chain.csv",
              out / "integrators.md"]
-    rows = list(res["summary"].values())
-    with open(files[0], "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
-    with open(files[1], "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=["integrator", "dt", "steps", "force_evals", "error"])
-        w.writeheader()
-        w.writerows({"integrator": m, **r} for m in METHODS for r in res["convergence"][m])
+    write_csv(files[0], list(res["summary"].values()))
+    write_csv(files[1], [{"integrator": m, **r} for m in METHODS for r in res["convergence"][m]])
     for path, problem in ((files[2], "pendulum"), (files[3], "chain")):
         stride = max(len(res[problem]["t"]) // 2000, 1)      # at most ~2000 rows; the plots use every step
         cols = np.column_stack([res[problem]["t"]] + [res[problem][m]["rel"] for m in METHODS])[::stride]
@@ -304,7 +297,7 @@ def plot(res: dict, out: Path) -> list[Path]:
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = arg_parser("bench.integrators", __doc__)
     p.add_argument("--out", type=Path, default=Path(__file__).resolve().parent / "results" / "integrators")
     p.add_argument("--quick", action="store_true", help="short runs and few dt values (smoke test)")
     p.add_argument("--no-plots", action="store_true")

@@ -1,6 +1,6 @@
 """Optional peer: the same hanging cloth through Newton's VBD cloth solver (``pip install newton``), on the CPU.
 
-    python bench/newton_peer.py [--size 64] [--substeps 4] [--iterations 8] [--frames 30]
+    python -m bench.newton_peer [--size 64] [--substeps 4] [--iterations 8] [--frames 30]
 
 Newton (github.com/newton-physics/newton) is not a dependency of this project; when ``import newton`` fails
 every entry point prints "Newton not installed: skipped" and does nothing else.
@@ -18,12 +18,14 @@ stiffness tried, 1e2 .. 1e6 N/m, so it is not offered here.)
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
+
+from warp_verlet.simulator import Simulator
+
+from .common import arg_parser, hanging_cloth, quiet_warp
 
 SKIP_MESSAGE = "Newton not installed: skipped"
 TRI_KE = 1.0e4      # membrane stiffness (Newton's tri_ke and tri_ka)
@@ -115,7 +117,7 @@ def run(scene, substeps: int, iterations: int, frames: int, repeats: int = 1, de
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = arg_parser("bench.newton_peer", __doc__)
     p.add_argument("--size", type=int, default=64)
     p.add_argument("--substeps", type=int, default=4)
     p.add_argument("--iterations", type=int, default=8)
@@ -125,11 +127,6 @@ def main(argv=None) -> int:
     if not available():
         print(SKIP_MESSAGE)
         return 0
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
-    from common import hanging_cloth, quiet_warp
-
-    from warp_verlet.simulator import Simulator
-
     quiet_warp()
     scene = hanging_cloth(args.size, args.substeps, args.iterations)
     r = run(scene, args.substeps, args.iterations, args.frames, args.repeats)

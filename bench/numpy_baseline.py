@@ -1,6 +1,6 @@
 """Plain numpy Verlet + stick relaxation: what a user writes without this project.
 
-    python bench/numpy_baseline.py [--size 64] [--frames 10] [--substeps 4] [--iterations 8]
+    python -m bench.numpy_baseline [--size 64] [--frames 10] [--substeps 4] [--iterations 8]
                                    [--solver jacobi|coloured|both] [--check]
 
 The same physics as warp_verlet's Simulator on a scene without colliders, vectorised over sticks:
@@ -19,13 +19,12 @@ runs the Warp simulator beside it and prints the largest position difference.
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import sys
-import time
-from pathlib import Path
 
 import numpy as np
+
+from .common import arg_parser, hanging_cloth, quiet_warp, time_frames
 
 MIN_LENGTH = np.float32(1.0e-9)
 
@@ -135,13 +134,7 @@ class NumpyCloth:
 
 def measure(cloth: NumpyCloth, frames: int, repeats: int = 1) -> dict:
     """Median seconds per frame over ``repeats`` batches (after one warm-up frame), and projections/s."""
-    cloth.step_frame()
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        for _ in range(frames):
-            cloth.step_frame()
-        times.append((time.perf_counter() - start) / frames)
+    times = time_frames(cloth, frames, repeats, warm_up=1)
     per_frame = float(np.median(times))
     return {"s_per_frame": per_frame, "min": min(times), "max": max(times),
             "proj_per_s": cloth.stick_count * cloth.substeps * cloth.iterations / per_frame}
@@ -168,7 +161,7 @@ def compare_with_warp(scene, solver: str, frames: int) -> dict:
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = arg_parser("bench.numpy_baseline", __doc__)
     p.add_argument("--size", type=int, default=64, help="grid n x n of the bench hanging cloth")
     p.add_argument("--frames", type=int, default=10)
     p.add_argument("--repeats", type=int, default=3)
@@ -177,12 +170,7 @@ def main(argv=None) -> int:
     p.add_argument("--solver", choices=["jacobi", "coloured", "both"], default="both")
     p.add_argument("--check", action="store_true", help="compare positions with the Warp CPU simulator")
     args = p.parse_args(argv)
-    sys.path.insert(0, str(Path(__file__).parent))
-    import warp as wp
-
-    from common import hanging_cloth
-
-    wp.config.quiet = True
+    quiet_warp()
     scene = hanging_cloth(args.size, args.substeps, args.iterations)
     for solver in (["jacobi", "coloured"] if args.solver == "both" else [args.solver]):
         r = measure(NumpyCloth.from_scene(scene, solver), args.frames, args.repeats)

@@ -1,7 +1,7 @@
 """What writing the USD cache costs, and how much of it the background writer hides.
 
-    python bench/overlap.py --device cpu --sizes 64 128 256
-    python bench/overlap.py --device cuda --sizes 256 1024 --out bench/results/h200
+    python -m bench.overlap --device cpu --sizes 64 128 256
+    python -m bench.overlap --device cuda --sizes 256 1024 --out bench/results/h200
 
 For each hanging-cloth grid (4 substeps x 8 iterations, --frames frames), three wall times per frame:
 
@@ -17,21 +17,18 @@ kernels. The cache goes to a temporary directory.
 
 from __future__ import annotations
 
-import argparse
 import statistics
 import sys
 import tempfile
 import time
-from datetime import date
 from pathlib import Path
 
 import warp as wp
 
-sys.path.insert(0, str(Path(__file__).parent))
-from common import hanging_cloth, machine, write_table  # noqa: E402
+from warp_verlet.runner import run_scene
+from warp_verlet.simulator import Simulator
 
-from warp_verlet.runner import run_scene  # noqa: E402
-from warp_verlet.simulator import Simulator  # noqa: E402
+from .common import arg_parser, hanging_cloth, machine, quiet_warp, write_table
 
 
 def simulate_only(scene, device: str) -> float:
@@ -64,18 +61,18 @@ def measure(n: int, device: str, frames: int, repeats: int) -> dict:
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = arg_parser("bench.overlap", __doc__)
     p.add_argument("--device", default=None)
     p.add_argument("--sizes", type=int, nargs="+", default=[64, 128, 256])
     p.add_argument("--frames", type=int, default=30)
     p.add_argument("--repeats", type=int, default=3)
     p.add_argument("--out", type=Path, default=None, help="write overlap.md/.csv here")
     args = p.parse_args(argv)
-    wp.config.quiet = True
-    device = wp.get_device(args.device) if args.device else wp.get_device()
+    quiet_warp()
+    device = wp.get_device(args.device)
     rows = [measure(n, str(device), args.frames, args.repeats) for n in args.sizes]
     title = (f"USD writing overlapped with simulation, hanging cloth, 4 substeps x 8 iterations, {args.frames} frames: "
-             f"{machine(device)}, {date.today()}")
+             f"{machine(device)}")
     write_table(rows, args.out, "overlap", title)
     return 0
 

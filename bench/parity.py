@@ -1,6 +1,6 @@
 """CPU/CUDA parity and CUDA determinism on every shipped scene.
 
-    python bench/parity.py --frames 30 --out bench/results/h100
+    python -m bench.parity --frames 30 --out bench/results/h100
 
 Runs each scene on the CPU and on CUDA from the same start, and reports the largest and RMS difference in
 particle position after the given frames, relative to the cloth's size; whether two CUDA runs of the
@@ -10,19 +10,16 @@ rounding difference can decide whether a stick on the edge of its threshold tear
 
 from __future__ import annotations
 
-import argparse
 import sys
-from datetime import date
 from pathlib import Path
 
 import numpy as np
 import warp as wp
 
-sys.path.insert(0, str(Path(__file__).parent))
-from common import machine, write_table  # noqa: E402
+from warp_verlet.scene import load_scene
+from warp_verlet.simulator import Simulator
 
-from warp_verlet.scene import load_scene  # noqa: E402
-from warp_verlet.simulator import Simulator  # noqa: E402
+from .common import arg_parser, cloth_size, machine, quiet_warp, write_table
 
 SCENES = Path(__file__).resolve().parent.parent / "scenes"
 
@@ -35,12 +32,12 @@ def run(scene, device, frames):
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = arg_parser("bench.parity", __doc__)
     p.add_argument("--frames", type=int, default=30)
     p.add_argument("--big-frames", type=int, default=3, help="frames for grids over 256^2 (slow on the CPU)")
     p.add_argument("--out", type=Path, default=None)
     args = p.parse_args(argv)
-    wp.config.quiet = True
+    quiet_warp()
     if not wp.is_cuda_available():
         print("parity: no CUDA device, nothing to compare")
         return 0
@@ -49,7 +46,7 @@ def main(argv=None) -> int:
         scene = load_scene(path)
         frames = args.big_frames if scene.particle_count > 256 * 256 else args.frames
         (cpu, torn_cpu), (cuda, torn_cuda), (cuda2, _) = (run(scene, d, frames) for d in ("cpu", "cuda", "cuda"))
-        extent = max(max(c.size) for c in scene.cloths)  # metres
+        extent = cloth_size(scene)  # metres
         diff = np.linalg.norm(cpu.astype(np.float64) - cuda, axis=1)
         rows.append({
             "scene": path.name, "particles": scene.particle_count, "frames": frames,
@@ -59,7 +56,7 @@ def main(argv=None) -> int:
             "torn cpu / cuda": f"{torn_cpu} / {torn_cuda}" if scene.tears else "-",
         })
         print(rows[-1], flush=True)
-    write_table(rows, args.out, "parity", f"CPU vs CUDA parity: {machine(wp.get_device('cuda'))}, {date.today()}")
+    write_table(rows, args.out, "parity", f"CPU vs CUDA parity: {machine('cuda')}")
     return 0
 
 

@@ -1,8 +1,8 @@
 """How the CPU relaxation scales with threads: ms/frame of the full simulator against the thread count.
 
-    python bench/thread_scaling.py [--sizes 128 256 1024] [--threads 1 2 4 8 16] [--out bench/results/...]
+    python -m bench.thread_scaling [--sizes 128 256 1024] [--threads 1 2 4 8 16] [--out bench/results/...]
 
-The hanging cloth of bench/throughput.py (structural + shear + bend, 4 substeps x 8 iterations), for each
+The hanging cloth of bench.throughput (structural + shear + bend, 4 substeps x 8 iterations), for each
 solver, grid size and thread count: 2 warm-up frames, then the median of ``--repeats`` timed batches. Every
 threaded run's final positions are compared with the 1-thread run's (they must be bit-identical). The
 "auto" column is what the simulator picks by itself (warp_verlet/cpu_team.py ``auto_threads``); the table
@@ -11,18 +11,15 @@ is what that choice is tuned from. Writes thread_scaling.md/.csv under ``--out``
 
 from __future__ import annotations
 
-import argparse
-import dataclasses
 import sys
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).parent))
-from common import hanging_cloth, machine_lines, median_spread, quiet_warp, time_frames, write_table  # noqa: E402
+from warp_verlet.cpu_team import usable_cores
+from warp_verlet.simulator import Simulator
 
-from warp_verlet.cpu_team import usable_cores  # noqa: E402
-from warp_verlet.simulator import Simulator  # noqa: E402
+from .common import arg_parser, hanging_cloth, machine, median_spread, quiet_warp, time_frames, write_table
 
 
 def measure(scene, threads: int, frames: int, repeats: int) -> tuple[float, np.ndarray]:
@@ -34,7 +31,7 @@ def measure(scene, threads: int, frames: int, repeats: int) -> tuple[float, np.n
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = arg_parser("bench.thread_scaling", __doc__)
     p.add_argument("--sizes", type=int, nargs="+", default=[128, 256, 512])
     p.add_argument("--threads", type=int, nargs="+", default=None, help="default: 1, 2, 4, ... up to the cores")
     p.add_argument("--solvers", nargs="+", choices=["coloured", "jacobi"], default=["coloured", "jacobi"])
@@ -48,8 +45,7 @@ def main(argv=None) -> int:
     rows = []
     for solver in args.solvers:
         for n in args.sizes:
-            scene = hanging_cloth(n, 4, 8)
-            scene = dataclasses.replace(scene, simulation=dataclasses.replace(scene.simulation, solver=solver))
+            scene = hanging_cloth(n, 4, 8, solver)
             auto = Simulator(scene, "cpu").threads
             one, reference = None, None
             row = {"solver": solver, "grid": f"{n}x{n}", "auto": auto}
@@ -65,9 +61,9 @@ def main(argv=None) -> int:
                     row[f"{t}T x"] = f"{one / per_frame:.2f}"
             rows.append(row)
             print(row, flush=True)
-    command = ["bench/thread_scaling.py", *(argv if argv is not None else sys.argv[1:])]
+    command = ["bench.thread_scaling", *(argv if argv is not None else sys.argv[1:])]
     title = "CPU relaxation threads: ms/frame and speed-up over 1 thread, hanging cloth 4 x 8"
-    write_table(rows, args.out, "thread_scaling", title + "\n\n" + "\n".join(machine_lines(command)))
+    write_table(rows, args.out, "thread_scaling", title + "\n\n" + "\n".join(machine("cpu").lines(command)))
     return 0
 
 

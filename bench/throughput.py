@@ -1,9 +1,9 @@
 """Throughput of the full simulator on a hanging cloth, with the error each figure bought.
 
-    python bench/throughput.py --device cpu --sizes 64 128 256
-    python bench/throughput.py --device cuda --sizes 64 256 1024 2048 --out bench/results/h100
-    python bench/throughput.py --device cpu --sizes 64 --colliders --tear 1.5   # every stage present
-    python bench/throughput.py --device cpu --sizes 256 --threads 1             # one core only
+    python -m bench.throughput --device cpu --sizes 64 128 256
+    python -m bench.throughput --device cuda --sizes 64 256 1024 2048 --out bench/results/h100
+    python -m bench.throughput --device cpu --sizes 64 --colliders --tear 1.5   # every stage present
+    python -m bench.throughput --device cpu --sizes 256 --threads 1             # one core only
 
 Each grid simulates the same 60 frames (1 s at 60 fps, 4 substeps x 8 iterations). Frames 1-2 are a
 warm-up that keeps compilation and graph capture out; frames 3-60 are timed in ``--repeats`` equal batches
@@ -24,21 +24,19 @@ copy rate, measured in the same run.
 
 from __future__ import annotations
 
-import argparse
 import sys
 import tempfile
 import time
 from dataclasses import replace
-from datetime import date
 from pathlib import Path
 
 import warp as wp
 
-sys.path.insert(0, str(Path(__file__).parent))
-from common import copy_bandwidth, hanging_cloth, machine, median_spread, time_frames, write_table  # noqa: E402
+from warp_verlet.scene import PlaneCollider, SphereCollider
+from warp_verlet.simulator import Simulator
 
-from warp_verlet.scene import PlaneCollider, SphereCollider  # noqa: E402
-from warp_verlet.simulator import Simulator  # noqa: E402
+from .common import (arg_parser, copy_bandwidth, hanging_cloth, machine, median_spread, quiet_warp, time_frames,
+                     write_table)
 
 
 FRAMES, WARM_UP = 60, 2
@@ -153,7 +151,7 @@ def launch_bound_below(rows: list[dict]) -> str:
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = arg_parser("bench.throughput", __doc__)
     p.add_argument("--device", default=None)
     p.add_argument("--sizes", type=int, nargs="+", default=[32, 64, 128, 256])
     p.add_argument("--repeats", type=int, default=3)
@@ -165,8 +163,8 @@ def main(argv=None) -> int:
     p.add_argument("--tear", type=float, default=None, metavar="RATIO", help="give the cloth this tear_threshold")
     p.add_argument("--out", type=Path, default=None, help="write throughput.md/.csv here")
     args = p.parse_args(argv)
-    wp.config.quiet = True
-    device = wp.get_device(args.device) if args.device else wp.get_device()
+    quiet_warp()
+    device = wp.get_device(args.device)
     copy_gbs = copy_bandwidth(device) if device.is_cuda else None
     rows, stage_rows = [], []
     for n in args.sizes:
@@ -177,8 +175,7 @@ def main(argv=None) -> int:
         print(row, flush=True)
     extras = (" + ball and ground" if args.colliders else "") + (f", tear_threshold {args.tear}" if args.tear else "")
     title = (f"Hanging cloth{extras} at 1 s, {args.substeps} substeps x {args.iterations} iterations, coloured "
-             f"Gauss-Seidel{', no graph capture' if args.no_graph else ''}: {machine(device)}, "
-             f"{date.today()}")
+             f"Gauss-Seidel{', no graph capture' if args.no_graph else ''}: {machine(device)}")
     if copy_gbs:
         title += f"; device copy {copy_gbs:.0f} GB/s (read + write)"
     stem = "throughput" + ("-nograph" if args.no_graph else "") + (f"-{args.threads}thread" if args.threads else "")

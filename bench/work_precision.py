@@ -1,6 +1,6 @@
 """Error against run time: a work-precision sweep over iterations K, substeps S and solver.
 
-    python bench/work_precision.py [SCENE] [--iterations 1 2 4 ...] [--substeps 1 2 4 8 16]
+    python -m bench.work_precision [SCENE] [--iterations 1 2 4 ...] [--substeps 1 2 4 8 16]
         [--solvers coloured jacobi] [--seconds 0.5] [--repeats 3] [--resolution N] [--out DIR] [--device cpu]
 
 For every (K, S, solver) point the scene (default scenes/hanging_cloth.toml) is simulated for ``--seconds``
@@ -30,7 +30,7 @@ damping and softness per second (and exactly the scene's values at S = S0), so t
 reference, simulate one physical problem. k = 1 sticks are unchanged.
 
 Newton (optional peer): when ``import newton`` works, the same cloth also runs through Newton's VBD solver
-(bench/newton_peer.py) at ``--newton-points`` and its points join the table and plot; otherwise the sweep
+(bench.newton_peer) at ``--newton-points`` and its points join the table and plot; otherwise the sweep
 prints "Newton not installed: skipped".
 
 Outputs under ``--out`` (default bench/results/work_precision): work_precision.csv, reference.csv (the reference
@@ -42,8 +42,6 @@ final-frame error, and against the final RMS stretch).
 
 from __future__ import annotations
 
-import argparse
-import csv
 import dataclasses
 import math
 import sys
@@ -51,21 +49,19 @@ import time
 from pathlib import Path
 
 import numpy as np
-import warp as wp
 
 try:
     import tomllib
 except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib
 
+from warp_verlet.scene import load_scene, parse_scene
+from warp_verlet.simulator import Simulator
+
+from . import newton_peer
+from .common import arg_parser, cloth_size, machine, markdown_table, quiet_warp, time_frames, write_csv
+
 HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE))
-from common import machine_lines, quiet_warp  # noqa: E402
-import newton_peer  # noqa: E402
-
-from warp_verlet.scene import load_scene, parse_scene  # noqa: E402
-from warp_verlet.simulator import Simulator  # noqa: E402
-
 DEFAULT_SCENE = HERE.parent / "scenes" / "hanging_cloth.toml"
 COLUMNS = ["solver", "substeps", "iterations", "frames", "sticks", "wall_per_sim_s", "wall_min", "wall_max",
            "Mproj_per_s", "stretch_rms", "stretch_max", "pos_error_traj", "pos_error", "pareto"]
@@ -87,19 +83,23 @@ def load(path: Path, resolution: int | None = None):
 def point_scene(base, substeps: int, iterations: int, solver: str, frames: int, literal: bool = False):
     """``base`` with S, K and the solver replaced; per-substep drag and soft stiffness rescaled to keep
     their per-second effect unless ``literal``."""
-    s = base.simulation
-    ratio = s.substeps / substeps
-    settings = dataclasses.replace(s, substeps=substeps, iterations=iterations, solver=solver, frames=frames,
-                                   drag=s.drag if literal else s.drag ** ratio)
-    cloths = base.cloths
     if not literal:
-        cloths = tuple(dataclasses.replace(c, stiffness={f: k if k >= 1.0 else 1.0 - (1.0 - k) ** ratio
-                                                         for f, k in c.stiffness.items()}) for c in base.cloths)
+        base = rescale_per_substep_drag_and_stiffness(base, substeps)
+    settings = dataclasses.replace(base.simulation, substeps=substeps, iterations=iterations, solver=solver,
+                                   frames=frames)
+    return dataclasses.replace(base, simulation=settings)
+
+
+def rescale_per_substep_drag_and_stiffness(base, substeps: int):
+    """``base`` with its drag and its soft stick stiffnesses (k < 1), which act per substep, changed so that
+    ``substeps`` substeps of them do per second what the scene's own substeps S0 did: drag^(S0/S) and
+    1 - (1 - k)^(S0/S) (see the module docstring). k = 1 sticks are unchanged. Only the values change: the
+    scene keeps its own substep count."""
+    ratio = base.simulation.substeps / substeps
+    settings = dataclasses.replace(base.simulation, drag=base.simulation.drag ** ratio)
+    cloths = tuple(dataclasses.replace(c, stiffness={f: k if k >= 1.0 else 1.0 - (1.0 - k) ** ratio
+                                                     for f, k in c.stiffness.items()}) for c in base.cloths)
     return dataclasses.replace(base, simulation=settings, cloths=cloths)
-
-
-def cloth_size(scene) -> float:
-    return max(max(c.size) for c in scene.cloths)
 
 
 # ---------------------------------------------------------------- runs
@@ -107,12 +107,8 @@ def cloth_size(scene) -> float:
 def simulate(scene, device: str, frames: int) -> tuple[Simulator, float]:
     """A fresh simulator run ``frames`` frames from the initial state; the simulator and the wall seconds."""
     sim = Simulator(scene, device)
-    wp.synchronize_device(sim.device)
-    start = time.perf_counter()
-    for _ in range(frames):
-        sim.step_frame()
-    wp.synchronize_device(sim.device)
-    return sim, time.perf_counter() - start
+    (per_frame,) = time_frames(sim, frames, 1)
+    return sim, per_frame * frames
 
 
 def trajectory(scene, device: str, frames: int) -> tuple[Simulator, np.ndarray]:
@@ -254,26 +250,37 @@ def _fmt(v):
     return f"{v:.1f}" if isinstance(v, float) else str(v)
 
 
-def write_outputs(res: dict, out: Path, title: str, command: list[str], literal: bool, plot: bool = True) -> None:
+FRONT_COLUMNS = ["solver", "S", "K", "s wall / s simulated", "position error, trajectory", "final", "stretch RMS"]
+POINT_COLUMNS = ["solver", "S", "K", "s wall / s simulated", "min..max", "M proj/s", "position error, trajectory",
+                 "final", "stretch RMS", "stretch max", "Pareto"]
+
+
+def _shown(r: dict) -> dict:
+    """A result row as the markdown tables show it (POINT_COLUMNS)."""
+    return {"solver": r["solver"], "S": r["substeps"], "K": r["iterations"],
+            "s wall / s simulated": f"{r['wall_per_sim_s']:.4g}",
+            "min..max": f"{r['wall_min']:.4g}..{r['wall_max']:.4g}",
+            "M proj/s": _fmt(r["Mproj_per_s"]), "position error, trajectory": f"{r['pos_error_traj']:.3g}",
+            "final": f"{r['pos_error']:.3g}", "stretch RMS": f"{r['stretch_rms']:.3g}",
+            "stretch max": f"{r['stretch_max']:.3g}", "Pareto": "yes" if r["pareto"] else ""}
+
+
+def write_outputs(res: dict, out: Path, title: str, command: list[str], literal: bool, plot: bool = True,
+                  device: str = "cpu") -> None:
     out.mkdir(parents=True, exist_ok=True)
     rows = res["rows"]
-    with open(out / "work_precision.csv", "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=COLUMNS)
-        writer.writeheader()
-        for r in rows:
-            writer.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
+    write_csv(out / "work_precision.csv", [{k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()}
+                                           for r in rows], COLUMNS)
     ref = res["reference"]
-    with open(out / "reference.csv", "w", newline="") as f:
-        writer = csv.writer(f)
-        writer.writerow(["run", "solver", "substeps", "iterations", "diff_traj", "diff_final"])
-        writer.writerow(["reference", ref["solver"], ref["substeps"], ref["iterations"], 0.0, 0.0])
-        for key, name in (("half_K", "half K"), ("half_S", "half S")):
-            writer.writerow([name, ref["solver"], ref[key].get("substeps", ref["substeps"]),
-                             ref[key].get("iterations", ref["iterations"]), f"{ref[key]['diff_traj']:.6g}",
-                             f"{ref[key]['diff']:.6g}"])
+    write_csv(out / "reference.csv", [
+        {"run": "reference", "solver": ref["solver"], "substeps": ref["substeps"], "iterations": ref["iterations"],
+         "diff_traj": 0.0, "diff_final": 0.0},
+        *({"run": name, "solver": ref["solver"], "substeps": ref[key].get("substeps", ref["substeps"]),
+           "iterations": ref[key].get("iterations", ref["iterations"]), "diff_traj": f"{ref[key]['diff_traj']:.6g}",
+           "diff_final": f"{ref[key]['diff']:.6g}"} for key, name in (("half_K", "half K"), ("half_S", "half S")))])
     front = sorted((r for r in rows if r["pareto"]), key=lambda r: r["pos_error_traj"])
     lines = [
-        f"# Work-precision: {title}", "", *machine_lines(command), "",
+        f"# Work-precision: {title}", "", *machine(device).lines(command), "",
         f"Simulated {res['frames']} frames ({res['sim_seconds']:.3f} s) from the initial state per point; wall time is "
         "the median of the timed repeats (min..max beside it), after an untimed warm-up run. Position error: RMS "
         f"particle distance to the reference / cloth size ({res['size']:g} m), over all frames (trajectory) and at "
@@ -297,17 +304,8 @@ def write_outputs(res: dict, out: Path, title: str, command: list[str], literal:
     if res["nondeterministic"]:
         lines += [f"Repeats that did not end bit-identical: {res['nondeterministic']}", ""]
     lines += ["## Pareto front (no other point is both faster and more accurate)", "",
-              "| solver | S | K | s wall / s simulated | position error, trajectory | final | stretch RMS |",
-              "|---|---|---|---|---|---|---|"]
-    lines += [f"| {r['solver']} | {r['substeps']} | {r['iterations']} | {r['wall_per_sim_s']:.4g} | "
-              f"{r['pos_error_traj']:.3g} | {r['pos_error']:.3g} | {r['stretch_rms']:.3g} |" for r in front]
-    lines += ["", "## All points", "",
-              "| solver | S | K | s wall / s simulated | min..max | M proj/s | position error, trajectory | final | "
-              "stretch RMS | stretch max | Pareto |", "|---|---|---|---|---|---|---|---|---|---|---|"]
-    lines += [f"| {r['solver']} | {r['substeps']} | {r['iterations']} | {r['wall_per_sim_s']:.4g} | "
-              f"{r['wall_min']:.4g}..{r['wall_max']:.4g} | {_fmt(r['Mproj_per_s'])} | "
-              f"{r['pos_error_traj']:.3g} | {r['pos_error']:.3g} | {r['stretch_rms']:.3g} | {r['stretch_max']:.3g} | "
-              f"{'yes' if r['pareto'] else ''} |" for r in rows]
+              markdown_table([_shown(r) for r in front], FRONT_COLUMNS),
+              "", "## All points", "", markdown_table([_shown(r) for r in rows], POINT_COLUMNS)]
     if plot:
         lines += ["", "![work-precision](work_precision.png)"]
     (out / "work_precision.md").write_text("\n".join(lines) + "\n")
@@ -373,7 +371,7 @@ def _points(text: str) -> tuple[int, int]:
 
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = arg_parser("bench.work_precision", __doc__)
     p.add_argument("scene", nargs="?", type=Path, default=DEFAULT_SCENE)
     p.add_argument("--iterations", type=int, nargs="+", default=[1, 2, 4, 8, 16, 32, 64])
     p.add_argument("--substeps", type=int, nargs="+", default=[1, 2, 4, 8, 16])
@@ -398,7 +396,8 @@ def main(argv=None) -> int:
     grid = " + ".join(f"{c.resolution[0]}x{c.resolution[1]}" for c in scene.cloths)
     title = (f"{args.scene.name} ({grid}), {res['sim_seconds']:.3f} s simulated, device {args.device}, "
              f"reference S = {args.ref_substeps}, K = {args.ref_iterations} {args.ref_solver}")
-    write_outputs(res, args.out, title, ["bench/work_precision.py", *argv], args.literal, plot=not args.no_plot)
+    write_outputs(res, args.out, title, ["bench.work_precision", *argv], args.literal, plot=not args.no_plot,
+                  device=args.device)
     front = [r for r in res["rows"] if r["pareto"]]
     print(f"Pareto front ({len(front)} points):")
     for r in sorted(front, key=lambda r: r["pos_error_traj"]):

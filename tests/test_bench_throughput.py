@@ -1,26 +1,14 @@
-"""bench/throughput.py and bench/overlap.py at tiny sizes: its tables have the promised columns and finite numbers, and the
+"""bench.throughput and bench.overlap at tiny sizes: its tables have the promised columns and finite numbers, and the
 stage breakdown shows that a scene without colliders or tearing spends no time in those stages."""
 
 from __future__ import annotations
 
 import csv
-import importlib.util
 import math
-import sys
 from pathlib import Path
 
-BENCH = Path(__file__).resolve().parent.parent / "bench"
-
-
-def _load():
-    sys.path.insert(0, str(BENCH))  # throughput.py imports its sibling common.py
-    spec = importlib.util.spec_from_file_location("bench_throughput", BENCH / "throughput.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-bench = _load()
+import bench_package  # noqa: F401  (makes the repository's bench/ importable as the package "bench")
+from bench import overlap, throughput
 
 
 def read(path: Path) -> list[dict]:
@@ -29,7 +17,7 @@ def read(path: Path) -> list[dict]:
 
 
 def test_plain_scene_spends_nothing_in_absent_stages(tmp_path):
-    assert bench.main(["--device", "cpu", "--sizes", "8", "12", "--repeats", "1", "--out", str(tmp_path)]) == 0
+    assert throughput.main(["--device", "cpu", "--sizes", "8", "12", "--repeats", "1", "--out", str(tmp_path)]) == 0
     rows = read(tmp_path / "throughput.csv")
     assert [r["grid"] for r in rows] == ["8x8", "12x12"]
     for r in rows:
@@ -44,7 +32,7 @@ def test_plain_scene_spends_nothing_in_absent_stages(tmp_path):
 
 def test_colliders_and_tearing_show_up_as_stages(tmp_path):
     args = ["--device", "cpu", "--sizes", "8", "--repeats", "1", "--colliders", "--tear", "1.5", "--out", str(tmp_path)]
-    assert bench.main(args) == 0
+    assert throughput.main(args) == 0
     (row,) = read(tmp_path / "throughput-colliders-tear.csv")
     assert int(row["torn"]) >= 0
     (stages,) = read(tmp_path / "throughput-colliders-tear-stages.csv")
@@ -52,9 +40,6 @@ def test_colliders_and_tearing_show_up_as_stages(tmp_path):
 
 
 def test_overlap_bench_reports_the_three_wall_times(tmp_path):
-    spec = importlib.util.spec_from_file_location("bench_overlap", BENCH / "overlap.py")
-    overlap = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(overlap)
     assert overlap.main(["--device", "cpu", "--sizes", "8", "--frames", "3", "--repeats", "1", "--out", str(tmp_path)]) == 0
     (row,) = read(tmp_path / "overlap.csv")
     times = [float(row[f"{k} ms/frame"]) for k in ("simulation only", "sequential", "overlapped")]

@@ -1,4 +1,4 @@
-"""bench/work_precision.py, bench/numpy_baseline.py, bench/cpu_reference.py (and bench/newton_peer.py): smoke
+"""bench.work_precision, bench.numpy_baseline, bench.cpu_reference (and bench.newton_peer): smoke
 tests at tiny sizes, plus the physics checks that make their numbers meaningful.
 
 Bounds are set from measured values (in each comment) with a margin.
@@ -7,34 +7,19 @@ Bounds are set from measured values (in each comment) with a margin.
 from __future__ import annotations
 
 import csv
-import importlib.util
 import math
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-BENCH = Path(__file__).resolve().parent.parent / "bench"
-
-
-def _load(name: str):
-    if str(BENCH) not in sys.path:
-        sys.path.insert(0, str(BENCH))  # the scripts import common and each other as top-level modules
-    spec = importlib.util.spec_from_file_location(name, BENCH / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[name] = module
-    spec.loader.exec_module(module)
-    return module
-
-
-wpb = _load("work_precision")
-npb = _load("numpy_baseline")
-cref = _load("cpu_reference")
-newton_peer = _load("newton_peer")
-from common import hanging_cloth  # noqa: E402  (bench/ is on sys.path now)
-
-from warp_verlet.simulator import Simulator  # noqa: E402
+import bench_package  # noqa: F401  (makes the repository's bench/ importable as the package "bench")
+from bench import cpu_reference as cref
+from bench import newton_peer
+from bench import numpy_baseline as npb
+from bench import work_precision as wpb
+from bench.common import hanging_cloth
+from warp_verlet.simulator import Simulator
 
 TINY = ["--resolution", "8", "--iterations", "1", "4", "32", "--substeps", "1", "2", "--seconds", "0.05",
         "--repeats", "2", "--ref-substeps", "8", "--ref-iterations", "32"]

@@ -15,8 +15,10 @@ import pytest
 import warp as wp
 
 import warp_verlet.cpu_team as cpu_team
+import bench_package  # noqa: F401  (makes the repository's bench/ importable as the package "bench")
+from bench import stability_cases as cases
 from conftest import make_scene
-from test_stability import assert_all_pass, cases
+from test_stability import assert_all_pass
 from warp_verlet.cpu_team import PhaseTeam, auto_threads, split
 from warp_verlet.errors import WarpVerletError
 from warp_verlet.scene import parse_scene

@@ -1,7 +1,7 @@
 """Numerical stability on stiff and extreme cases (issue "Numerical stability on stiff and extreme cases").
 
-The cases, their pass criteria and the reasoning behind every bound live in ``bench/stability_cases.py``,
-shared with ``bench/stability.py``, which runs them larger. Here they run at the test sizes, on every
+The cases, their pass criteria and the reasoning behind every bound live in ``bench/stability_cases/``,
+shared with ``bench.stability``, which runs them larger. Here they run at the test sizes, on every
 device (the CPU always, CUDA where present). Where the test is smaller than the bench:
 
 - bend sticks on a 48^2 grid (bench 256^2); checkerboard mass ratio and gravity 1000 on 16^2 (bench 64^2);
@@ -20,24 +20,10 @@ and a step shrinking by more than max_dt_ratio at once (it created energy).
 
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
-
 import pytest
 
-CASES_FILE = Path(__file__).resolve().parent.parent / "bench" / "stability_cases.py"
-
-
-def _load():
-    spec = importlib.util.spec_from_file_location("stability_cases", CASES_FILE)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules.setdefault("stability_cases", module)
-    spec.loader.exec_module(module)
-    return module
-
-
-cases = _load()
+import bench_package  # noqa: F401  (makes the repository's bench/ importable as the package "bench")
+from bench import stability_cases as cases
 
 
 def assert_all_pass(checks) -> None:
