@@ -15,11 +15,11 @@ python3 -m pip install -q --no-deps --no-build-isolation -e . 2>&1 | tail -2 \
   || { echo "editable install failed (old setuptools?): using the tree on PYTHONPATH"; ln -sfn ../kernels warp_verlet/kernels; }
 nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv,noheader | tee "$res/gpu.txt"
 python3 -m pytest -q -rs -p no:cacheprovider tests ${PYTEST_ARGS:-} 2>&1 | tail -25 | tee "$res/pytest-cuda.txt"
-python3 bench/throughput.py --device cuda --sizes 64 256 512 1024 2048 --repeats 5 --out "$res"
-python3 bench/throughput.py --device cuda --sizes 64 1024 --repeats 3 --no-graph --out "$res"
-python3 bench/throughput.py --device cuda --sizes 64 1024 --repeats 3 --colliders --tear 1.5 --out "$res"
-python3 bench/overlap.py --device cuda --sizes 256 1024 --frames 30 --repeats 3 --out "$res"
-python3 bench/parity.py --frames 30 --big-frames 3 --out "$res"
+python3 -m bench.throughput --device cuda --sizes 64 256 512 1024 2048 --repeats 5 --out "$res"
+python3 -m bench.throughput --device cuda --sizes 64 1024 --repeats 3 --no-graph --out "$res"
+python3 -m bench.throughput --device cuda --sizes 64 1024 --repeats 3 --colliders --tear 1.5 --out "$res"
+python3 -m bench.overlap --device cuda --sizes 256 1024 --frames 30 --repeats 3 --out "$res"
+python3 -m bench.parity --frames 30 --big-frames 3 --out "$res"
 if [ -n "${GPU_EXTRA:-}" ]; then eval "$GPU_EXTRA"; fi
 # End to end through the CLI, USD writing included.
 { python3 -m warp_verlet run scenes/hanging_cloth.toml --device cuda -q -o /tmp/hanging.usdc
@@ -27,6 +27,6 @@ if [ -n "${GPU_EXTRA:-}" ]; then eval "$GPU_EXTRA"; fi
   python3 -m warp_verlet run scenes/big_grid_1024.toml --device cuda -q -o /tmp/big.usdc --frames 20; } 2>&1 | tee -a "$res/gpu.txt"
 tar -czf "$out/gpu-results.tar.gz" -C "$res" .
 # The host's CPU cores too: the threaded CPU relaxation on more than the development machine's 2 cores.
-python3 bench/cpu_reference.py --out "$res/cpu_reference_host"
-python3 bench/throughput.py --device cpu --sizes 64 256 1024 --repeats 2 --out "$res/cpu_host"
+python3 -m bench.cpu_reference --out "$res/cpu_reference_host"
+python3 -m bench.throughput --device cpu --sizes 64 256 1024 --repeats 2 --out "$res/cpu_host"
 tar -czf "$out/gpu-results.tar.gz" -C "$res" .
