@@ -11,7 +11,7 @@ from warp_verlet.simulator import Simulator
 # particle may be inside a collider by more than TOL.
 TOL = 1e-5
 DROP = {"name": "sheet", "resolution": [16, 16], "size": [1.2, 1.2], "origin": [-0.6, 0.6, -0.6],
-        "orientation": "horizontal", "sticks": {"structural": 1.0, "shear": 1.0, "bend": 0.3}}
+        "orientation": "horizontal", "sticks": ["structural", "shear", "bend"], "compliance": {"bend": 0.02}}
 GROUND = {"type": "plane", "name": "ground", "point": [0.0, -0.4, 0.0], "normal": [0.0, 1.0, 0.0], "thickness": 0.01}
 BALL = {"type": "sphere", "name": "ball", "centre": [0.0, 0.0, 0.0], "radius": 0.3, "thickness": 0.02}
 
@@ -26,7 +26,7 @@ def assert_outside(sim, positions, free):
     for plane in sim.scene.planes:
         height = (p - plane.point) @ np.asarray(plane.normal)
         assert height.min() >= plane.thickness - TOL, f"{plane.name}: a particle is {plane.thickness - height.min():.2e} m inside"
-    centres = sim.colliders.centres()
+    centres = sim.state.sphere_centres.numpy() if sim.scene.spheres else []
     for sphere, centre in zip(sim.scene.spheres, centres):
         distance = np.linalg.norm(p - centre, axis=1)
         reach = sphere.radius + sphere.thickness
@@ -62,7 +62,7 @@ def test_cloth_starting_inside_a_collider_is_pushed_out(device, start_y, collide
 
 def test_fast_sphere_sweeping_through_a_hanging_cloth(device):
     hanging = {"name": "curtain", "resolution": [20, 20], "size": [1.0, 1.0], "origin": [-0.5, 1.0, 0.0],
-               "pins": ["top-edge"], "sticks": {"structural": 1.0, "shear": 1.0}}
+               "pins": ["top-edge"], "sticks": ["structural", "shear"]}
     # 10 m/s through the curtain's lower half, i.e. 4 cm per substep against 5 cm between particles.
     sweep = {"type": "sphere", "name": "ball", "radius": 0.2,
              "path": [[0.0, 0.0, 0.4, -1.0], [0.2, 0.0, 0.4, 1.0]]}
@@ -79,21 +79,22 @@ def test_moving_sphere_follows_its_keyframes(device):
     for frame in range(1, 80):
         sim.step_frame()
         expected = sphere.centre_at(frame / 60.0)
-        np.testing.assert_allclose(sim.colliders.centres()[0], expected, atol=1e-5)
-    np.testing.assert_allclose(sim.colliders.centres()[0], [1.0, 2.0, 0.0], atol=1e-6)  # held after the last key
+        np.testing.assert_allclose(sim.state.sphere_centres.numpy()[0], expected, atol=1e-5)
+        np.testing.assert_array_equal(sim.model.colliders.moving_centres(sim.state), sim.state.sphere_centres.numpy())
+    # held after the last key
+    np.testing.assert_allclose(sim.state.sphere_centres.numpy()[0], [1.0, 2.0, 0.0], atol=1e-6)
 
 
 @pytest.mark.parametrize("friction", [0.0, 0.5, 1.0])
 def test_friction_scales_tangential_velocity_in_contact(device, friction):
-    # A flat cloth resting on the ground, sliding at 1 m/s along x. Gravity presses it into the plane every
-    # substep, so it is in contact every substep and its x-velocity is multiplied by (1 - friction) each
-    # time: after n substeps it has moved v dt * sum_{k<n} (1 - friction)^k.
+    # A flat cloth resting on the ground, launched at 1 m/s along x. Gravity presses it into the plane every
+    # substep, so it is in contact every substep: each substep moves it by its x-velocity times dt, and then
+    # multiplies that velocity by (1 - friction): after n substeps it has moved v dt * sum_{k<n} (1 - friction)^k.
     cloth = dict(DROP, origin=[0.0, 0.0, 0.0])
     ground = {"type": "plane", "point": [0.0, 0.0, 0.0], "friction": friction}
     sim = Simulator(scene(cloth, [ground], iterations=2), device)
     dt, v, n = sim.settings.dt, 1.0, 40
-    sim.step()
-    sim.delta.assign(np.tile(np.array([v * dt, -9.81 * dt * dt, 0.0], np.float32), (256, 1)))
+    sim.state.set_velocity([v, 0.0, 0.0])
     start = sim.positions()[:, 0]
     for _ in range(n):
         sim.step()
@@ -102,16 +103,34 @@ def test_friction_scales_tangential_velocity_in_contact(device, friction):
     assert np.abs(sim.positions()[:, 1]).max() < TOL  # and it stays on the plane
 
 
-def test_only_the_collider_kinds_present_are_launched_and_allocated():
-    plane_only = Simulator(scene(DROP, [GROUND]), "cpu")
-    assert plane_only.launch_plan()[-1:] == ["collide_planes"]
-    assert "collide_spheres" not in plane_only.launch_plan()
-    assert not hasattr(plane_only.colliders, "sphere_centres")
-    still_ball = Simulator(scene(DROP, [BALL]), "cpu")
-    assert still_ball.launch_plan()[-1:] == ["collide_spheres"]
-    assert not hasattr(still_ball.colliders, "clock")  # no moving sphere: no clock, no placing kernel
-    nothing = Simulator(scene(DROP, []), "cpu")
-    assert not any(name.startswith(("collide", "place", "advance")) for name in nothing.launch_plan())
+def test_only_the_collider_kinds_present_are_launched_and_allocated(launches):
+    # DROP: all three stick families (12 colours), soft bend sticks (the XPBD kernel, after zeroing its
+    # tensions), no pins (no tethers), no tearing; 8 sweeps. Colliders add their clamping after the sweeps.
+    k = 8
+    substep = ["verlet_step", "zero"] + ["relax_colour_compliant"] * (12 * k)
+
+    def step_launches(colliders):
+        sim = Simulator(scene(DROP, colliders), "cpu", use_graph=False)
+        assert sim.model.colour_count == 12
+        sim.step()
+        return sim, launches.of(sim.step)
+
+    plane_only, issued = step_launches([GROUND])
+    assert issued == substep + ["collide_planes"]
+    assert plane_only.state.sphere_centres is None and not hasattr(plane_only.colliders, "sphere_reach")
+    still_ball, issued = step_launches([BALL])
+    assert issued == substep + ["collide_spheres"]
+    assert still_ball.state.collider_clock is None  # no moving sphere: no clock, no placing kernel
+    assert not hasattr(still_ball.colliders, "key_times") and not hasattr(still_ball.colliders, "plane_points")
+    # Spheres before planes; a moving sphere first advances the device clock and places the spheres on it.
+    sweep = {"type": "sphere", "radius": 0.1, "path": [[0.0, 0.0, 0.0, 0.0], [1.0, 1.0, 0.0, 0.0]]}
+    everything, issued = step_launches([GROUND, sweep, BALL])
+    assert issued == substep + ["advance_clock", "place_spheres", "collide_spheres", "collide_planes"]
+    assert everything.state.collider_clock is not None and everything.state.sphere_centres.shape == (2,)
+    nothing, issued = step_launches([])
+    assert issued == substep
+    assert [name for name, _ in nothing.stages()] == ["integrate", "relax"]
+    assert [name for name, _ in everything.stages()] == ["integrate", "relax", "collide"]
 
 
 def test_colliders_are_written_into_the_cache(tmp_path):

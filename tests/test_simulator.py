@@ -7,7 +7,7 @@ import warp as wp
 from conftest import make_scene
 from warp_verlet.simulator import Simulator
 
-HANGING = dict(resolution=[10, 12], pins=["top-left", "top-right"], sticks={"structural": 1.0, "shear": 0.8, "bend": 0.3})
+HANGING = dict(resolution=[10, 12], pins=["top-left", "top-right"], sticks=["structural", "shear", "bend"])
 
 
 def test_advance_runs_whole_substeps_and_returns_alpha():
@@ -41,7 +41,7 @@ def test_render_positions_interpolate_between_the_last_two_substeps():
 @pytest.mark.parametrize("solver", ["coloured", "jacobi"])
 def test_same_scene_same_device_is_bit_identical(device, solver):
     def run():
-        sim = Simulator(make_scene({"solver": solver, "wind": [2.0, 0.0, 1.0], "drag": 0.99}, **HANGING), device)
+        sim = Simulator(make_scene({"solver": solver, "wind": [2.0, 0.0, 1.0], "damping": 2.4}, **HANGING), device)
         for _ in range(15):
             sim.step_frame()
         return sim.positions()
@@ -64,27 +64,71 @@ def test_cpu_and_cuda_agree(solver):
     assert np.abs(run("cpu") - run("cuda")).max() < 1e-5
 
 
-def test_a_step_launches_only_what_the_scene_uses():
-    k = 5
-    structural_shear = Simulator(make_scene({"iterations": k}, resolution=[8, 8], sticks={"structural": 1.0, "shear": 1.0}), "cpu")
-    assert structural_shear.model.colour_count == 8  # no bend family: no bend colours, no bend launches
-    assert structural_shear.launch_plan() == ["verlet_step"] + ["relax_colour"] * (8 * k)
-    everything = Simulator(make_scene({"iterations": k}, resolution=[8, 8], sticks={"structural": 1.0, "shear": 1.0, "bend": 1.0}), "cpu")
-    assert everything.launch_plan().count("relax_colour") == 12 * k
+def one_step(sim, launches) -> list[str]:
+    """What one substep of ``sim`` (after the exact start) actually issued."""
+    sim.step()  # the first step also runs verlet_start, which sets x_prev
+    return launches.of(sim.step)
 
-    jacobi = Simulator(make_scene({"iterations": k, "solver": "jacobi"}, resolution=[8, 8]), "cpu")
-    assert jacobi.launch_plan() == ["verlet_step"] + ["relax_jacobi", "copy"] * k
+
+def test_a_step_launches_only_what_the_scene_uses(launches):
+    k = 5
+    # Structural + shear sticks of an 8 x 8 grid: 4 directions x 2 parities = 8 colours (no bend family: no
+    # bend colours). No pins (so no tethers), no soft sticks, no colliders, no tearing: a substep is the
+    # Verlet step and K sweeps of one launch per colour, and nothing else.
+    structural_shear = Simulator(make_scene({"iterations": k}, resolution=[8, 8], sticks=["structural", "shear"]),
+                                 "cpu", use_graph=False)
+    assert structural_shear.model.colour_count == 8
+    assert launches.of(structural_shear.step) == ["verlet_start", "verlet_step"] + ["relax_colour"] * (8 * k)
+    assert launches.of(structural_shear.step) == ["verlet_step"] + ["relax_colour"] * (8 * k)
+
+    # All three families: 12 colours.
+    everything = Simulator(make_scene({"iterations": k}, resolution=[8, 8], sticks=["structural", "shear", "bend"]),
+                           "cpu", use_graph=False)
+    assert everything.model.colour_count == 12
+    assert one_step(everything, launches) == ["verlet_step"] + ["relax_colour"] * (12 * k)
+
+    # Soft bend sticks: the XPBD kernel for every colour (one stick set, one kernel), after zeroing the tensions.
+    soft = Simulator(make_scene({"iterations": k}, resolution=[8, 8], sticks=["structural", "shear", "bend"],
+                                compliance={"bend": 1e-3}), "cpu", use_graph=False)
+    assert one_step(soft, launches) == ["verlet_step", "zero"] + ["relax_colour_compliant"] * (12 * k)
+
+    # Jacobi: a gather into the scratch buffer and a copy back per sweep.
+    jacobi = Simulator(make_scene({"iterations": k, "solver": "jacobi"}, resolution=[8, 8]), "cpu", use_graph=False)
+    assert one_step(jacobi, launches) == ["verlet_step"] + ["relax_jacobi", "copy"] * k
+
+    # A pinned cloth that cannot tear gets tethers: one launch per sweep, before the sticks' 4 colours.
+    pinned = make_scene({"iterations": k}, resolution=[8, 8], pins=["top-left", "top-right"])
+    assert pinned.cloths[0].uses_tethers
+    tethered = Simulator(pinned, "cpu", use_graph=False)
+    assert tethered.model.colour_count == 4
+    assert one_step(tethered, launches) == ["verlet_step"] + (["pull_tethers"] + ["relax_colour"] * 4) * k
+    untethered = Simulator(make_scene({"iterations": k}, resolution=[8, 8], pins=["top-left", "top-right"],
+                                      tethers=False), "cpu", use_graph=False)
+    assert one_step(untethered, launches) == ["verlet_step"] + ["relax_colour"] * (4 * k)
+
     # The stages a substep runs (and the throughput benchmark times): no collide or tear stage here.
     assert [name for name, _ in jacobi.stages()] == ["integrate", "relax"]
-    unsolved = Simulator(make_scene({"iterations": 0}, resolution=[8, 8]), "cpu")
+    unsolved = Simulator(make_scene({"iterations": 0}, resolution=[8, 8]), "cpu", use_graph=False)
     assert [name for name, _ in unsolved.stages()] == ["integrate"]
+    assert one_step(unsolved, launches) == ["verlet_step"]
+    # Every particle pinned: nothing to integrate, only the sticks' sweeps (which move nothing).
+    frozen = Simulator(make_scene({"iterations": 2}, resolution=[1, 3], size=[0.0, 1.0], pins=[0, 1, 2]),
+                       "cpu", use_graph=False)
+    assert [name for name, _ in frozen.stages()] == ["relax"]
+    assert one_step(frozen, launches) == ["relax_colour"] * (frozen.model.colour_count * 2)
 
 
 def test_arrays_are_allocated_only_for_the_solver_in_use():
     coloured = Simulator(make_scene(resolution=[8, 8]), "cpu")
-    assert coloured._x_scratch is None and not hasattr(coloured.model, "neighbour")
+    coloured.step()
+    assert coloured.solver._scratch == {} and not hasattr(coloured.model, "neighbour")
     jacobi = Simulator(make_scene({"solver": "jacobi"}, resolution=[8, 8]), "cpu")
-    assert jacobi._x_scratch is not None and not hasattr(jacobi.model, "stick_ends")
+    jacobi.step()
+    assert set(jacobi.solver._scratch) == {"jacobi_positions"} and not hasattr(jacobi.model, "stick_ends")
+    soft = Simulator(make_scene(resolution=[8, 8], compliance={"structural": 1e-4}), "cpu")
+    soft.step()
+    assert set(soft.solver._scratch) == {"stick_tension"} and soft.model.stick_compliance is not None
+    assert coloured.model.stick_compliance is None  # rigid sticks carry no compliance
     # A structural-only cloth carries only structural sticks: 2 * 8 * 7 of them.
     assert coloured.model.stick_count == 2 * 8 * 7
 
@@ -92,7 +136,7 @@ def test_arrays_are_allocated_only_for_the_solver_in_use():
 def test_multiple_cloths_share_launches_and_stay_independent():
     from warp_verlet.scene import parse_scene
 
-    cloth = {"resolution": [6, 6], "size": [1.0, 1.0], "pins": ["top-edge"], "sticks": {"structural": 1.0, "shear": 1.0, "bend": 1.0}}
+    cloth = {"resolution": [6, 6], "size": [1.0, 1.0], "pins": ["top-edge"], "sticks": ["structural", "shear", "bend"]}
     two = parse_scene({"cloth": [dict(cloth, name="a"), dict(cloth, name="b", origin=[3.0, 0.0, 0.0])]})
     one = parse_scene({"cloth": [dict(cloth, name="a")]})
     sim2, sim1 = Simulator(two, "cpu"), Simulator(one, "cpu")
@@ -108,7 +152,7 @@ def test_multiple_cloths_share_launches_and_stay_independent():
 def test_graph_colouring_gives_the_same_physics_as_the_grid_fast_path():
     # Different colour orders give different Gauss-Seidel sweeps, but both must converge to the same
     # hanging shape: after 2 s the two cloths agree to 1% of their size.
-    scene = make_scene({"iterations": 16, "drag": 0.98}, **HANGING)
+    scene = make_scene({"iterations": 16, "damping": 4.85}, **HANGING)  # the old drag 0.98 at 240 substeps/s
     grid, graph = Simulator(scene, "cpu", colouring="grid"), Simulator(scene, "cpu", colouring="graph")
     for _ in range(120):
         grid.step_frame()
@@ -133,11 +177,11 @@ def test_divergence_check_finds_the_lowest_bad_particle(device):
     x[12] = (np.inf, 0.0, 0.0)
     x[9] = (0.0, np.nan, 0.0)
     x[5] = (0.0, 0.0, -10.5)
-    sim.x.assign(x)
+    sim.state.set_positions(x)
     assert sim.diverged_particle() == 5  # beyond the bound
     x[5] = (0.0, 0.0, -10.0)  # on the bound is still fine
-    sim.x.assign(x)
+    sim.state.set_positions(x)
     assert sim.diverged_particle() == 9  # NaN
     x[9] = 0.0
-    sim.x.assign(x)
+    sim.state.set_positions(x)
     assert sim.diverged_particle() == 12  # inf

@@ -24,7 +24,7 @@ def gale(**simulation):
     """A 16 x 24 flag on a pole in a 72 m/s^2 wind, with a 1.3 tear threshold: it tears within 40 frames."""
     settings = {"fps": 60, "substeps": 4, "iterations": 8, "wind": [60.0, 0.0, 40.0], **simulation}
     return make_scene(settings, resolution=[16, 24], size=[0.6, 0.9], pins=["left-edge"], mass=0.1,
-                      sticks={"structural": 1.0, "shear": 0.8}, tear_threshold=1.3)
+                      sticks=["structural", "shear"], compliance={"shear": 0.03}, tear_threshold=1.3)
 
 
 def all_stick_ratios(sim: Simulator) -> np.ndarray:
@@ -44,7 +44,7 @@ def test_free_falling_rows_tear_from_the_pins_at_the_analytic_time(device, solve
     dt = 1.0 / (fps * substeps)
     scene = make_scene({"fps": fps, "substeps": substeps, "iterations": 0, "solver": solver},
                        resolution=[rows, cols], size=[height, 1.0], pins=["top-edge"],
-                       sticks={"structural": 1.0}, tear_threshold=threshold)
+                       sticks=["structural"], tear_threshold=threshold)
     sim = Simulator(scene, device)
     expected_step = int(np.floor(np.sqrt(2 * (threshold - 1) * spacing / G) / dt)) + 1  # first t with drop > 0.2 L
     drop = lambda n: G * (n * dt) ** 2 / 2  # noqa: E731
@@ -65,12 +65,14 @@ def test_free_falling_rows_tear_from_the_pins_at_the_analytic_time(device, solve
 
 
 def test_a_torn_stick_exerts_no_force(device):
-    # A pinned particle holding a free one by a soft stick, under g = 1000 m/s^2: the stick tears, and then
-    # the free particle follows free fall: second differences x[n+1] - 2 x[n] + x[n-1] = g dt^2, to rounding.
+    # A pinned particle holding a free one (0.5 kg) by a soft stick (compliance 1e-4 m/N: it would settle
+    # 0.5 kg x 1000 m/s^2 x 1e-4 m/N = 5 cm long, past the 1 cm the threshold allows), under g = 1000 m/s^2: the
+    # stick tears, and then the free particle follows free fall: second differences x[n+1] - 2 x[n] + x[n-1] =
+    # g dt^2, to rounding.
     g = 1000.0
     scene = make_scene({"fps": 60, "substeps": 4, "iterations": 1, "gravity": [0.0, -g, 0.0]},
-                       resolution=[2, 1], size=[0.1, 0.0], pins=["top-left"], sticks={"structural": 0.05},
-                       tear_threshold=1.1)
+                       resolution=[2, 1], size=[0.1, 0.0], pins=["top-left"], sticks=["structural"],
+                       compliance={"structural": 1e-4}, tear_threshold=1.1)
     sim = Simulator(scene, device)
     history, torn_at = [], None
     for n in range(40):
@@ -89,7 +91,8 @@ def test_a_torn_stick_exerts_no_force(device):
 def test_below_the_threshold_nothing_tears_and_nothing_changes(device):
     # Run once without tearing and record the largest D / L any stick reached after any substep; a threshold
     # 1 % above it must tear nothing and leave the motion bit-identical, one 1 % below it must tear.
-    base = dict(resolution=[12, 12], pins=["top-left", "top-right"], sticks={"structural": 1.0, "shear": 1.0, "bend": 0.5})
+    base = dict(resolution=[12, 12], pins=["top-left", "top-right"], sticks=["structural", "shear", "bend"],
+                compliance={"bend": 1e-3}, tethers=False)
     settings = {"fps": 60, "substeps": 4, "iterations": 4}
     plain = Simulator(make_scene(settings, **base), device)
     peak, frames = 1.0, []
@@ -114,7 +117,8 @@ def test_below_the_threshold_nothing_tears_and_nothing_changes(device):
 def test_tearing_keeps_particles_and_a_valid_colouring():
     sim = Simulator(gale(), "cpu")
     model = sim.model
-    ends_before, stiffness_before = model.stick_ends.numpy().copy(), model.stick_stiffness.numpy().copy()
+    ends_before, weight_before = model.stick_ends.numpy().copy(), model.stick_weight.numpy().copy()
+    assert (weight_before == 1).all() and np.array_equal(sim.state.stick_weight.numpy(), weight_before)
     for _ in range(40):
         sim.step_frame()
     torn = sim.torn_sticks()
@@ -122,11 +126,14 @@ def test_tearing_keeps_particles_and_a_valid_colouring():
     points = sim.positions()
     assert points.shape == (16 * 24, 3) and np.isfinite(points).all()  # no particle lost or broken
 
-    # Torn sticks stay in their colour slot (no compaction, no recolouring) with stiffness 0; the rest keep
-    # theirs, and the sticks still alive are still a valid partition: no two of one colour share a particle.
+    # Torn sticks stay in their colour slot (no compaction, no recolouring) with the State's weight 0; the rest
+    # keep weight 1, the Model is untouched, and the sticks still alive are still a valid partition: no two
+    # of one colour share a particle.
     assert np.array_equal(model.stick_ends.numpy(), ends_before)
-    stiffness = model.stick_stiffness.numpy()
-    assert (stiffness[torn] == 0).all() and np.array_equal(stiffness[~torn], stiffness_before[~torn])
+    assert np.array_equal(model.stick_weight.numpy(), weight_before)
+    weight = sim.state.stick_weight.numpy()
+    assert (weight[torn] == 0).all() and (weight[~torn] == 1).all()
+    assert sim.torn_count() == int(sim.state.torn_entries.numpy()[0]) == torn.sum()
     colour = np.concatenate([np.full(n, c) for c, (_, n) in enumerate(model.colour_ranges)])
     check_partition(model.host_sticks[~torn], colour[~torn])
 
@@ -144,11 +151,31 @@ def test_same_scene_same_device_tears_bit_identically(device):
     assert t1.any() and np.array_equal(t1, t2) and np.array_equal(p1, p2)
 
 
-def test_only_tearing_scenes_launch_and_allocate_the_tear_kernel():
-    plain = Simulator(make_scene(resolution=[8, 8]), "cpu")
-    assert "tear_sticks" not in plain.launch_plan() and not hasattr(plain.model, "tear_length")
-    tearing = Simulator(make_scene(resolution=[8, 8], tear_threshold=1.5), "cpu")
-    assert tearing.launch_plan()[-1] == "tear_sticks" and tearing.launch_plan().count("tear_sticks") == 1
+def test_only_tearing_scenes_launch_and_allocate_the_tear_kernel(launches):
+    k = 3
+    # An unpinned 8 x 8 grid of structural sticks (4 colours), so no tethers: the Verlet step and K sweeps.
+    plain = Simulator(make_scene({"iterations": k}, resolution=[8, 8]), "cpu", use_graph=False)
+    plain.step()
+    assert launches.of(plain.step) == ["verlet_step"] + ["relax_colour"] * (4 * k)
+    assert not hasattr(plain.model, "tear_length") and plain.state.stick_weight is None
+    assert plain.state.torn_entries is None
+    # The same cloth that can tear: one tear_sticks launch after the sweeps, nothing else added.
+    tearing = Simulator(make_scene({"iterations": k}, resolution=[8, 8], tear_threshold=1.5), "cpu", use_graph=False)
+    tearing.step()
+    assert launches.of(tearing.step) == ["verlet_step"] + ["relax_colour"] * (4 * k) + ["tear_sticks"]
+    # Jacobi tears per stick end: still one launch.
+    jacobi = Simulator(make_scene({"iterations": k, "solver": "jacobi"}, resolution=[8, 8], tear_threshold=1.5),
+                       "cpu", use_graph=False)
+    jacobi.step()
+    assert launches.of(jacobi.step) == ["verlet_step"] + ["relax_jacobi", "copy"] * k + ["tear_sticks"]
+    # A pinned cloth that can tear gets no tethers unless asked; asked, they run first in every sweep.
+    pinned = make_scene({"iterations": k}, resolution=[8, 8], pins=["top-edge"], tear_threshold=1.5)
+    assert not pinned.cloths[0].uses_tethers
+    tethered = Simulator(make_scene({"iterations": k}, resolution=[8, 8], pins=["top-edge"], tear_threshold=1.5,
+                                    tethers=True, tether_scale=2.0), "cpu", use_graph=False)
+    tethered.step()
+    assert launches.of(tethered.step) == (["verlet_step"] + (["pull_tethers"] + ["relax_colour"] * 4) * k
+                                          + ["tear_sticks"])
     assert [name for name, _ in plain.stages()] == ["integrate", "relax"]
     assert [name for name, _ in tearing.stages()] == ["integrate", "relax", "tear"]
 
@@ -168,12 +195,14 @@ def torn_edge_faces(rows: int, cols: int, sticks: np.ndarray, torn: np.ndarray) 
 @pytest.mark.parametrize("solver", ["coloured", "jacobi"])
 def test_cache_hides_exactly_the_faces_beside_torn_sticks(tmp_path, solver):
     rows, cols = 16, 24
+    # Soft shear sticks (as in gale()) where the solver has them; Jacobi's rigid sticks tear all the same.
+    soft = {"compliance": {"shear": 0.03}} if solver == "coloured" else {}
     data = {
         "simulation": {"fps": 60, "frames": 30, "substeps": 4, "iterations": 8, "wind": [60.0, 0.0, 40.0],
                        "solver": solver},
         "cloth": [
             {"name": "flag", "resolution": [rows, cols], "size": [0.6, 0.9], "pins": ["left-edge"], "mass": 0.1,
-             "sticks": {"structural": 1.0, "shear": 0.8}, "tear_threshold": 1.3},
+             "sticks": ["structural", "shear"], "tear_threshold": 1.3, **soft},
             {"name": "calm", "resolution": [4, 4], "size": [0.3, 0.3], "origin": [3.0, 0.0, 0.0],
              "pins": ["top-edge"]},
         ],
