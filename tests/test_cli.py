@@ -16,7 +16,7 @@ fps = 30
 frames = 6
 substeps = 2
 iterations = 4
-drag = 0.99
+damping = 0.6
 
 [output]
 path = "small.usdc"
@@ -27,7 +27,7 @@ name = "sheet"
 resolution = [6, 7]
 size = [0.5, 0.6]
 origin = [0.0, 1.0, 0.0]
-sticks = { structural = 1.0, shear = 1.0 }
+sticks = ["structural", "shear"]
 pins = ["top-left", "top-right"]
 
 [[cloth]]
@@ -100,10 +100,17 @@ def test_threads_option_gives_the_same_cache_and_says_so(scene_file, capsys):
 
 
 def test_invalid_scene_exits_nonzero_names_the_key_and_writes_nothing(scene_file, capsys):
-    scene_file.write_text(SCENE.replace("drag = 0.99", "drag = 1.5"))
+    scene_file.write_text(SCENE.replace("damping = 0.6", "damping = -1.5"))
     assert main(["run", str(scene_file), "--device", "cpu", "-q"]) == 2
     err = capsys.readouterr().err
-    assert "small.toml: simulation.drag: expected a number in [0.0, 1.0], got 1.5" in err
+    assert "small.toml: simulation.damping: expected a number in [0.0, inf), got -1.5" in err
+    assert not (scene_file.parent / "small.usdc").exists()
+    # The old per-substep drag is refused with the damping that means the same at this budget:
+    # -ln(0.99) x 30 fps x 2 substeps = 0.603 per second.
+    scene_file.write_text(SCENE.replace("damping = 0.6", "drag = 0.99"))
+    assert main(["run", str(scene_file), "--device", "cpu", "-q"]) == 2
+    err = capsys.readouterr().err
+    assert "small.toml: simulation.drag: " in err and "damping = 0.603" in err
     assert not (scene_file.parent / "small.usdc").exists()
 
 
@@ -115,7 +122,7 @@ def test_unwritable_output_fails_before_simulating(scene_file, capsys):
 def test_divergence_stops_names_the_frame_and_keeps_frames_done(scene_file, capsys):
     # 1000 m/s^2 for a rope with one pin: the free end leaves a 3 m bound during frame 3.
     # x(t) = a t^2 / 2 = 3 m at t = 0.077 s, i.e. frame 3 at 30 fps.
-    text = SCENE.replace("drag = 0.99", "drag = 1.0\ngravity = [0.0, -1000.0, 0.0]\nposition_bound = 3.0")
+    text = SCENE.replace("damping = 0.6", "damping = 0.0\ngravity = [0.0, -1000.0, 0.0]\nposition_bound = 3.0")
     scene_file.write_text(text.replace('pins = ["top-left", "top-right"]', "pins = []"))
     assert main(["run", str(scene_file), "--device", "cpu", "-q"]) == 1
     err = capsys.readouterr().err

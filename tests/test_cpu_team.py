@@ -45,11 +45,13 @@ def test_auto_threads_balances_work_per_thread_against_the_cost_per_thread():
 
 
 def busy_scene(solver: str):
-    """A 20 x 24 cloth with every stick kind, a moving ball, the ground and tearing: all stages run."""
+    """A 20 x 24 cloth with every stick family (soft shear and bend sticks where the solver has them: the
+    coloured one), tethers, a moving ball, the ground and tearing: every stage and constraint set runs."""
+    soft = {"compliance": {"shear": 0.02, "bend": 0.2}} if solver == "coloured" else {}
     return parse_scene({
         "simulation": {"fps": 60, "substeps": 3, "iterations": 6, "solver": solver, "wind": [8.0, 0.0, 3.0]},
         "cloth": [{"resolution": [20, 24], "size": [1.0, 1.2], "pins": ["top-left", "top-right"], "tear_threshold": 1.4,
-                   "sticks": {"structural": 1.0, "shear": 0.8, "bend": 0.3}}],
+                   "tethers": True, "tether_scale": 1.5, "sticks": ["structural", "shear", "bend"], **soft}],
         "collider": [{"type": "sphere", "radius": 0.2, "path": [[0.0, 0.0, 0.3, 1.0], [0.5, 0.0, 0.3, -1.0]]},
                      {"type": "plane", "point": [0.0, -1.0, 0.0], "normal": [0.0, 1.0, 0.0]}],
     }, file="<busy>")
@@ -166,8 +168,8 @@ def test_phases_run_in_order_with_every_member_and_workers_stop_on_close():
 def test_dropping_a_threaded_simulator_stops_its_threads(solver):
     sim = Simulator(busy_scene(solver), "cpu", threads=3)
     sim.step_frame()
-    workers = sim._team._workers
-    assert all(w.is_alive() for w in workers)
+    workers = [w for team in sim.solver._teams for w in team._workers]
+    assert workers and all(w.is_alive() for w in workers)
     del sim
     gc.collect()
     for worker in workers:

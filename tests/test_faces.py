@@ -97,7 +97,15 @@ def test_grid_faces_are_build_cloths_quads(rows, cols):
     topology = build_cloth(ClothSpec("cloth", (rows, cols), (1.0, 1.0)))
     faces = grid_faces(rows, cols)
     assert len(faces) == len(topology.faces) == max(rows - 1, 0) * max(cols - 1, 0)
-    assert faces == Faces.uniform(topology.faces)
+    assert topology.faces == faces
+    # The grid-only topology code's quads, (r,c) -> (r+1,c) -> (r+1,c+1) -> (r,c+1), as its oracle.
+    if rows > 1 and cols > 1:
+        r, c = np.meshgrid(np.arange(rows - 1), np.arange(cols - 1), indexing="ij")
+        a = (r * cols + c).ravel()
+        quads = np.stack([a, a + cols, a + cols + 1, a + 1], axis=1).astype(np.int32)
+    else:
+        quads = np.zeros((0, 4), np.int32)
+    assert faces == Faces.uniform(quads)
 
 
 # ---------------------------------------------------------------------------------------- validation
