@@ -96,16 +96,16 @@ KINDS = {
 }
 # What each key accepts: number = int or float; vector = array; table; string (choices and names).
 ACCEPTS = {"number": {"int", "float"}, "integer": {"int"}, "string": {"string"}, "array": {"array"},
-           "table": {"table"}}
+           "table": {"table"}, "boolean": {"bool"}}
 
 SIM_KEYS = {"fps": "number", "frames": "integer", "substeps": "integer", "iterations": "integer",
-            "gravity": "array", "wind": "array", "drag": "number", "solver": "string", "max_dt_ratio": "number",
+            "gravity": "array", "wind": "array", "damping": "number", "solver": "string", "max_dt_ratio": "number",
             "max_frame_time": "number", "position_bound": "number"}
 OUT_KEYS = {"path": "string", "save_every": "integer", "up_axis": "string", "meters_per_unit": "number"}
 CLOTH_KEYS = {"name": "string", "resolution": "array", "size": "array", "origin": "array", "orientation": "string",
-              "mass": "number", "sticks": "table", "pins": "array", "tear_threshold": "number",
-              "particle_masses": "array"}
-STICK_KEYS = {"structural": "number", "shear": "number", "bend": "number"}
+              "mass": "number", "sticks": "array", "compliance": "table", "pins": "array", "tear_threshold": "number",
+              "particle_masses": "array", "tethers": "boolean", "tether_scale": "number"}
+COMPLIANCE_KEYS = {"structural": "number", "shear": "number", "bend": "number"}  # m/N per stick family
 PLANE_KEYS = {"type": "string", "name": "string", "thickness": "number", "friction": "number", "normal": "array",
               "point": "array", "display_size": "number"}
 SPHERE_KEYS = {"type": "string", "name": "string", "thickness": "number", "friction": "number", "radius": "number",
@@ -117,12 +117,14 @@ def full_scene() -> dict:
     Its pins and particle masses stay on row 0, so that any row count keeps them valid."""
     return {
         "simulation": {"fps": 60.0, "frames": 10, "substeps": 2, "iterations": 4, "gravity": [0.0, -9.81, 0.0],
-                       "wind": [1.0, 0.0, 0.5], "drag": 0.99, "solver": "coloured", "max_dt_ratio": 2.0,
+                       "wind": [1.0, 0.0, 0.5], "damping": 0.5, "solver": "coloured", "max_dt_ratio": 2.0,
                        "max_frame_time": 0.1, "position_bound": 100.0},
         "output": {"path": "fuzz.usdc", "save_every": 5, "up_axis": "Y", "meters_per_unit": 1.0},
         "cloth": [{"name": "sheet", "resolution": [3, 4], "size": [0.5, 0.6], "origin": [0.0, 1.0, 0.0],
-                   "orientation": "vertical", "mass": 0.2, "sticks": {"structural": 1.0, "shear": 0.5, "bend": 0.1},
-                   "pins": ["top-left", 3, [0, 2]], "tear_threshold": 1.5, "particle_masses": [[0, 1, 0.05]]}],
+                   "orientation": "vertical", "mass": 0.2, "sticks": ["structural", "shear", "bend"],
+                   "compliance": {"structural": 1e-4, "shear": 1e-3, "bend": 1e-2},
+                   "pins": ["top-left", 3, [0, 2]], "tear_threshold": 1.5, "particle_masses": [[0, 1, 0.05]],
+                   "tethers": True, "tether_scale": 2.0}],
         "collider": [{"type": "plane", "name": "ground", "thickness": 0.01, "friction": 0.2, "normal": [0.0, 1.0, 0.0],
                       "point": [0.0, -1.0, 0.0], "display_size": 4.0},
                      {"type": "sphere", "name": "ball", "thickness": 0.0, "friction": 0.0, "radius": 0.2,
@@ -136,7 +138,7 @@ def known_key_paths() -> list[tuple[str, tuple, str]]:
     out += [(f"simulation.{k}", ("simulation", k), kind) for k, kind in SIM_KEYS.items()]
     out += [(f"output.{k}", ("output", k), kind) for k, kind in OUT_KEYS.items()]
     out += [(f"cloth[0].{k}", ("cloth", 0, k), kind) for k, kind in CLOTH_KEYS.items()]
-    out += [(f"cloth[0].sticks.{k}", ("cloth", 0, "sticks", k), kind) for k, kind in STICK_KEYS.items()]
+    out += [(f"cloth[0].compliance.{k}", ("cloth", 0, "compliance", k), kind) for k, kind in COMPLIANCE_KEYS.items()]
     out += [(f"collider[0].{k}", ("collider", 0, k), kind) for k, kind in PLANE_KEYS.items()]
     out += [(f"collider[1].{k}", ("collider", 1, k), kind) for k, kind in SPHERE_KEYS.items()]
     return out
@@ -163,15 +165,16 @@ def test_serialiser_round_trips_through_tomllib(doc):
 
 def test_serialiser_writes_headers_and_full_scene_loads(tmp_path):
     text = dump(full_scene())
-    assert "[simulation]" in text and "[[cloth]]" in text and "[cloth.sticks]" in text and "[[collider]]" in text
+    assert "[simulation]" in text and "[[cloth]]" in text and "[cloth.compliance]" in text and "[[collider]]" in text
     scene = load_text(tmp_path, text)
     assert scene.cloths[0].tear_threshold == 1.5 and len(scene.colliders) == 2
+    assert scene.cloths[0].sticks == ("structural", "shear", "bend") and scene.cloths[0].compliance["bend"] == 1e-2
 
 
 # ---------------------------------------------------------------------------------------------- random structure
 
 SECTION = st.sampled_from(["simulation", "output", "cloth", "collider"])
-KNOWN = sorted({*SIM_KEYS, *OUT_KEYS, *CLOTH_KEYS, *STICK_KEYS, *PLANE_KEYS, *SPHERE_KEYS, "path"})
+KNOWN = sorted({*SIM_KEYS, *OUT_KEYS, *CLOTH_KEYS, *COMPLIANCE_KEYS, *PLANE_KEYS, *SPHERE_KEYS, "path", "drag"})
 near_keys = st.one_of(st.sampled_from(KNOWN), keys)
 near_tables = st.dictionaries(near_keys, values, max_size=8)
 documents = st.dictionaries(
@@ -215,7 +218,7 @@ RANGES = {
     ("simulation", "frames"): (1, False, None, False, True),
     ("simulation", "substeps"): (1, False, 10_000, False, True),
     ("simulation", "iterations"): (0, False, 100_000, False, True),
-    ("simulation", "drag"): (0.0, False, 1.0, False, False),
+    ("simulation", "damping"): (0.0, False, None, False, False),
     ("simulation", "max_dt_ratio"): (1.0, False, None, False, False),
     ("simulation", "max_frame_time"): (0.0, True, None, False, False),
     ("simulation", "position_bound"): (0.0, True, None, False, False),
@@ -228,7 +231,8 @@ RANGES = {
     ("cloth", 0, "size", 1): (0.0, True, None, False, False),  # 4 columns: > 0
     ("cloth", 0, "origin", 2): (None, False, None, False, False),
     ("cloth", 0, "resolution", 0): (1, False, 32_768, False, True),
-    ("cloth", 0, "sticks", "shear"): (0.0, False, 1.0, False, False),
+    ("cloth", 0, "compliance", "shear"): (0.0, False, None, False, False),
+    ("cloth", 0, "tether_scale"): (1.0, False, None, False, False),
     ("cloth", 0, "particle_masses", 0, 2): (0.0, True, None, False, False),
     ("collider", 0, "thickness"): (0.0, False, None, False, False),
     ("collider", 0, "friction"): (0.0, False, 1.0, False, False),
@@ -264,10 +268,10 @@ def loaded_value(scene: Scene, path: tuple):
         return getattr(scene.output, path[1])
     if section == "cloth":
         spec = scene.cloths[path[1]]
-        name = {"sticks": "stiffness"}.get(path[2], path[2])
+        name = path[2]
         v = getattr(spec, name)
-        if name == "stiffness":
-            return v.get(path[3], 0.0)
+        if name == "compliance":
+            return v.get(path[3], 0.0)  # 0 (rigid) is dropped on loading
         if name == "particle_masses":
             return v[path[3]][path[4]]
         return v[path[3]] if len(path) > 3 else v
@@ -416,13 +420,12 @@ def default_of(scene: Scene, path: tuple):
                                                  "meters_per_unit": 1.0}[path[1]]
     if path[0] == "cloth":
         spec = scene.cloths[0]
-        if len(path) == 4:  # one family left out of the sticks table: that family is not built
-            return spec.stiffness.get(path[3]), None
-        if path[2] == "sticks":
-            return spec.stiffness, {"structural": 1.0}
+        if len(path) == 4:  # one family left out of the compliance table: that family is rigid
+            return spec.compliance.get(path[3]), None
         attribute = path[2]
         defaults = {"name": "cloth0", "origin": (0.0, 0.0, 0.0), "orientation": "vertical", "mass": 1.0,
-                    "pins": (), "tear_threshold": None, "particle_masses": ()}
+                    "pins": (), "tear_threshold": None, "particle_masses": (), "sticks": ("structural",),
+                    "compliance": {}, "tethers": None, "tether_scale": 1.0}
         return getattr(spec, attribute), defaults[attribute]
     collider = scene.colliders[path[1]]
     if path[2] == "centre":
@@ -450,30 +453,43 @@ def test_missing_sections_and_keys(tmp_path, dropped):
     doc = full_scene()
     gone = [p for p in dropped if drop(doc, p)]  # keys inside a dropped section are gone with it
     # What the loader must report first, in its reading order: the cloth array, then a cloth's required
-    # keys, then a cloth with every stick family left out, then a collider's required keys.
+    # keys, then a cloth's keys that no longer agree (tethers without pins; a compliance for a family that the
+    # default sticks, structural only, do not build), then a collider's required keys.
     cloth_required = [p for p in gone if p in REQUIRED and p[0] == "cloth"]
-    families_gone = {p[3] for p in gone if len(p) == 4 and p[2] == "sticks"}
-    no_family = families_gone == set(STICK_KEYS) and ("cloth", 0, "sticks") not in gone
+    cloth = ("cloth",) not in gone and not cloth_required
+    tethers_without_pins = cloth and ("cloth", 0, "pins") in gone and ("cloth", 0, "tethers") not in gone
+    rigid_again = {p[3] for p in gone if len(p) == 4 and p[:3] == ("cloth", 0, "compliance")}
+    soft_left = {"structural", "shear", "bend"} - rigid_again
+    unbuilt = sorted(soft_left - {"structural"}) if (
+        cloth and ("cloth", 0, "sticks") in gone and ("cloth", 0, "compliance") not in gone) else []
     collider_required = [p for p in gone if p in REQUIRED and p[0] == "collider" and ("collider",) not in gone]
-    if cloth_required or (not no_family and collider_required):
+    if not cloth:
         err = scene_error(tmp_path, doc)
         assert "is required but missing" in err.problem, str(err)
-        expected = ([("cloth",)] if ("cloth",) in gone else cloth_required) or collider_required
+        expected = [("cloth",)] if ("cloth",) in gone else cloth_required
         assert err.key in {dotted(p) for p in expected}, str(err)
         return
-    if no_family:
-        err = scene_error(tmp_path, doc)  # sticks = {}: no family at all
-        assert err.key == "cloth[0].sticks" and "at least one family" in err.problem, str(err)
+    if tethers_without_pins:
+        err = scene_error(tmp_path, doc)
+        assert err.key == "cloth[0].tethers" and "expected pins" in err.problem, str(err)
+        return
+    if unbuilt:
+        err = scene_error(tmp_path, doc)
+        assert err.key == f"cloth[0].compliance.{unbuilt[0]}" and "does not build" in err.problem, str(err)
+        return
+    if collider_required:
+        err = scene_error(tmp_path, doc)
+        assert "is required but missing" in err.problem, str(err)
+        assert err.key in {dotted(p) for p in collider_required}, str(err)
         return
     scene = load_doc(tmp_path, doc)
     for p in gone:
         if p[0] == "collider" and ("collider",) in gone and p != ("collider",):
             continue
+        if p[:3] == ("cloth", 0, "compliance") and len(p) == 4 and ("cloth", 0, "compliance") in gone:
+            continue
         loaded, default = default_of(scene, p)
-        if p[0] == "cloth" and p[2] == "sticks" and len(p) == 4 and ("cloth", 0, "sticks") not in gone:
-            assert loaded is None, (p, loaded)  # the family is not built
-        elif not (p[0] == "cloth" and p[2] == "sticks" and len(p) == 4):
-            assert loaded == default, (p, loaded, default)
+        assert loaded == default, (p, loaded, default)
 
 
 # ---------------------------------------------------------------------------------------------- truncation
@@ -508,8 +524,11 @@ name = st.from_regex(r"[A-Za-z_][A-Za-z0-9_]{0,10}", fullmatch=True)
 def valid_scenes(draw) -> dict:
     rows = draw(st.integers(1, 40))
     cols = draw(st.integers(2 if rows == 1 else 1, 40))
-    sticks = draw(st.dictionaries(st.sampled_from(["structural", "shear", "bend"]), unit, min_size=1))
-    sticks[draw(st.sampled_from(sorted(sticks)))] = draw(st.floats(min_value=0.01, max_value=1.0))
+    solver = draw(st.sampled_from(["coloured", "jacobi"]))
+    sticks = draw(st.lists(st.sampled_from(["structural", "shear", "bend"]), min_size=1, unique=True))
+    # Soft sticks need the coloured solver; compliance 0 (rigid) is accepted with either.
+    alpha = st.one_of(st.just(0.0), positive) if solver == "coloured" else st.just(0.0)
+    compliance = draw(st.dictionaries(st.sampled_from(sticks), alpha))
     cell = st.tuples(st.integers(0, rows - 1), st.integers(0, cols - 1))
     pins = draw(st.lists(st.one_of(st.sampled_from(sorted(NAMED_PINS)), st.integers(0, rows * cols - 1),
                                    cell.map(list)), max_size=4))
@@ -518,9 +537,13 @@ def valid_scenes(draw) -> dict:
              "size": [draw(positive) if rows > 1 else draw(st.sampled_from([0.0, 1.0])), draw(positive)],
              "origin": draw(vec3), "orientation": draw(st.sampled_from(["vertical", "horizontal"])),
              "mass": draw(positive),
-             "sticks": sticks, "pins": pins, "particle_masses": [[r, c, kg] for (r, c), kg in masses.items()]}
+             "sticks": sticks, "compliance": compliance, "pins": pins,
+             "particle_masses": [[r, c, kg] for (r, c), kg in masses.items()]}
     if draw(st.booleans()):
         cloth["tear_threshold"] = draw(st.floats(min_value=1.001, max_value=100.0))
+    if draw(st.booleans()):
+        cloth["tethers"] = draw(st.booleans()) if pins else False  # tethers need pins
+        cloth["tether_scale"] = draw(st.floats(1.0, 100.0))
     collider = draw(st.one_of(
         st.fixed_dictionaries({"type": st.just("plane"), "point": vec3, "thickness": st.floats(0.0, 1.0),
                                "friction": unit, "display_size": positive,
@@ -531,7 +554,7 @@ def valid_scenes(draw) -> dict:
         "simulation": {"fps": draw(positive), "frames": draw(st.integers(1, 10**6)),
                        "substeps": draw(st.integers(1, 10_000)),
                        "iterations": draw(st.integers(0, 100_000)), "gravity": draw(vec3), "wind": draw(vec3),
-                       "drag": draw(unit), "solver": draw(st.sampled_from(["coloured", "jacobi"])),
+                       "damping": draw(st.floats(0.0, 1e6)), "solver": solver,
                        "max_dt_ratio": draw(st.floats(1.0, 1e6)), "max_frame_time": draw(positive),
                        "position_bound": draw(positive)},
         "output": {"path": draw(st.text(st.characters(codec="utf-8", exclude_characters="\0/"), min_size=1, max_size=8))
@@ -548,14 +571,16 @@ def test_valid_scenes_load_and_read_back(tmp_path, doc):
     scene = load_doc(tmp_path, doc)
     sim, out, cloth = doc["simulation"], doc["output"], doc["cloth"][0]
     assert scene.simulation == SimulationSettings(**{k: tuple(v) if isinstance(v, list) else float(v) if k in (
-        "fps", "drag", "max_dt_ratio", "max_frame_time", "position_bound") else v for k, v in sim.items()})
+        "fps", "damping", "max_dt_ratio", "max_frame_time", "position_bound") else v for k, v in sim.items()})
     assert scene.output == OutputSettings(path=Path(out["path"]), save_every=out["save_every"], up_axis=out["up_axis"],
                                           meters_per_unit=out["meters_per_unit"])
     spec = scene.cloths[0]
     assert isinstance(spec, ClothSpec) and spec.name == cloth["name"]
     assert spec.resolution == tuple(cloth["resolution"]) and spec.size == tuple(cloth["size"])
     assert spec.origin == tuple(cloth["origin"]) and spec.mass == cloth["mass"]
-    assert spec.stiffness == {k: v for k, v in cloth["sticks"].items() if v > 0}
+    assert spec.sticks == tuple(f for f in ("structural", "shear", "bend") if f in cloth["sticks"])
+    assert spec.compliance == {k: v for k, v in cloth["compliance"].items() if v > 0}
+    assert spec.tethers == cloth.get("tethers") and spec.tether_scale == cloth.get("tether_scale", 1.0)
     assert spec.tear_threshold == cloth.get("tear_threshold")
     assert sorted(spec.particle_masses) == sorted(tuple(m) for m in cloth["particle_masses"])
     rows, cols = cloth["resolution"]

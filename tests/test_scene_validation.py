@@ -8,6 +8,7 @@ import math
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -88,8 +89,61 @@ def test_unknown_key(tmp_path, text, key):
 
 
 def test_unknown_stick_family(tmp_path):
-    check(tmp_path, CLOTH + "sticks = { structural = 1.0, sheer = 0.5 }\n", "cloth[0].sticks.sheer",
+    check(tmp_path, CLOTH + "sticks = ['structural', 'sheer']\n", "cloth[0].sticks[1]",
+          "unknown stick family 'sheer'", "structural, shear, bend")
+    check(tmp_path, CLOTH + "compliance = { sheer = 0.5 }\n", "cloth[0].compliance.sheer",
           "unknown stick family", "structural, shear, bend")
+
+
+# ---------------------------------------------------------------------------------------------- keys that moved
+
+
+def test_drag_is_refused_with_the_equivalent_damping(tmp_path):
+    # drag d kept d of the velocity per substep; damping c keeps exp(-c dt) per substep of dt = 1 / (fps substeps):
+    # c = -ln(d) fps substeps = -ln(0.995) x 60 x 8 = 2.406 per second.
+    err = check(tmp_path, "[simulation]\nfps = 60\nsubsteps = 8\ndrag = 0.995\n" + CLOTH, "simulation.drag",
+                "replaced by damping", "damping = 2.406", "0.995", "60 fps", "8 substeps")
+    assert f"{-math.log(0.995) * 60 * 8:.4g}" == "2.406"
+    assert str(err).count("simulation.drag") == 1  # one error, naming the key once
+    # With the defaults (60 fps, 4 substeps), and for a value with no equivalent, the formula instead.
+    check(tmp_path, "[simulation]\ndrag = 0.999\n" + CLOTH, "simulation.drag",
+          f"damping = {-math.log(0.999) * 240:.4g}")
+    check(tmp_path, "[simulation]\ndrag = false\n" + CLOTH, "simulation.drag", "damping = -ln(drag) x fps x substeps")
+    check(tmp_path, "[simulation]\ndrag = 1.5\n" + CLOTH, "simulation.drag", "damping = -ln(drag) x fps x substeps")
+
+
+def test_drag_of_one_suggests_no_damping(tmp_path):
+    # drag = 1 kept all the velocity: the equivalent is damping = 0, written as a user would write it (not "-0",
+    # the sign of -ln(1.0) x fps x substeps = -0.0).
+    err = check(tmp_path, "[simulation]\ndrag = 1.0\n" + CLOTH, "simulation.drag", "replaced by damping")
+    assert "damping = 0 " in err.problem and "damping = -0" not in err.problem, (
+        f"the suggestion for drag = 1 should read damping = 0: {err.problem}")
+
+
+def test_the_stiffness_table_is_refused_saying_what_to_write(tmp_path):
+    err = check(tmp_path, CLOTH + "sticks = { structural = 1.0, shear = 1.0, bend = 0.3 }\n", "cloth[0].sticks",
+                "the table form { family = stiffness } is gone", 'sticks = ["structural", "shear", "bend"]',
+                "compliance", "bend = ")
+    assert "structural = 1e-3" not in err.problem and "shear = 1e-3" not in err.problem  # only soft families
+    # All rigid: no compliance to suggest.
+    err = check(tmp_path, CLOTH + "sticks = { structural = 1.0 }\n", "cloth[0].sticks", 'sticks = ["structural"]')
+    assert "compliance" not in err.problem
+
+
+def test_compliance_needs_its_family_built(tmp_path):
+    check(tmp_path, CLOTH + "sticks = ['structural', 'shear']\ncompliance = { bend = 0.5 }\n",
+          "cloth[0].compliance.bend", "bend family", 'sticks = ["structural", "shear"]', "does not build")
+    # The default sticks are structural only.
+    check(tmp_path, CLOTH + "compliance = { shear = 0.5 }\n", "cloth[0].compliance.shear", "does not build")
+
+
+def test_compliance_needs_the_coloured_solver(tmp_path):
+    check(tmp_path, "[simulation]\nsolver = 'jacobi'\n" + CLOTH + "compliance = { structural = 1e-3 }\n",
+          "cloth[0].compliance", "coloured solver")
+    # Rigid (compliance 0) is fine with Jacobi: it is the default.
+    scene = load_scene(write(tmp_path, "[simulation]\nsolver = 'jacobi'\n" + CLOTH
+                             + "compliance = { structural = 0 }\n"))
+    assert scene.cloths[0].compliance == {} and not scene.compliant
 
 
 # ---------------------------------------------------------------------------------------------- wrong types
@@ -103,7 +157,7 @@ def test_unknown_stick_family(tmp_path):
         (CLOTH + "mass = 'heavy'\n", "cloth[0].mass", ["expected a number", "str 'heavy'"]),
         # a boolean where an integer (or a number) is expected
         ("[simulation]\nframes = true\n" + CLOTH, "simulation.frames", ["expected an integer", "boolean true"]),
-        ("[simulation]\ndrag = false\n" + CLOTH, "simulation.drag", ["expected a number", "boolean false"]),
+        ("[simulation]\ndamping = false\n" + CLOTH, "simulation.damping", ["expected a number", "boolean false"]),
         ("[[cloth]]\nresolution = [true, 5]\nsize = [1, 1]\n", "cloth[0].resolution[0]",
          ["expected an integer", "boolean true"]),
         # a float where an integer is expected, even a whole one
@@ -127,7 +181,11 @@ def test_unknown_stick_family(tmp_path):
         # tables where tables belong
         ("simulation = 5\n" + CLOTH, "simulation", ["expected a table", "int 5"]),
         ("output = 'out.usdc'\n" + CLOTH, "output", ["expected a table"]),
-        (CLOTH + "sticks = 1.0\n", "cloth[0].sticks", ["expected a table"]),
+        (CLOTH + "sticks = 1.0\n", "cloth[0].sticks", ["expected a non-empty array of stick families", "float 1.0"]),
+        (CLOTH + "sticks = 'structural'\n", "cloth[0].sticks", ["expected a non-empty array", "str 'structural'"]),
+        (CLOTH + "sticks = ['structural', 1]\n", "cloth[0].sticks[1]", ["unknown stick family 1"]),
+        (CLOTH + "compliance = 0.5\n", "cloth[0].compliance", ["expected a table", "float 0.5"]),
+        (CLOTH + "compliance = ['structural']\n", "cloth[0].compliance", ["expected a table", "an array of 1"]),
         ("cloth = [1]\n", "cloth[0]", ["expected a table", "int 1"]),
         ("[cloth]\nresolution = [2, 2]\nsize = [1, 1]\n", "cloth", ["one or more [[cloth]] tables"]),
         # pins of the wrong kind
@@ -137,7 +195,9 @@ def test_unknown_stick_family(tmp_path):
         (CLOTH + "pins = [0, true]\n", "cloth[0].pins[1]", ["boolean true"]),
         (CLOTH + "pins = [[1, 2, 3]]\n", "cloth[0].pins[0]", ["[row, col] pair", "an array of 3"]),
         (CLOTH + "pins = [[1, 2.0]]\n", "cloth[0].pins[0]", ["[row, col] pair"]),
-        (CLOTH + "sticks = { shear = '0.5' }\n", "cloth[0].sticks.shear", ["expected a number"]),
+        (CLOTH + "sticks = ['shear']\ncompliance = { shear = '0.5' }\n", "cloth[0].compliance.shear",
+         ["expected a number", "str '0.5'"]),
+        (CLOTH + "compliance = { structural = true }\n", "cloth[0].compliance.structural", ["boolean true"]),
         (CLOTH + "tear_threshold = true\n", "cloth[0].tear_threshold", ["expected a number"]),
         (CLOTH + "particle_masses = [0, 0, 1.0]\n", "cloth[0].particle_masses[0]", ["[row, col, kg]"]),
         (CLOTH + "particle_masses = [[0, 0]]\n", "cloth[0].particle_masses[0]", ["[row, col, kg]"]),
@@ -161,10 +221,14 @@ def test_wrong_type(tmp_path, text, key, expected):
         ("[[cloth]]\nresolution = [4, -3]\nsize = [1, 1]\n", "cloth[0].resolution[1]", ["[1, 32768]", "got -3"]),
         ("[[cloth]]\nresolution = [4, 40000]\nsize = [1, 1]\n", "cloth[0].resolution[1]", ["[1, 32768]"]),
         ("[[cloth]]\nresolution = [1, 1]\nsize = [0, 0]\n", "cloth[0].resolution", ["at least 2 particles"]),
-        (CLOTH + "sticks = { shear = 1.5 }\n", "cloth[0].sticks.shear", ["[0.0, 1.0]", "got 1.5"]),
-        (CLOTH + "sticks = { structural = 1.0, bend = -0.1 }\n", "cloth[0].sticks.bend", ["[0.0, 1.0]", "got -0.1"]),
-        (CLOTH + "sticks = { structural = nan }\n", "cloth[0].sticks.structural", ["finite"]),
-        (CLOTH + "sticks = { structural = 0.0, shear = 0 }\n", "cloth[0].sticks", ["at least one family"]),
+        (CLOTH + "sticks = ['shear']\ncompliance = { shear = -0.1 }\n", "cloth[0].compliance.shear",
+         ["[0.0, inf)", "got -0.1"]),
+        (CLOTH + "sticks = ['structural', 'bend']\ncompliance = { bend = -1e-9 }\n", "cloth[0].compliance.bend",
+         ["[0.0, inf)", "got -1e-09"]),
+        (CLOTH + "compliance = { structural = nan }\n", "cloth[0].compliance.structural", ["finite"]),
+        (CLOTH + "compliance = { structural = inf }\n", "cloth[0].compliance.structural", ["finite"]),
+        (CLOTH + "sticks = []\n", "cloth[0].sticks", ["expected a non-empty array", "an array of 0"]),
+        (CLOTH + "sticks = ['shear', 'bend', 'shear']\n", "cloth[0].sticks", ["listed twice"]),
         (CLOTH + "tear_threshold = 1.0\n", "cloth[0].tear_threshold", ["(1.0, inf)", "got 1.0"]),
         (CLOTH + "tear_threshold = 0.5\n", "cloth[0].tear_threshold", ["(1.0, inf)", "got 0.5"]),
         (CLOTH + "tear_threshold = inf\n", "cloth[0].tear_threshold", ["finite"]),
@@ -183,7 +247,8 @@ def test_wrong_type(tmp_path, text, key, expected):
         ("[simulation]\nframes = 0\n" + CLOTH, "simulation.frames", [">= 1", "got 0"]),
         ("[simulation]\nsubsteps = 10001\n" + CLOTH, "simulation.substeps", ["[1, 10000]"]),
         ("[simulation]\niterations = -1\n" + CLOTH, "simulation.iterations", ["[0, 100000]"]),
-        ("[simulation]\ndrag = 1.01\n" + CLOTH, "simulation.drag", ["[0.0, 1.0]"]),
+        ("[simulation]\ndamping = -0.01\n" + CLOTH, "simulation.damping", ["[0.0, inf)", "got -0.01"]),
+        ("[simulation]\ndamping = inf\n" + CLOTH, "simulation.damping", ["finite"]),
         ("[simulation]\nmax_dt_ratio = 0.5\n" + CLOTH, "simulation.max_dt_ratio", ["[1.0, inf)"]),
         ("[simulation]\nmax_frame_time = 0\n" + CLOTH, "simulation.max_frame_time", ["(0.0, inf)"]),
         ("[simulation]\nposition_bound = -1\n" + CLOTH, "simulation.position_bound", ["(0.0, inf)"]),
@@ -337,10 +402,10 @@ def test_every_shipped_scene_loads():
 def test_shipped_scenes_say_what_the_brief_says():
     hanging = load_scene(SCENES / "hanging_cloth.toml")
     sim, cloth = hanging.simulation, hanging.cloths[0]
-    assert (sim.fps, sim.frames, sim.substeps, sim.iterations, sim.drag) == (60.0, 120, 4, 8, 0.999)
+    assert (sim.fps, sim.frames, sim.substeps, sim.iterations, sim.damping) == (60.0, 120, 4, 8, 0.24)
     assert cloth.resolution == (64, 64) and cloth.size == (1.0, 1.0) and cloth.orientation == "vertical"
     assert cloth.pins == ((0, 0), (0, 63))
-    assert set(cloth.stiffness) == {"structural", "shear", "bend"}
+    assert cloth.sticks == ("structural", "shear", "bend") and cloth.compliance == {"bend": 0.7}
 
     wind = load_scene(SCENES / "wind_sheet.toml")
     assert wind.simulation.wind == (4.0, 0.0, 3.0)
@@ -350,13 +415,13 @@ def test_shipped_scenes_say_what_the_brief_says():
     rope = load_scene(SCENES / "rope.toml")
     spec = rope.cloths[0]
     assert spec.resolution == (1, 40) and spec.size == (0.0, 2.0) and spec.orientation == "horizontal"
-    assert spec.pins == ((0, 0),) and spec.stiffness == {"structural": 1.0}
+    assert spec.pins == ((0, 0),) and spec.sticks == ("structural",) and spec.compliance == {}
     topo = build_cloth(spec)
     assert len(topo.sticks) == 39 and len(topo.faces) == 0
 
     big = load_scene(SCENES / "big_grid_1024.toml")
     assert big.cloths[0].resolution == (1024, 1024) and big.particle_count == 1 << 20
-    assert set(big.cloths[0].stiffness) == {"structural", "shear", "bend"}
+    assert big.cloths[0].sticks == ("structural", "shear", "bend")
     assert (big.simulation.frames, big.simulation.substeps, big.simulation.iterations) == (60, 4, 8)
 
 
@@ -367,8 +432,9 @@ def test_defaults_apply_when_sections_are_missing(tmp_path):
     assert scene.output == OutputSettings(path=Path("minimal.usdc"))  # relative: resolved against the cwd
     assert scene.cloths == (ClothSpec(name="cloth0", resolution=(4, 5), size=(0.3, 0.4)),)
     c = scene.cloths[0]
-    assert (c.origin, c.orientation, c.mass, c.stiffness, c.pins) == (
-        (0.0, 0.0, 0.0), "vertical", 1.0, {"structural": 1.0}, ())
+    assert (c.origin, c.orientation, c.mass, c.sticks, c.compliance, c.pins) == (
+        (0.0, 0.0, 0.0), "vertical", 1.0, ("structural",), {}, ())
+    assert scene.simulation.damping == 0.0 and not scene.compliant
     assert math.isclose(scene.simulation.dt, 1.0 / 240.0)
 
 
@@ -379,23 +445,44 @@ def test_defaults_apply_to_empty_sections(tmp_path):
 
 
 def test_integers_are_accepted_for_numbers(tmp_path):
-    scene = load_scene(write(tmp_path, "[simulation]\nfps = 30\ndrag = 1\n" + CLOTH))
+    scene = load_scene(write(tmp_path, "[simulation]\nfps = 30\ndamping = 1\n" + CLOTH
+                             + "compliance = { structural = 2 }\n"))
     assert scene.simulation.fps == 30.0 and isinstance(scene.simulation.fps, float)
-    assert scene.simulation.drag == 1.0
+    assert scene.simulation.damping == 1.0 and isinstance(scene.simulation.damping, float)
+    compliance = scene.cloths[0].compliance
+    assert compliance == {"structural": 2.0} and isinstance(compliance["structural"], float)
 
 
-def test_stiffness_zero_means_the_family_is_not_built(tmp_path):
-    scene = load_scene(write(tmp_path, CLOTH + "sticks = { structural = 1.0, shear = 0.0, bend = 0 }\n"))
+def test_only_the_listed_families_are_built(tmp_path):
+    scene = load_scene(write(tmp_path, CLOTH + "sticks = ['structural']\n"))
     spec = scene.cloths[0]
-    assert spec.stiffness == {"structural": 1.0}
+    assert spec.sticks == ("structural",)
     topo = build_cloth(spec)
     assert topo.families == ("structural",)
     assert len(topo.sticks) == 4 * 4 + 3 * 5  # horizontal + vertical structural sticks of a 4 x 5 grid
 
 
+def test_compliance_zero_means_rigid(tmp_path):
+    # Compliance 0 is the rigid default: dropped on loading, so the scene has no soft stick at all.
+    spec = load_scene(write(tmp_path, CLOTH + "sticks = ['structural', 'shear']\n"
+                                               "compliance = { structural = 0.0, shear = 0 }\n")).cloths[0]
+    assert spec.sticks == ("structural", "shear") and spec.compliance == {}
+    assert not build_cloth(spec).compliance.any()
+    # A soft family gets its compliance on each of its sticks; the rest stay rigid.
+    spec = load_scene(write(tmp_path, CLOTH + "sticks = ['structural', 'shear']\n"
+                                               "compliance = { shear = 2.5e-3, structural = 0 }\n")).cloths[0]
+    assert spec.compliance == {"shear": 2.5e-3}
+    topo = build_cloth(spec)
+    shear = topo.compliance > 0
+    assert shear.sum() == 2 * 3 * 4 and (topo.compliance[shear] == np.float32(2.5e-3)).all()
+
+
 def test_named_sticks_replace_the_default(tmp_path):
-    spec = load_scene(write(tmp_path, CLOTH + "sticks = { shear = 0.5 }\n")).cloths[0]
-    assert spec.stiffness == {"shear": 0.5}
+    spec = load_scene(write(tmp_path, CLOTH + "sticks = ['shear']\n")).cloths[0]
+    assert spec.sticks == ("shear",)
+    # Listed in any order, built in the fixed family order.
+    spec = load_scene(write(tmp_path, CLOTH + "sticks = ['bend', 'structural']\n")).cloths[0]
+    assert spec.sticks == ("structural", "bend")
 
 
 def test_documented_example_loads(tmp_path):
@@ -424,15 +511,15 @@ def has_raw(v) -> bool:
 
 
 KNOWN_KEYS = [
-    "simulation", "output", "cloth", "fps", "frames", "substeps", "iterations", "gravity", "wind", "drag",
-    "solver", "max_dt_ratio", "max_frame_time", "position_bound", "path", "save_every", "up_axis",
-    "meters_per_unit", "name", "resolution", "size", "origin", "orientation", "mass", "sticks", "pins",
-    "structural", "shear", "bend",
+    "simulation", "output", "cloth", "fps", "frames", "substeps", "iterations", "gravity", "wind", "damping",
+    "drag", "solver", "max_dt_ratio", "max_frame_time", "position_bound", "path", "save_every", "up_axis",
+    "meters_per_unit", "name", "resolution", "size", "origin", "orientation", "mass", "sticks", "compliance",
+    "pins", "tear_threshold", "particle_masses", "tethers", "tether_scale", "structural", "shear", "bend",
 ]
 KNOWN_STRINGS = [
     "coloured", "jacobi", "vertical", "horizontal", "Y", "Z", "out.usdc", "out.usda", "x.usd", ".usdc",
     "top-left", "top-right", "bottom-left", "bottom-right", "top-edge", "bottom-edge", "left-edge",
-    "right-edge", "cloth0", "sheet", "", "\0", "1abc", "a\n",
+    "right-edge", "cloth0", "sheet", "", "\0", "1abc", "a\n", "structural", "shear", "bend",
 ]
 RAW_LITERALS = [
     "1979-05-27", "07:32:00", "1979-05-27T07:32:00Z", "1979-05-27T00:32:00.999999-07:00",
@@ -464,7 +551,7 @@ def valid_scene() -> dict:
         "simulation": {"fps": 60.0, "frames": 10, "substeps": 2, "iterations": 4},
         "output": {"path": "fuzz.usdc", "save_every": 5},
         "cloth": [{"name": "a", "resolution": [3, 4], "size": [1.0, 1.0], "pins": ["top-left"],
-                   "sticks": {"structural": 1.0, "shear": 0.5}}],
+                   "sticks": ["structural", "shear"], "compliance": {"shear": 1e-3}}],
     }
 
 
@@ -472,7 +559,7 @@ def valid_scene() -> dict:
 def mutated_scenes(draw) -> dict:
     """A valid scene with random values written over (or added to) its tables."""
     doc = valid_scene()
-    tables = [doc, doc["simulation"], doc["output"], doc["cloth"][0], doc["cloth"][0]["sticks"]]
+    tables = [doc, doc["simulation"], doc["output"], doc["cloth"][0], doc["cloth"][0]["compliance"]]
     for _ in range(draw(st.integers(1, 4))):
         table = draw(st.sampled_from(tables))
         key = draw(keys)
