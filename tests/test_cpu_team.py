@@ -177,6 +177,26 @@ def test_dropping_a_threaded_simulator_stops_its_threads(solver):
     assert not any(w.is_alive() for w in workers)
 
 
+def test_dropping_a_state_stops_the_threads_that_relaxed_it():
+    # A threaded solver starts a team of workers for every state it steps (its launches are bound to that
+    # state's arrays): checkpoints must not leave threads behind once they are dropped.
+    sim = Simulator(busy_scene("coloured"), "cpu", threads=3)
+    sim.step()
+    own = {w for team in sim.solver._teams for w in team._workers}
+    clones = [sim.state.clone() for _ in range(3)]
+    for clone in clones:
+        sim.solver.step(clone, sim.settings.dt)
+    workers = {w for team in sim.solver._teams for w in team._workers} - own
+    assert len(workers) == 3 * 2 and all(w.is_alive() for w in workers)
+    del clones, clone
+    gc.collect()
+    for worker in workers:
+        worker.join(timeout=5)
+    assert not any(w.is_alive() for w in workers)
+    assert all(w.is_alive() for w in own)  # the simulator's own state still has its team
+    sim.step()
+
+
 def _joined(team: PhaseTeam) -> list[threading.Thread]:
     for worker in team._workers:
         worker.join(timeout=5)

@@ -40,7 +40,9 @@ class VerletSolver:
         self.stage_names = tuple(s.name for s in STAGES if s.needed(need))
         self._scratch: dict[str, wp.array] = {}
         self._bound: weakref.WeakKeyDictionary[State, list] = weakref.WeakKeyDictionary()
-        self._teams: list[PhaseTeam] = []
+        # Held weakly: a team belongs to the launches bound for one state (the relaxation stage holds it), so a
+        # dropped state's team is collected and its worker threads stop (PhaseTeam's finalizer).
+        self._teams: weakref.WeakSet[PhaseTeam] = weakref.WeakSet()
         self.min_dt = self._smallest_resolved_dt()
 
     # ------------------------------------------------------------------ set-up
@@ -74,7 +76,7 @@ class VerletSolver:
             return None
         team = PhaseTeam([[t.run if t is not None else None for t in phase] for phase in phases],
                          self.settings.iterations)
-        self._teams.append(team)
+        self._teams.add(team)
         return team
 
     def bind(self, state: State) -> list[tuple[str, Callable[[State, float], None]]]:
@@ -148,5 +150,5 @@ class VerletSolver:
 
     def close(self) -> None:
         """Stop the CPU thread teams (also done when the solver is collected)."""
-        for team in self._teams:
+        for team in list(self._teams):
             team.close()
