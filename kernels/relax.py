@@ -82,9 +82,11 @@ def relax_colour_compliant(
         return
     alpha = compliance[s] * inv_dt2
     mu = tension[s]
-    step = weight[s] * (length - rest[s] - alpha * mu) / (w + alpha)
-    tension[s] = mu + step
-    c = d * (step / length)
+    # The same operations, in the same order, as stick_correction: with alpha = 0 this is the rigid kernel
+    # bit for bit.
+    error = weight[s] * (length - rest[s] - alpha * mu)
+    tension[s] = mu + error / (w + alpha)
+    c = d * (error / (length * (w + alpha)))
     x[i] = xi + c * wi
     x[j] = xj - c * wj
 

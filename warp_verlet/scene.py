@@ -379,7 +379,9 @@ def _drag_moved(data: dict) -> str:
     hint = "damping = -ln(drag) x fps x substeps"
     numbers = (drag, fps, substeps)
     if all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in numbers) and 0 < drag <= 1 and fps > 0:
-        hint = f"damping = {-math.log(drag) * fps * substeps:.4g} (= -ln({drag}) x {fps:g} fps x {substeps} substeps)"
+        rate = -math.log(drag) * fps * substeps
+        hint = f"damping = {rate:.4g} (= -ln({drag}) x {fps:g} fps x {substeps} substeps)" if rate > 0 else \
+            "damping = 0 (the default: it keeps all the velocity, as drag = 1 did)"
     return ("drag (the velocity kept per substep, so the cloth changed with substeps) is replaced by damping, a "
             f"rate per second (velocity decays as exp(-damping t)); for the same motion at this budget write {hint}")
 

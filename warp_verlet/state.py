@@ -85,7 +85,7 @@ class State:
         self.time, self.steps, self.dt_prev = other.time, other.steps, other.dt_prev
 
     def set_velocity(self, velocity) -> None:
-        """Start from rest positions moving at ``velocity`` (m/s): one (3,) vector for every particle, or
+        """Start again from the current positions, moving at ``velocity`` (m/s): one (3,) vector for every particle, or
         (N, 3). Pinned particles stay at rest. The next step runs the exact start (x = x0 + v0 dt + a dt^2 / 2
         for a constant acceleration a)."""
         n = self.model.particle_count
