@@ -138,19 +138,29 @@ def _run(args) -> int:
             bar.close()
     print(summary.format())
     if args.preview:
-        from .preview import render_preview  # pxr and matplotlib, only when asked for
-
-        image = render_preview(summary.output, summary.output.with_suffix(".png"))
+        image = _preview_module().render_preview(summary.output, summary.output.with_suffix(".png"))
         print(f"{'preview':<17}{image}")
     return 0
 
 
-def _preview(args) -> int:
-    from .preview import PreviewError, render_preview  # pxr and matplotlib; never warp
-
+def _preview_module():
+    """warp_verlet.preview (pxr and matplotlib; never warp), or one clear error when the optional extra that
+    brings matplotlib is not installed."""
     try:
-        image = render_preview(args.cache, args.output, frames=args.frames, size=args.size)
-    except PreviewError as exc:  # a bad cache or option: the same exit code as a bad scene
+        from . import preview
+    except ModuleNotFoundError as exc:
+        if exc.name and exc.name.split(".")[0] == "matplotlib":
+            raise WarpVerletError("the preview needs matplotlib, an optional extra: pip install "
+                                  "'warp-verlet[preview]'") from None
+        raise
+    return preview
+
+
+def _preview(args) -> int:
+    preview = _preview_module()
+    try:
+        image = preview.render_preview(args.cache, args.output, frames=args.frames, size=args.size)
+    except preview.PreviewError as exc:  # a bad cache or option: the same exit code as a bad scene
         print(f"error: {exc}", file=sys.stderr)
         return 2
     print(f"{args.cache}: preview written to {image}")
