@@ -1,0 +1,102 @@
+"""Tethers (long-range attachments, kernels/tether.py): a tethered particle stays within its tether length
+of its pins, a tear that cuts a piece off its pins drops those tethers so the piece falls freely, and a
+cloth without pins gets none."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from conftest import make_scene
+from warp_verlet.simulator import Simulator
+
+G = 9.81
+
+
+def hanging(tethers: bool, n: int = 16):
+    return make_scene({"substeps": 4, "iterations": 8, "damping": 0.24}, resolution=[n, n], size=[1.0, 1.0],
+                      mass=0.2, pins=["top-left", "top-right"], sticks=["structural", "shear", "bend"],
+                      tethers=tethers)
+
+
+def excess_over_tether(sim: Simulator, table) -> np.ndarray:
+    """(distance to pin - tether length) / tether length, per tether."""
+    p = sim.positions().astype(np.float64)
+    distance = np.linalg.norm(p[table.particle][:, None, :] - p[table.pin], axis=2)
+    return (distance - table.length) / table.length
+
+
+def test_a_tethered_cloth_stays_within_its_tether_lengths(device):
+    sim = Simulator(hanging(True), device)
+    table = sim.model.tether_table
+    assert table.pin.shape == (16 * 16 - 2, 2)  # every free particle, tied to both pins
+    for _ in range(60):
+        sim.step_frame()
+    # The tether pass runs before the sticks in each sweep, so the last sweep's stick corrections (the residual
+    # stretch, about 1e-5 here) may carry a particle that far past its tether: 1e-4 relative bounds it.
+    assert excess_over_tether(sim, table).max() < 1e-4
+    # The same cloth without tethers ends far beyond those lengths: the bound above is not vacuous.
+    plain = Simulator(hanging(False), device)
+    for _ in range(60):
+        plain.step_frame()
+    assert excess_over_tether(plain, table).max() > 1e-2
+
+
+def test_tethers_cut_the_stretch_of_a_big_hanging_cloth():
+    with_tethers, without = Simulator(hanging(True, 64), "cpu"), Simulator(hanging(False, 64), "cpu")
+    for _ in range(60):
+        with_tethers.step_frame()
+        without.step_frame()
+    # Measured (bench/convergence.py, CPU): 0.027% RMS / 0.18% max with tethers, 3.6% / 90% without.
+    assert with_tethers.stretch().rms < 1e-3 and with_tethers.stretch().max < 5e-3
+    assert without.stretch().rms > 1e-2
+
+
+def test_a_piece_torn_off_its_pins_drops_its_tethers_and_falls_freely(device):
+    # 4 rows hanging from a pinned top row; tethers with slack 2 (so they cannot stop the 1.2 tear); g = 100
+    # m/s^2 stretches the top sticks past 1.2 L and tears them. The rest of the cloth is then cut off from
+    # every pin: sync_tears drops its tethers and its centre of mass follows free fall, x[n+1] - 2 x[n] + x[n-1]
+    # = g dt^2 (its sticks still ring, but their corrections are equal and opposite between equal masses).
+    g = 100.0
+    scene = make_scene({"fps": 60, "substeps": 4, "iterations": 2, "gravity": [0.0, -g, 0.0]},
+                       resolution=[4, 3], size=[0.3, 0.2], pins=["top-edge"], sticks=["structural"],
+                       compliance={"structural": 1e-2}, tear_threshold=1.2, tethers=True, tether_scale=2.0)
+    sim = Simulator(scene, device)
+    assert sim.model.tether_table is not None
+    for _ in range(200):
+        sim.step()
+        if sim.torn_count() == 3:
+            break
+    assert sim.torn_count() == 3, "the three sticks to the pinned row should tear"
+    sim.sync_tears()
+    assert np.isinf(sim.state.tether_length.numpy()).all()  # every free particle was cut off
+    history = []
+    for _ in range(12):
+        sim.step()
+        history.append(sim.positions()[3:, 1].astype(np.float64).mean())
+    y = np.array(history)
+    second = y[2:] - 2 * y[1:-1] + y[:-2]
+    dt = sim.settings.dt
+    np.testing.assert_allclose(second, -g * dt * dt, rtol=2e-3)
+
+
+def test_a_stale_tether_would_hold_the_torn_piece():
+    # The same tear without sync_tears: the tethers (2 x the rest distance) catch the piece, so the free-fall
+    # check above can fail.
+    g = 100.0
+    scene = make_scene({"fps": 60, "substeps": 4, "iterations": 2, "gravity": [0.0, -g, 0.0]},
+                       resolution=[4, 3], size=[0.3, 0.2], pins=["top-edge"], sticks=["structural"],
+                       compliance={"structural": 1e-2}, tear_threshold=1.2, tethers=True, tether_scale=2.0)
+    sim = Simulator(scene, "cpu")
+    for _ in range(400):
+        sim.step()
+    assert sim.torn_count() >= 3
+    # 400 steps of free fall would take it 100 * (400 / 240)^2 / 2 = 139 m down; the stale tethers hold every
+    # particle within 2 x its rest distance (at most 0.3 m) of a pin.
+    assert sim.positions()[3:, 1].min() > -0.3 * 2.0 - 1e-3
+
+
+def test_a_cloth_without_pins_or_with_tethers_off_gets_none():
+    assert Simulator(make_scene(resolution=[8, 8]), "cpu").model.tether_table is None
+    assert Simulator(hanging(False), "cpu").model.tether_table is None
+    assert Simulator(hanging(True), "cpu").solver.need.tethered == 16 * 16 - 2
