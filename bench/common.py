@@ -1,10 +1,11 @@
-"""What the benchmark scripts share: scenes, the one way into a simulator's state, timing, the machine
+"""What the benchmark scripts share: scenes, the device arrays a simulator holds, timing, the machine
 description and the table writer."""
 
 from __future__ import annotations
 
 import argparse
 import csv
+import math
 import os
 import platform
 import shlex
@@ -14,8 +15,6 @@ import time
 from dataclasses import dataclass
 from datetime import datetime
 from pathlib import Path
-from typing import NamedTuple
-
 import numpy as np
 import warp as wp
 
@@ -37,7 +36,20 @@ def quiet_warp() -> None:
 
 # ---------------------------------------------------------------- scenes
 
-HANGING_STICKS = {"structural": 1.0, "shear": 1.0, "bend": 0.5}
+HANGING_FAMILIES = ["structural", "shear", "bend"]
+"""The benchmark cloth's stick families, all rigid (the kernel the C and numpy references implement)."""
+
+HANGING_DAMPING = -math.log(0.999) * 240.0
+"""1/s: the benchmark cloth's old drag 0.999 per substep at its 240 substeps per second (60 fps x 4), so that
+at 4 substeps it keeps the same velocity per substep as before (about 0.24 /s; now the same per second at any
+substeps)."""
+
+
+def damping_for_drag(drag: float, dt: float) -> float:
+    """The damping rate (1/s) that keeps ``drag`` of the velocity per step of ``dt`` s, as the old per-substep
+    ``drag`` did: exp(-damping dt) = drag to float64 rounding, so the float32 the kernel sees is the same
+    (tests/test_golden.py). 0 for drag 1."""
+    return -math.log(drag) / dt if drag != 1.0 else 0.0
 
 
 def scene(simulation: dict, cloths: dict | list, colliders: list | None = None, name: str = "<bench>") -> Scene:
@@ -50,15 +62,16 @@ def scene(simulation: dict, cloths: dict | list, colliders: list | None = None, 
 
 def hanging_sheet(n: int, **cloth) -> dict:
     """The [[cloth]] table of the benchmark cloth: n x n particles, 1 m, 0.2 kg, pinned at its top corners, all
-    three stick families; keyword arguments override its entries."""
+    three stick families rigid, no tethers (which the C, numpy and Newton peers do not have; bench.convergence
+    measures them); keyword arguments override its entries."""
     return {"name": "sheet", "resolution": [n, n], "size": [1.0, 1.0], "origin": [-0.5, 1.0, 0.0], "mass": 0.2,
-            "pins": ["top-left", "top-right"], "sticks": HANGING_STICKS, **cloth}
+            "pins": ["top-left", "top-right"], "sticks": list(HANGING_FAMILIES), "tethers": False, **cloth}
 
 
 def hanging_cloth(n: int, substeps: int = 4, iterations: int = 8, solver: str = "coloured", frames: int = 60) -> Scene:
-    """The benchmark scene: the hanging sheet, vertical, drag 0.999."""
-    return scene({"frames": frames, "substeps": substeps, "iterations": iterations, "drag": 0.999, "solver": solver},
-                 hanging_sheet(n), name=f"<hanging cloth {n}x{n}>")
+    """The benchmark scene: the hanging sheet, vertical, damping HANGING_DAMPING."""
+    return scene({"frames": frames, "substeps": substeps, "iterations": iterations, "damping": HANGING_DAMPING,
+                  "solver": solver}, hanging_sheet(n), name=f"<hanging cloth {n}x{n}>")
 
 
 def cloth_size(scene: Scene) -> float:
@@ -66,25 +79,18 @@ def cloth_size(scene: Scene) -> float:
     return max(max(c.size) for c in scene.cloths)
 
 
-# ---------------------------------------------------------------- the simulator's state
+# ---------------------------------------------------------------- the simulator's arrays
 
-class VerletState(NamedTuple):
-    """The simulator's live summed-form Verlet arrays (kernels/integrate.py): positions, what the last step
-    predicted, and its increment; x - x_prev = delta + (x - x_inertial)."""
-    x: wp.array
-    x_inertial: wp.array
-    delta: wp.array
+def device_arrays(sim) -> dict[int, wp.array]:
+    """Every device array a ``Simulator`` holds, by address: the Model's, its colliders', the State's
+    (``state.arrays()``) and the solver's scratch (allocated when the solver first binds a state, so ask after a
+    step). An array two of them share (the coloured solver's tear ends are its stick ends) is there once."""
+    def arrays_of(obj) -> list[wp.array]:
+        return [a for a in vars(obj).values() if isinstance(a, wp.array)]
 
-
-def verlet_state(sim) -> VerletState:
-    """The one place the benchmarks reach past ``Simulator``'s public methods (``positions()``, ``stretch()``,
-    ``step()``): its live state arrays, to read the implicit velocity or to put particles somewhere else."""
-    return VerletState(sim.x, sim.x_inertial, sim.delta)
-
-
-def set_positions(sim, points: np.ndarray) -> None:
-    """Overwrite every particle's position (before the first step: the cloth then starts from there at rest)."""
-    verlet_state(sim).x.assign(points)
+    found = arrays_of(sim.model) + arrays_of(sim.model.colliders) + list(sim.state.arrays().values())
+    found += list(sim.solver._scratch.values())
+    return {a.ptr: a for a in found}
 
 
 # ---------------------------------------------------------------- timing

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import ctypes
 import dataclasses
+import math
 import os
 import shutil
 import subprocess
@@ -92,18 +93,21 @@ class CCloth:
         self.inv_mass = np.ascontiguousarray(m.inv_mass.numpy(), dtype=np.float32)
         self.ends = np.ascontiguousarray(m.host_sticks, dtype=np.int32)
         self.rest = np.ascontiguousarray(m.host_rest, dtype=np.float32)
-        self.stiffness = np.ascontiguousarray(m.stick_stiffness.numpy(), dtype=np.float32)
+        if m.compliant:
+            raise ValueError("the C reference has rigid sticks only (no compliance)")
+        self.weight = np.ascontiguousarray(m.stick_weight.numpy(), dtype=np.float32)  # all 1: every stick holds
         accel = np.add(s.gravity, s.wind).astype(np.float32)
         # As the simulator: the acceleration rounded to float32, times dt (dt + dt_prev) / 2 in double, rounded.
         self.accel_offset = (accel.astype(np.float64) * (s.dt * s.dt)).astype(np.float32)
-        self.velocity_scale = float(np.float32(s.drag))
+        # As the simulator: the velocity kept per fixed step, exp(-damping dt), rounded to float32.
+        self.velocity_scale = float(np.float32(math.exp(-s.damping * s.dt)))
         self.x_inertial = np.empty_like(self.x)
         self.delta = np.empty_like(self.x)
         lib.verlet_start(self.n, self.x, self.inv_mass, accel, s.dt, self.x_inertial, self.delta)
 
     def step_frame(self) -> None:
         self.lib.step_frame(self.n, self.x, self.x_inertial, self.delta, self.inv_mass, self.stick_count, self.ends,
-                            self.rest, self.stiffness, self.substeps, self.iterations, self.velocity_scale,
+                            self.rest, self.weight, self.substeps, self.iterations, self.velocity_scale,
                             self.accel_offset)
 
     def positions(self) -> np.ndarray:

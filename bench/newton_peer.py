@@ -9,7 +9,7 @@ What is the same: particle count and layout (``ModelBuilder.add_cloth_grid``, re
 row-major order, rows running down -Y), cloth size, total mass spread evenly, the pinned particles (mass 0
 and not ACTIVE), the start pose at rest, gravity, frame rate, substeps and iterations per substep.
 What is not: Newton's VBD solves a StVK triangle membrane (``tri_ke``, ``tri_ka``) with dihedral bending
-(``edge_ke``) by vertex block descent, not distance sticks; it has no per-substep drag. So its positions differ
+(``edge_ke``) by vertex block descent, not distance sticks; it has no damping. So its positions differ
 from warp_verlet's by a model difference as well as by solver error; the RMS structural stretch |D - L|/L over
 the same grid edges is the like-for-like measure of how well each holds the weave. (Newton's XPBD solver with
 springs on the same sticks was tried too: its un-averaged Jacobi spring sum diverges on this cloth at every

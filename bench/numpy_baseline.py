@@ -6,20 +6,23 @@
 The same physics as warp_verlet's Simulator on a scene without colliders, vectorised over sticks:
 
 - Verlet in the simulator's summed form (kernels/integrate.py): x += d (delta + x - x_inertial) + a dt^2,
-  with the exact start delta = -a dt^2 / 2, pins (inverse mass 0) never moving, all in float32.
+  d = exp(-damping dt), with the exact start delta = -a dt^2 / 2, pins (inverse mass 0) never moving, all in
+  float32.
 - Jacobi (kernels/relax.py relax_jacobi): every stick's correction is computed from the old positions,
   summed per particle with ``np.bincount`` and averaged over the particle's stick count.
 - Coloured Gauss-Seidel (relax_colour): one vectorised update per colour of the simulator's colouring;
   the sticks of one colour share no particle, so a fancy-indexed ``+=`` is race-free.
 
-Sticks, rest lengths, per-iteration stiffness, inverse masses and the colouring are taken from a
-``Simulator``'s model, so both sides relax exactly the same sticks (``NumpyCloth.from_scene``). ``--check``
+Sticks (rigid: the model's stick weights, all 1), rest lengths, inverse masses and the colouring are taken from a
+``Simulator``'s model, so both sides relax exactly the same sticks (``NumpyCloth.from_scene``); soft sticks
+(compliance) and tethers are not reproduced, and such a scene is refused. ``--check``
 runs the Warp simulator beside it and prints the largest position difference.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import math
 import sys
 
 import numpy as np
@@ -32,8 +35,8 @@ MIN_LENGTH = np.float32(1.0e-9)
 class NumpyCloth:
     """One scene's particles and sticks as numpy arrays; ``step_frame()`` mirrors ``Simulator.step_frame``."""
 
-    def __init__(self, positions, inv_mass, sticks, rest, stiffness, colour_ranges, *, dt, substeps, iterations,
-                 drag, accel, solver="jacobi"):
+    def __init__(self, positions, inv_mass, sticks, rest, weight, colour_ranges, *, dt, substeps, iterations,
+                 damping, accel, solver="jacobi"):
         if solver not in ("jacobi", "coloured"):
             raise ValueError(f"solver must be 'jacobi' or 'coloured', got {solver!r}")
         self.solver = solver
@@ -43,10 +46,10 @@ class NumpyCloth:
         self.a = np.ascontiguousarray(sticks[:, 0], dtype=np.intp)
         self.b = np.ascontiguousarray(sticks[:, 1], dtype=np.intp)
         self.rest = np.asarray(rest, dtype=np.float32)
-        self.k = np.asarray(stiffness, dtype=np.float32)
+        self.k = np.asarray(weight, dtype=np.float32)
         self.colour_ranges = list(colour_ranges)
         self.dt, self.substeps, self.iterations = float(dt), int(substeps), int(iterations)
-        self.drag = np.float32(drag)
+        self.velocity_scale = np.float32(math.exp(-damping * dt))  # the velocity kept per step, as the kernel
         self.accel = np.asarray(accel, dtype=np.float32)
         self.free = self.w > 0
         self.stick_count = len(self.a)
@@ -58,8 +61,8 @@ class NumpyCloth:
 
     @classmethod
     def from_scene(cls, scene, solver: str = "jacobi") -> "NumpyCloth":
-        """The arrays of ``scene`` as the Warp simulator builds them (coloured stick order and per-iteration
-        stiffness; the colouring is only used by the coloured solver)."""
+        """The arrays of ``scene`` as the Warp simulator builds them (coloured stick order and stick weights;
+        the colouring is only used by the coloured solver)."""
         from warp_verlet.simulator import Simulator
 
         if scene.colliders:
@@ -67,9 +70,11 @@ class NumpyCloth:
         settings = dataclasses.replace(scene.simulation, solver="coloured")
         sim = Simulator(dataclasses.replace(scene, simulation=settings), device="cpu")
         m = sim.model
+        if m.compliant or m.tether_table is not None:
+            raise ValueError("the numpy baseline has rigid sticks only: no compliance, no tethers")
         s = scene.simulation
-        return cls(sim.positions(), m.inv_mass.numpy(), m.host_sticks, m.host_rest, m.stick_stiffness.numpy(),
-                   m.colour_ranges, dt=s.dt, substeps=s.substeps, iterations=s.iterations, drag=s.drag,
+        return cls(sim.positions(), m.inv_mass.numpy(), m.host_sticks, m.host_rest, m.stick_weight.numpy(),
+                   m.colour_ranges, dt=s.dt, substeps=s.substeps, iterations=s.iterations, damping=s.damping,
                    accel=np.add(s.gravity, s.wind), solver=solver)
 
     # ------------------------------------------------------------------ Verlet
@@ -83,14 +88,15 @@ class NumpyCloth:
             half = np.float32(0.5) * np.float32(self.dt) * np.float32(self.dt)
             self.delta = np.where(self.free[:, None], -(self.accel * half), np.float32(0)).astype(np.float32)
         f = self.free
-        step = (self.delta[f] + (self.x[f] - self.x_inertial[f])) * self.drag + self._accel_offset()
+        step = (self.delta[f] + (self.x[f] - self.x_inertial[f])) * self.velocity_scale + self._accel_offset()
         self.x[f] += step
         self.x_inertial[f] = self.x[f]
         self.delta[f] = step
 
     # ------------------------------------------------------------------ relaxation
     def _correction(self, xa, xb, wa, wb, rest, k):
-        """Per-unit-w move of end a for each stick (kernels/relax.py stick_correction), float32."""
+        """Per-unit-w move of end a for each stick (kernels/relax.py stick_correction, k the stick's weight),
+        float32."""
         d = xb - xa
         length = np.sqrt(np.einsum("ij,ij->i", d, d))
         w = wa + wb

@@ -35,14 +35,14 @@ import warp as wp
 from warp_verlet.scene import PlaneCollider, SphereCollider
 from warp_verlet.simulator import Simulator
 
-from .common import (arg_parser, copy_bandwidth, hanging_cloth, machine, median_spread, quiet_warp, time_frames,
-                     write_table)
+from .common import (arg_parser, copy_bandwidth, device_arrays, hanging_cloth, machine, median_spread, quiet_warp,
+                     time_frames, write_table)
 
 
 FRAMES, WARM_UP = 60, 2
 STAGES = ("integrate", "relax", "collide", "tear", "USD write")
 STAGE_SUBSTEPS = 12
-# Bytes one stick projection must move in relax_colour: its ends (vec2i), rest and stiffness, both inverse
+# Bytes one stick projection must move in relax_colour: its ends (vec2i), rest and weight, both inverse
 # masses, and both positions read and written. Caches can only lower the real traffic (neighbouring sticks
 # share particles), so bytes / time is a lower bound on the bandwidth the kernel reaches.
 RELAX_BYTES_PER_PROJECTION = 8 + 4 + 4 + 2 * 4 + 2 * 12 + 2 * 12
@@ -88,13 +88,13 @@ def stage_breakdown(sim: Simulator) -> dict[str, float]:
 
 
 def array_bytes(sim: Simulator) -> tuple[int, int]:
-    """Device bytes held in per-particle arrays and in all other arrays (the per-stick ones, and a few
-    bytes of colliders and counters). An array that two attributes share (tearing reuses the stick arrays)
-    counts once."""
+    """Device bytes held in per-particle arrays (tethers count as per-particle: one row per tethered particle)
+    and in all other arrays (the per-stick ones, and a few bytes of colliders and counters): the Model's, its
+    colliders', the State's and the solver's scratch (common.device_arrays; each array once)."""
     m = sim.model
-    arrays = {v.ptr: v for v in list(vars(sim).values()) + list(vars(m).values()) + list(vars(sim.colliders).values())
-              if isinstance(v, wp.array)}.values()
-    particle = sum(a.capacity for a in arrays if a.shape[0] in (m.particle_count, m.particle_count + 1))
+    arrays = device_arrays(sim).values()
+    rows = {m.particle_count, m.particle_count + 1, sim.solver.need.tethered or m.particle_count}
+    particle = sum(a.capacity for a in arrays if a.shape[0] in rows)
     return particle, sum(a.capacity for a in arrays) - particle
 
 

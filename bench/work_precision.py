@@ -22,12 +22,10 @@ of simulated time (a whole number of frames at the scene's fps) from its initial
   The reference is checked by re-running it at half its K and at half its S; those differences are printed
   and written: errors near them are not resolved by this reference.
 
-Per-substep parameters: the scene's ``drag`` (velocity kept per substep) and soft stick stiffnesses k < 1
-(error removed per substep) are per-substep quantities, so changing S would change the physics itself
-(drag 0.999 at S = 64 removes 98% of the velocity per second, at S = 4 21%). Unless ``--literal`` is given,
-every point therefore uses drag^(S0/S) and 1 - (1 - k)^(S0/S), with S0 the scene's own substeps: the same
-damping and softness per second (and exactly the scene's values at S = S0), so that all points, and the
-reference, simulate one physical problem. k = 1 sticks are unchanged.
+One physical problem: the scene's ``damping`` (1/s) and soft sticks' ``compliance`` (m/N, XPBD) are
+per-second and physical quantities, the same at any S and K, so every point and the reference run the scene's
+own values. The Jacobi solver has rigid sticks only: when the sweep includes it and the scene has a
+compliance, every point (and the reference) runs the scene with all sticks rigid, and the outputs say so.
 
 Newton (optional peer): when ``import newton`` works, the same cloth also runs through Newton's VBD solver
 (bench.newton_peer) at ``--newton-points`` and its points join the table and plot; otherwise the sweep
@@ -80,26 +78,28 @@ def load(path: Path, resolution: int | None = None):
     return parse_scene(data, str(path), Path(path))
 
 
-def point_scene(base, substeps: int, iterations: int, solver: str, frames: int, literal: bool = False):
-    """``base`` with S, K and the solver replaced; per-substep drag and soft stiffness rescaled to keep
-    their per-second effect unless ``literal``."""
-    if not literal:
-        base = rescale_per_substep_drag_and_stiffness(base, substeps)
+def point_scene(base, substeps: int, iterations: int, solver: str, frames: int):
+    """``base`` with S, K and the solver replaced; everything else (damping per second, compliance) as it
+    is: the physics does not depend on the budget."""
+    if solver == "jacobi" and base.compliant:
+        raise ValueError("the Jacobi solver has rigid sticks only, and this scene has a compliance: "
+                         "run it through rigid_for(scene, solvers) first")
     settings = dataclasses.replace(base.simulation, substeps=substeps, iterations=iterations, solver=solver,
                                    frames=frames)
     return dataclasses.replace(base, simulation=settings)
 
 
-def rescale_per_substep_drag_and_stiffness(base, substeps: int):
-    """``base`` with its drag and its soft stick stiffnesses (k < 1), which act per substep, changed so that
-    ``substeps`` substeps of them do per second what the scene's own substeps S0 did: drag^(S0/S) and
-    1 - (1 - k)^(S0/S) (see the module docstring). k = 1 sticks are unchanged. Only the values change: the
-    scene keeps its own substep count."""
-    ratio = base.simulation.substeps / substeps
-    settings = dataclasses.replace(base.simulation, drag=base.simulation.drag ** ratio)
-    cloths = tuple(dataclasses.replace(c, stiffness={f: k if k >= 1.0 else 1.0 - (1.0 - k) ** ratio
-                                                     for f, k in c.stiffness.items()}) for c in base.cloths)
-    return dataclasses.replace(base, simulation=settings, cloths=cloths)
+def rigid_for(scene, solvers) -> tuple[object, str | None]:
+    """The scene every point runs: ``scene`` itself, or, when ``solvers`` include Jacobi (rigid sticks only)
+    and the scene has a compliance, the scene with every stick rigid, so that all points simulate one
+    problem. Returns it and a note saying what was changed (None when nothing was)."""
+    if "jacobi" not in solvers or not scene.compliant:
+        return scene, None
+    soft = "; ".join(f"{c.name}: {', '.join(f'{f} = {a:g} m/N' for f, a in c.compliance.items())}"
+                     for c in scene.cloths if c.compliance)
+    note = (f"The Jacobi solver has rigid sticks only, so every point and the reference run this scene with its "
+            f"soft sticks made rigid (scene compliance: {soft}); sweep --solvers coloured to keep them soft.")
+    return dataclasses.replace(scene, cloths=tuple(dataclasses.replace(c, compliance={}) for c in scene.cloths)), note
 
 
 # ---------------------------------------------------------------- runs
@@ -152,8 +152,11 @@ def pareto(points: list[tuple[float, float]]) -> list[bool]:
     return out
 
 
-def run(scene, iterations, substeps, solvers, seconds=0.5, repeats=3, device="cpu", literal=False,
+def run(scene, iterations, substeps, solvers, seconds=0.5, repeats=3, device="cpu",
         ref_substeps=64, ref_iterations=128, ref_solver="coloured", newton_points=(), log=print) -> dict:
+    scene, rigid_note = rigid_for(scene, [*solvers, ref_solver])
+    if rigid_note:
+        log(rigid_note, flush=True)
     fps = scene.simulation.fps
     frames = max(1, round(seconds * fps))
     sim_seconds = frames / fps
@@ -167,7 +170,7 @@ def run(scene, iterations, substeps, solvers, seconds=0.5, repeats=3, device="cp
     for key, (s_, k_) in {"ref": (ref_substeps, ref_iterations), "half K": (ref_substeps, max(1, ref_iterations // 2)),
                           "half S": (max(1, ref_substeps // 2), ref_iterations)}.items():
         t0 = time.perf_counter()
-        sim, traj = trajectory(point_scene(scene, s_, k_, ref_solver, frames, literal), device, frames)
+        sim, traj = trajectory(point_scene(scene, s_, k_, ref_solver, frames), device, frames)
         ref_runs[key] = {"substeps": s_, "iterations": k_, "trajectory": traj, "stretch": sim.stretch()}
         log(f"  {key:6s} S = {s_:3d}, K = {k_:4d}: {time.perf_counter() - t0:.1f} s wall, stretch rms "
             f"{sim.stretch().rms:.3e}", flush=True)
@@ -192,7 +195,7 @@ def run(scene, iterations, substeps, solvers, seconds=0.5, repeats=3, device="cp
         for s_ in substeps:
             for k_ in iterations:
                 done += 1
-                m = measure_point(point_scene(scene, s_, k_, solver, frames, literal), device, frames, repeats)
+                m = measure_point(point_scene(scene, s_, k_, solver, frames), device, frames, repeats)
                 sim, times = m["sim"], m["times"]
                 wall = float(np.median(times))
                 st = sim.stretch(m["trajectory"][-1])
@@ -220,7 +223,7 @@ def run(scene, iterations, substeps, solvers, seconds=0.5, repeats=3, device="cp
         else:
             probe = Simulator(scene, device="cpu")  # for the stretch metric over the same structural sticks
             for s_, k_ in newton_points:
-                sc = point_scene(scene, s_, k_, "coloured", frames, literal)
+                sc = point_scene(scene, s_, k_, "coloured", frames)
                 r = newton_peer.run(sc, s_, k_, frames, repeats, device)
                 wall = float(np.median(r["times"]))
                 st = probe.stretch(r["trajectory"][-1])
@@ -236,12 +239,13 @@ def run(scene, iterations, substeps, solvers, seconds=0.5, repeats=3, device="cp
             import newton
 
             newton_note = (f"Newton {newton.__version__} VBD (tri_ke = tri_ka = {newton_peer.TRI_KE:g}, edge_ke = {newton_peer.EDGE_KE:g}, "
-                           "no drag): a membrane model, not sticks; its position error includes that model difference")
+                           "no damping): a membrane model, not sticks; its position error includes that model difference")
 
     for row, on in zip(rows, pareto([(r["pos_error_traj"], r["wall_per_sim_s"]) for r in rows])):
         row["pareto"] = int(on)
     return {"rows": rows, "reference": reference, "frames": frames, "sim_seconds": sim_seconds, "size": size,
-            "nondeterministic": nondeterministic, "newton": newton_note, "elapsed": time.perf_counter() - started}
+            "nondeterministic": nondeterministic, "newton": newton_note, "rigid": rigid_note,
+            "elapsed": time.perf_counter() - started}
 
 
 # ---------------------------------------------------------------- output
@@ -265,7 +269,7 @@ def _shown(r: dict) -> dict:
             "stretch max": f"{r['stretch_max']:.3g}", "Pareto": "yes" if r["pareto"] else ""}
 
 
-def write_outputs(res: dict, out: Path, title: str, command: list[str], literal: bool, plot: bool = True,
+def write_outputs(res: dict, out: Path, title: str, command: list[str], plot: bool = True,
                   device: str = "cpu") -> None:
     out.mkdir(parents=True, exist_ok=True)
     rows = res["rows"]
@@ -288,9 +292,8 @@ def write_outputs(res: dict, out: Path, title: str, command: list[str], literal:
         "the phase of the cloth's bounce at that instant. Stretch: |D - L| / L over structural sticks at the last "
         "frame.",
         "",
-        ("Per-substep drag and soft stiffness as written in the scene at every S (--literal)." if literal else
-         "Drag and soft stick stiffness rescaled per point to the scene's per-second values (drag^(S0/S), "
-         "1 - (1 - k)^(S0/S)), so every point simulates the same physical problem."),
+        "Damping (1/s) and compliance (m/N) are the scene's own at every point: they are per second and physical, "
+        "so every point simulates the same problem." + (" " + res["rigid"] if res.get("rigid") else ""),
         "",
         f"Reference: S = {ref['substeps']}, K = {ref['iterations']}, {ref['solver']}; stretch RMS "
         f"{ref['stretch_rms']:.3e}, max {ref['stretch_max']:.3e}. Convergence check (RMS distance / cloth size, "
@@ -383,7 +386,6 @@ def main(argv=None) -> int:
     p.add_argument("--ref-substeps", type=int, default=64)
     p.add_argument("--ref-iterations", type=int, default=128)
     p.add_argument("--ref-solver", choices=["coloured", "jacobi"], default="coloured")
-    p.add_argument("--literal", action="store_true", help="keep the scene's per-substep drag and stiffness at every S")
     p.add_argument("--newton-points", type=_points, nargs="*", default=[(4, 2), (4, 8)], metavar="SxK",
                    help="Newton VBD points (substeps x iterations), run when `import newton` works")
     p.add_argument("--no-plot", action="store_true")
@@ -392,11 +394,11 @@ def main(argv=None) -> int:
     quiet_warp()
     scene = load(args.scene, args.resolution)
     res = run(scene, args.iterations, args.substeps, args.solvers, args.seconds, args.repeats, args.device,
-              args.literal, args.ref_substeps, args.ref_iterations, args.ref_solver, args.newton_points)
+              args.ref_substeps, args.ref_iterations, args.ref_solver, args.newton_points)
     grid = " + ".join(f"{c.resolution[0]}x{c.resolution[1]}" for c in scene.cloths)
     title = (f"{args.scene.name} ({grid}), {res['sim_seconds']:.3f} s simulated, device {args.device}, "
              f"reference S = {args.ref_substeps}, K = {args.ref_iterations} {args.ref_solver}")
-    write_outputs(res, args.out, title, ["bench.work_precision", *argv], args.literal, plot=not args.no_plot,
+    write_outputs(res, args.out, title, ["bench.work_precision", *argv], plot=not args.no_plot,
                   device=args.device)
     front = [r for r in res["rows"] if r["pareto"]]
     print(f"Pareto front ({len(front)} points):")

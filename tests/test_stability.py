@@ -8,7 +8,11 @@ device (the CPU always, CUDA where present). Where the test is smaller than the 
 - stiff 200-sweep cloth 16^2 for 0.5 s (bench 48^2 for 1 s; the stretch bound scales with N^2);
 - fixed dt: 1000 free-fall steps and 300 hanging steps per dt (bench 3000 and 3000);
 - variable dt: 60 random jumps (bench 600); the long run 2 000 substeps on 16^2 (bench 10 000 on 32^2);
-- the 1 x N rope has 20 particles (bench 40); pins moved apart on 16^2 (bench 64^2).
+- the 1 x N rope has 20 particles (bench 40); pins moved apart on 16^2 (bench 64^2);
+- tethers: the 64^2 cloth's stiff run 0.5 s and its 4 x 8 run 1 s (bench 1 s and 2 s), the undamped tethered
+  cloth 16^2 (bench 32^2); free fall at 512 substeps per frame for 0.5 s (bench 2 s).
+
+Every stick is rigid and every cloth untethered unless the case is about softness or tethers (each says which).
 
 Every check is ``measured <= bound`` (a NaN never passes); a failure lists each failed criterion with its
 measured value, bound and where the bound comes from.
@@ -129,6 +133,21 @@ def test_long_undamped_run_gains_no_energy(device):
     assert_all_pass(cases.long_run(device))
 
 
+# ---------------------------------------------------------------------------------------------- tethers and small steps
+
+
+def test_tethers_hold_every_particle_within_reach_and_the_cloth_taut(device):
+    assert_all_pass(cases.tether_reach(device))
+
+
+def test_tethers_add_no_energy(device):
+    assert_all_pass(cases.tether_energy(device))
+
+
+def test_small_steps_stay_exact_in_free_fall_and_keep_the_pendulum_period(device):
+    assert_all_pass(cases.small_steps(device))
+
+
 def test_divergence_end_to_end(device, tmp_path):
     assert_all_pass(cases.divergence(device, out_dir=tmp_path))
 
@@ -142,15 +161,17 @@ def test_checks_fail_when_they_should():
 
 
 def test_the_summary_says_when_the_sticks_are_far_from_satisfied(tmp_path):
-    """Where the relaxation has not converged (here 1 substep x 1 iteration on a 48^2 cloth: a stick near a
-    pin ends at 8x its rest length) the run summary warns instead of presenting the result as a cloth; a
-    converged run (12^2 at 4 x 8, stretch max 0.05) does not."""
+    """Where the relaxation has not converged (here 1 substep x 1 iteration on a 48^2 cloth without tethers: a
+    stick near a pin ends at 8x its rest length, stretch 7.1) the run summary warns instead of presenting the
+    result as a cloth; a converged run (12^2 at 4 x 8, with its default tethers: stretch max 2.5e-4) does not.
+    (With its default tethers the 48^2 cloth ends at 0.39 max stretch and no warning: tethers are what make that
+    budget converge.)"""
     from conftest import make_scene
     from warp_verlet.runner import UNCONVERGED_STRETCH, run_scene
 
     pins = ["top-left", "top-right"]
-    loose = run_scene(make_scene({"frames": 20, "substeps": 1, "iterations": 1}, resolution=[48, 48], pins=pins),
-                      tmp_path / "loose.usdc", device="cpu")
+    loose = run_scene(make_scene({"frames": 20, "substeps": 1, "iterations": 1}, resolution=[48, 48], pins=pins,
+                                 tethers=False), tmp_path / "loose.usdc", device="cpu")
     assert loose.stretch_max > UNCONVERGED_STRETCH and "relaxation has not converged" in loose.format()
     tight = run_scene(make_scene({"frames": 20}, resolution=[12, 12], pins=pins), tmp_path / "tight.usdc", device="cpu")
     assert tight.stretch_max < UNCONVERGED_STRETCH and "warning" not in tight.format()

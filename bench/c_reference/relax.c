@@ -45,9 +45,10 @@ static void verlet_step(int n, float *x, float *x_inertial, float *delta, const 
     }
 }
 
-/* One Gauss-Seidel sweep over all sticks, in the given order. */
+/* One Gauss-Seidel sweep over all sticks, in the given order. weight is the stick's weight (kernels/relax.py:
+ * 1 while it holds, 0 once torn); the sticks are rigid. */
 void relax_sweep(float *x, const float *inv_mass, int m, const int32_t *ends, const float *rest,
-                 const float *stiffness)
+                 const float *weight)
 {
     for (int s = 0; s < m; ++s) {
         int i = ends[2 * s], j = ends[2 * s + 1];
@@ -58,7 +59,7 @@ void relax_sweep(float *x, const float *inv_mass, int m, const int32_t *ends, co
         float w = wi + wj;
         if (w == 0.0f || length < MIN_LENGTH)
             continue;
-        float f = stiffness[s] * (length - rest[s]) / (length * w);
+        float f = weight[s] * (length - rest[s]) / (length * w);
         float cx = dx * f, cy = dy * f, cz = dz * f;
         xi[0] += cx * wi; xi[1] += cy * wi; xi[2] += cz * wi;
         xj[0] -= cx * wj; xj[1] -= cy * wj; xj[2] -= cz * wj;
@@ -67,12 +68,12 @@ void relax_sweep(float *x, const float *inv_mass, int m, const int32_t *ends, co
 
 /* `substeps` fixed steps: Verlet, then `iterations` sweeps. The caller runs verlet_start once first. */
 void step_frame(int n, float *x, float *x_inertial, float *delta, const float *inv_mass, int m,
-                const int32_t *ends, const float *rest, const float *stiffness, int substeps, int iterations,
+                const int32_t *ends, const float *rest, const float *weight, int substeps, int iterations,
                 float velocity_scale, const float *accel_offset)
 {
     for (int step = 0; step < substeps; ++step) {
         verlet_step(n, x, x_inertial, delta, inv_mass, velocity_scale, accel_offset);
         for (int it = 0; it < iterations; ++it)
-            relax_sweep(x, inv_mass, m, ends, rest, stiffness);
+            relax_sweep(x, inv_mass, m, ends, rest, weight);
     }
 }

@@ -1,6 +1,6 @@
 """The stability cases, shared by ``tests/test_stability.py`` (small sizes) and ``bench.stability`` (large), one
-module per category: stiff, extreme_steps, loads, degenerate, over_constrained, long_runs, divergence; what
-they share (the :class:`Check` row, scenes, energy) is in ``base``.
+module per category: stiff, extreme_steps, loads, degenerate, over_constrained, long_runs, tethers (with small
+steps), divergence; what they share (the :class:`Check` row, scenes, energy) is in ``base``.
 
 Each case builds its scene, runs it and returns :class:`Check` rows: a stated pass criterion, the measured
 value, the bound and where the bound comes from. A check passes when ``measured <= bound`` (a NaN never
@@ -16,6 +16,7 @@ from .loads import heavy_gravity, tearing_gale
 from .long_runs import long_run
 from .over_constrained import pins_apart, two_places
 from .stiff import bend_grid, heavy_chain, mass_ratio, stiff_iterations
+from .tethers import small_steps, tether_energy, tether_reach
 
 CASES = {
     "stiff_iterations": stiff_iterations,
@@ -36,6 +37,9 @@ CASES = {
     "pins_apart": pins_apart,
     "two_places": two_places,
     "long_run": long_run,
+    "tether_reach": tether_reach,
+    "tether_energy": tether_energy,
+    "small_steps": small_steps,
     "divergence": divergence,
 }
 

@@ -2,10 +2,15 @@
 
 Energy, wherever it is used: kinetic from the implicit velocity v = (x - x_prev) / dt of the last step with
 per-particle masses (``mass / particles``, then ``particle_masses`` overrides; pins are fixed and carry
-none), read from the summed-form state as x - x_prev = delta + (x - x_inertial) in float64; potential
--sum m a.x with a = gravity + wind (both are uniform accelerations). E0 is the initial pose at rest.
-Relaxation is a projection and removes energy (README: "projection damping"), so with drag = 1 energy
-may fall but must not rise; elastic energy of stretched sticks is not counted (PBD has none).
+none), read from the summed-form State as x - x_prev = particle_dq + (particle_q - particle_q_inertial) in
+float64; potential -sum m a.x with a = gravity + wind (both are uniform accelerations). E0 is the initial pose
+at rest. Relaxation is a projection and removes energy (README: "projection damping"), so undamped (damping 0)
+energy may fall but must not rise; elastic energy of stretched sticks is not counted (rigid sticks have none).
+
+Scenes: every stick is rigid unless a case is about softness (then it says what compliance it uses and why),
+and every cloth has tethers off (``tethers = false``) unless the case is about them, so that the cases measure
+what they measured before tethers existed. A case's old per-substep ``drag`` d is the damping -ln(d) / dt at
+that case's own dt (:func:`damping`): the same velocity kept per substep, to float64 rounding.
 
 Float32 rounding: an ulp is ``np.spacing(float32(|x|))`` of the largest coordinate involved.
 """
@@ -20,12 +25,13 @@ import numpy as np
 from warp_verlet.scene import Scene
 from warp_verlet.simulator import Simulator
 
-from ..common import HANGING_STICKS, cloth_size, hanging_sheet, verlet_state
+from ..common import HANGING_FAMILIES, cloth_size, damping_for_drag, hanging_sheet
 from ..common import scene as bench_scene
 
 G = 9.81
 SIZES = ("test", "bench")
 SCENE_NAME = "<stability>"  # stands for the file in scene error messages (zero_area checks one word for word)
+DT = 1.0 / 240.0  # s: the scenes' fixed step (60 fps x 4 substeps) unless a case says otherwise
 
 
 # ---------------------------------------------------------------------------------------------- reporting
@@ -63,14 +69,23 @@ def count_check(case: str, criterion: str, violations: int, note: str = "") -> C
 # ---------------------------------------------------------------------------------------------- scenes and state
 
 
+def damping(drag: float, dt: float = DT) -> float:
+    """The damping rate (1/s) of an old per-substep ``drag`` at the step ``dt``: exp(-damping dt) = drag."""
+    return damping_for_drag(drag, dt)
+
+
 def scene(simulation: dict, cloths: dict | list, colliders: list | None = None) -> Scene:
-    """bench.common.scene under the stability suite's name."""
+    """bench.common.scene under the stability suite's name; a cloth that does not say otherwise gets
+    ``tethers = false``."""
+    cloths = [{"tethers": False, **c} for c in (cloths if isinstance(cloths, list) else [cloths])]
     return bench_scene(simulation, cloths, colliders, name=SCENE_NAME)
 
 
-def hanging(n: int, simulation: dict, sticks: dict | None = None, **cloth) -> Scene:
-    """The benchmark's n x n, 1 m sheet, horizontal (it swings down through 0.5 m), pinned at its two top corners."""
-    return scene(simulation, hanging_sheet(n, orientation="horizontal", sticks=sticks or HANGING_STICKS, **cloth))
+def hanging(n: int, simulation: dict, sticks: list | None = None, **cloth) -> Scene:
+    """The benchmark's n x n, 1 m sheet, horizontal (it swings down through 0.5 m), pinned at its two top corners,
+    rigid sticks (all three families unless ``sticks`` lists others), no tethers unless ``cloth`` asks."""
+    return scene(simulation, hanging_sheet(n, orientation="horizontal", sticks=list(sticks or HANGING_FAMILIES),
+                                           **cloth))
 
 
 def free_fall_error(sim: Simulator, x0: np.ndarray, t: float) -> float:
@@ -83,8 +98,7 @@ def free_cloth(n: int = 6, **simulation) -> Scene:
     """An unpinned n x n, 0.5 m cloth at the origin: in free fall its sticks stay at rest length, so every
     particle follows x0 + a t^2 / 2 (the integrator is exact for constant acceleration, for any dt)."""
     return scene({"iterations": 8, **simulation},
-                 {"name": "free", "resolution": [n, n], "size": [0.5, 0.5],
-                  "sticks": {"structural": 1.0, "shear": 1.0}})
+                 {"name": "free", "resolution": [n, n], "size": [0.5, 0.5], "sticks": ["structural", "shear"]})
 
 
 def particle_masses(sc: Scene) -> np.ndarray:
@@ -99,8 +113,13 @@ def particle_masses(sc: Scene) -> np.ndarray:
 
 
 def implicit_velocity(sim: Simulator, dt: float) -> np.ndarray:
-    """(x - x_prev) / dt in float64, from the summed-form state: x - x_prev = delta + (x - x_inertial)."""
-    x, xi, d = (a.numpy().astype(np.float64) for a in verlet_state(sim))
+    """(x - x_prev) / dt in float64, from the summed-form State: x - x_prev = particle_dq + (particle_q -
+    particle_q_inertial). Before the first step particle_dq holds the initial velocity (m/s) itself."""
+    state = sim.state
+    if state.dt_prev is None:
+        return state.particle_dq.numpy().astype(np.float64)
+    x, xi, d = (a.numpy().astype(np.float64) for a in (state.particle_q, state.particle_q_inertial,
+                                                       state.particle_dq))
     return (d + (x - xi)) / dt
 
 
@@ -129,7 +148,7 @@ class EnergyLog:
         return float(-np.sum(self.m * (x @ self.a)))
 
     def sample(self, dt: float) -> None:
-        x = verlet_state(self.sim).x.numpy().astype(np.float64)
+        x = self.sim.state.particle_q.numpy().astype(np.float64)
         self.nonfinite += nonfinite(x)
         v = implicit_velocity(self.sim, dt)[self.free]
         self.ke.append(float(0.5 * np.sum(self.m[self.free] * np.sum(v * v, axis=1))))
@@ -161,7 +180,7 @@ class EnergyLog:
         energy at most (1 + tolerance) x the potential energy released."""
         scale = self.scale() if fixed_scale else self.released
         name = "M|a|H" if fixed_scale else "released PE (E0 - min PE)"
-        basis = basis or (f"physics: drag 1 and a dissipative projection; {tolerance:g} for the O(dt) bias of "
+        basis = basis or (f"physics: damping 0 and a dissipative projection; {tolerance:g} for the O(dt) bias of "
                           "(x - x_prev)/dt")
         note = (f"drift at end {self.drift(scale):+.3e} of {name}; "
                 f"released PE = {self.released / self.scale():.3f} M|a|H")

@@ -7,7 +7,6 @@ import numpy as np
 from warp_verlet.errors import WarpVerletError
 from warp_verlet.simulator import Simulator
 
-from ..common import verlet_state
 from .base import (G, Check, EnergyLog, count_check, free_cloth, free_fall_error, hanging, run_with_energy,
                    ulp)
 
@@ -19,7 +18,7 @@ def fixed_steps(device: str = "cpu", size: str = "test", dts: tuple = STEP_RANGE
     """sim.step(dt) with fixed dt from 1e-5 s to 0.1 s. (1) A free (unpinned) cloth: its centre of mass falls
     exactly a t^2 / 2 (internal corrections are equal and opposite, the update is exact for constant
     acceleration), checked at the end of the run, once it has fallen 8e3 ulps or more. (2) A hanging cloth,
-    drag 1: finite and no energy gain (normalised by M|a|H: at 1e-5 s it falls only ~1e-4 m)."""
+    undamped: finite and no energy gain (normalised by M|a|H: at 1e-5 s it falls only ~1e-4 m)."""
     checks = []
     for dt in dts:
         case = f"steps: fixed dt = {dt:g} s"
@@ -43,7 +42,7 @@ def fixed_steps(device: str = "cpu", size: str = "test", dts: tuple = STEP_RANGE
                             f"{0.5 * G * t * t:.3g} m"))
         log = run_with_energy(Simulator(hanging(12, {"iterations": 8}), device), 300 if size == "test" else 3000, dt=dt)
         checks += log.checks(case, tolerance=1e-3, fixed_scale=True,
-                             basis="physics (drag 1); 1e-3 M|a|H for the O(dt) velocity estimate")[:2]
+                             basis="physics (damping 0); 1e-3 M|a|H for the O(dt) velocity estimate")[:2]
     return checks
 
 
@@ -75,14 +74,15 @@ def step_walk(rng, count: int, smallest: float, largest: float = 0.1, r_max: flo
 
 
 def clamp_invariant_violation(before: tuple, after_delta: np.ndarray, free: np.ndarray, dt: float, dt_prev: float,
-                              a: np.ndarray, r_max: float, drag: float) -> float:
+                              a: np.ndarray, r_max: float, kept: float) -> float:
     """What clamping guarantees, for every free particle and step: the carried velocity term of the step,
-    step - a h (h + h') / 2, is the previous move scaled by drag * min(h / h', r_max), so it is never more
-    than drag * r_max x the previous move. Returns the largest excess over that (<= rounding when held)."""
+    step - a h (h + h') / 2, is the previous move scaled by kept * min(h / h', r_max) (kept = exp(-damping h),
+    the velocity damping keeps), so it is never more than kept * r_max x the previous move. Returns the largest
+    excess over that (<= rounding when held)."""
     x, xi, d = before
     move = (d + (x - xi))[free]
     carried = after_delta[free] - a * (dt * (dt + dt_prev) * 0.5)
-    limit = drag * r_max * np.linalg.norm(move, axis=1)
+    limit = kept * r_max * np.linalg.norm(move, axis=1)
     rounding = 4 * (ulp(after_delta[free]) + ulp(move))
     return float(np.max(np.linalg.norm(carried, axis=1) - limit - rounding))
 
@@ -117,11 +117,13 @@ def variable_steps(device: str = "cpu", size: str = "test") -> list[Check]:
     free = sim.model.inv_mass.numpy() > 0
     t, faster, excess, dt_prev = 0.0, -np.inf, -np.inf, None  # faster: in ulps per step, like the ramp
     for n, dt in enumerate(jumps, 1):
-        before = tuple(arr.numpy().astype(np.float64) for arr in verlet_state(sim))
+        state = sim.state
+        before = tuple(arr.numpy().astype(np.float64)
+                       for arr in (state.particle_q, state.particle_q_inertial, state.particle_dq))
         sim.step(dt)
         t += dt
         if dt_prev is not None:
-            after = verlet_state(sim).delta.numpy().astype(np.float64)
+            after = state.particle_dq.numpy().astype(np.float64)
             excess = max(excess, clamp_invariant_violation(before, after, free, dt, dt_prev, a, 2.0, 1.0))
         dt_prev = dt
         fall = -(sim.positions().astype(np.float64) - x0)[:, 1]
@@ -135,13 +137,13 @@ def variable_steps(device: str = "cpu", size: str = "test") -> list[Check]:
 
 
 def dt_drop_energy(device: str = "cpu", size: str = "test") -> list[Check]:
-    """A hanging cloth (drag 1) whose step shrinks. The relaxation leaves a residual stretch after each step;
+    """A hanging cloth (undamped) whose step shrinks. The relaxation leaves a residual stretch after each step;
     a step much shorter than the last removes it within that step, and Verlet turns the move into velocity
     residual / dt (a drop from 1/240 s to 1e-5 s gave 10x the kinetic energy gravity had released), so the
     simulator refuses a step that shrinks by more than max_dt_ratio at once. (1) That drop is refused with a
     clear error. (2) Steps from a walk that jumps up by up to 1e3 and shrinks by at most 2 per step, down to
     the float32 limit: kinetic energy never above the potential energy released, total energy never above
-    its start (physics, drag 1)."""
+    its start (physics, damping 0)."""
     sim = Simulator(hanging(12, {"iterations": 8}), device)
     run_with_energy(sim, 240)
     checks = [refused("steps: dt drop 1/240 s -> 5e-4 s", "a step shrinking 8x at once is refused",
@@ -153,7 +155,7 @@ def dt_drop_energy(device: str = "cpu", size: str = "test") -> list[Check]:
         sim.step(dt)
         log.sample(dt)
     return checks + log.checks(case, tolerance=0.02, fixed_scale=True,
-                               basis="physics (drag 1); 2e-2 M|a|H for the O(dt) velocity estimate at 0.1 s")
+                               basis="physics (damping 0); 2e-2 M|a|H for the O(dt) velocity estimate at 0.1 s")
 
 
 def _advance_run(frame_times: list[float], device: str, max_frame_time: float = 0.1):

@@ -24,15 +24,23 @@ def heavy_gravity(device: str = "cpu", size: str = "test") -> list[Check]:
 def tearing_gale(device: str = "cpu", size: str = "test") -> list[Check]:
     """Every other particle pinned (a checkerboard), structural sticks only, so every stick joins a pin to a
     free particle; a wind of |w| = 2.2e4 m/s^2 moves a free particle w dt^2 = 0.39 m per substep, against a
-    spacing of 0.1 m, and stiffness 0.5 leaves half a stick's error after the sweeps: every stick must tear
-    (threshold 1.5). Afterwards no stick acts, so each free particle is in free fall under gravity + wind:
-    its second differences x[n+1] - 2 x[n] + x[n-1] equal (g + w) dt^2 to float32 rounding."""
+    spacing of L = 0.1 m, and every stick must tear (threshold 1.5). The sticks are soft, compliance
+    alpha = 4 dt^2 / m (m the particle's mass; alpha~ = 4 / m: one projection removes 1/5 of a stick's error),
+    so that no intact equilibrium exists: a stick of stiffness 1 / alpha pushes or pulls with at most L / alpha
+    until it tears (compressed to 0, or stretched by 0.5 L), so the at most 4 sticks of a particle hold at most
+    4 L / alpha = m L / dt^2, less than the wind's m |w| since |w| dt^2 = 0.39 m > L; the spring the XPBD sweeps
+    converge to cannot hold the particle, which accelerates until its sticks tear. Afterwards no stick acts, so
+    each free particle is in free fall under gravity + wind: its second differences x[n+1] - 2 x[n] + x[n-1]
+    equal (g + w) dt^2 to float32 rounding."""
     n = 8 if size == "test" else 64
     case = f"loads: gale tears every stick ({n}x{n})"
     pins = [[r, c] for r in range(n) for c in range(n) if (r + c) % 2 == 0]
+    mass, dt = 1.0, 1.0 / 240.0
+    alpha = 4.0 * dt * dt / (mass / (n * n))  # m/N
     sc = scene({"iterations": 8, "wind": [2.0e4, 0.0, 1.0e4]},
-               {"name": "net", "resolution": [n, n], "size": [0.1 * (n - 1)] * 2, "pins": pins,
-                "sticks": {"structural": 0.5}, "tear_threshold": 1.5})
+               {"name": "net", "resolution": [n, n], "size": [0.1 * (n - 1)] * 2, "pins": pins, "mass": mass,
+                "sticks": ["structural"], "compliance": {"structural": alpha}, "tear_threshold": 1.5})
+    assert sc.simulation.dt == dt
     sim = Simulator(sc, device)
     torn_at = None
     for step in range(1, 41):
@@ -52,7 +60,8 @@ def tearing_gale(device: str = "cpu", size: str = "test") -> list[Check]:
     error = float(np.abs(second - a).max() / (4 * ulp(y)))
     return [
         Check(case, "sticks not torn after 40 substeps", float(sim.model.stick_count - sim.torn_count()), 0.0,
-              "physics: w dt^2 > 2 x 0.5 x spacing", f"all {sim.model.stick_count} torn at substep {torn_at}"),
+              "physics: |w| dt^2 > spacing, so 4 soft sticks cannot hold a particle (docstring)",
+              f"all {sim.model.stick_count} torn at substep {torn_at}; alpha = {alpha:.3g} m/N"),
         count_check(case, "particles lost or added", abs(sim.positions().shape[0] - n * n)),
         Check(case, "free fall after tearing: max |second difference - a dt^2| / (4 ulp)", error, 1.0,
               "float32 rounding of three positions", f"a dt^2 = {np.linalg.norm(a):.3f} m"),

@@ -6,7 +6,7 @@ import numpy as np
 
 from warp_verlet.simulator import Simulator
 
-from ..common import HANGING_STICKS, set_positions
+from ..common import HANGING_FAMILIES
 from .base import Check, count_check, nonfinite, scene
 
 
@@ -21,11 +21,11 @@ def pins_apart(device: str = "cpu", size: str = "test") -> list[Check]:
     reach = {}
     for shift in (0.0, 2.0):
         sc = scene({"iterations": 8}, {"name": "curtain", "resolution": [n, n], "size": [1.0, 1.0],
-                                       "pins": ["top-left", "top-right"], "sticks": HANGING_STICKS})
+                                       "pins": ["top-left", "top-right"], "sticks": HANGING_FAMILIES})
         sim = Simulator(sc, device)
         x = sim.positions()
         x[n - 1] += np.float32([shift, 0.0, 0.0])
-        set_positions(sim, x)
+        sim.state.set_positions(x)
         pins = x[[0, n - 1]].astype(np.float64)
         lo, hi = pins.min(axis=0), pins.max(axis=0)
         outside, bad = -np.inf, 0
@@ -42,34 +42,62 @@ def pins_apart(device: str = "cpu", size: str = "test") -> list[Check]:
                   "the simulator does not say so)")]
 
 
+def xpbd_sweeps(u: float, L: float, d: float, w: float, alpha_tilde: float, sweeps: int, a_first: bool) -> float:
+    """The middle particle's position after ``sweeps`` coloured XPBD sweeps from ``u`` (kernels/relax.py, in
+    float64 along the line): stick A ties it to the pin at 0, stick B to the pin at d, both of rest length L;
+    each projection moves it by w e / (w + alpha~) with e = C - alpha~ mu, and the tensions mu start at 0 in
+    every substep. alpha~ = 0 is the rigid projection."""
+    mu = [0.0, 0.0]
+    for _ in range(sweeps):
+        for stick in ((0, 1) if a_first else (1, 0)):
+            if stick == 0:
+                e = (u - L) - alpha_tilde * mu[0]
+                mu[0] += e / (w + alpha_tilde)
+                u -= w * e / (w + alpha_tilde)
+            else:
+                e = (d - u - L) - alpha_tilde * mu[1]
+                mu[1] += e / (w + alpha_tilde)
+                u += w * e / (w + alpha_tilde)
+    return u
+
+
 def two_places(device: str = "cpu", size: str = "test") -> list[Check]:
     """A particle between two pinned neighbours whose pins are moved apart, d = 3 L, no gravity: both sticks
-    cannot hold. Coloured Gauss-Seidel projects stick A (colour first) then stick B by k' each, so along the
-    line the middle particle at u (from A) maps to u1 = u - k'(u - L), then u2 = u1 + k'(d - u1 - L). The
-    fixed point is u* = ((1 - k') L + d - L) / (2 - k'): stick A keeps error (d - 2L) / (2 - k'), stick B
-    (1 - k') (d - 2L) / (2 - k'). At k' = 1 the stick projected last is exact and the other takes all of
-    it; Jacobi averages the two corrections and splits it evenly (u* = d / 2). The run must reach that fixed
-    point, never leave [L, d - L], and sim.stretch() must report the unsatisfied error."""
+    cannot hold. The K sweeps of one substep map the particle's predicted position u affinely, u -> a u + b, and
+    a particle at rest must sit at the fixed point u* = b / (1 - a). Rigid sticks, coloured Gauss-Seidel: the
+    stick projected last is exact and the other takes all of the error (u* = d - L when stick A, from the pin at
+    0, comes first; a = 0). Jacobi averages the two corrections and splits it evenly (u* = d / 2). Soft sticks
+    (XPBD compliance alpha, alpha~ = alpha / dt^2, the tensions reset each substep): a and b follow exactly from
+    the kernel's update (:func:`xpbd_sweeps`, float64), and u* lies between the rigid d - L and the balance of
+    two equal springs, d / 2, which the sweeps converge to (measured: alpha~ = w / 5 gives 0.765 m, alpha~ = w
+    0.750006 m). The run must reach that fixed point, never leave [L, d - L], and sim.stretch() must report the
+    unsatisfied error. Compliances are given as alpha~ / w, w the particle's inverse mass: alpha~ = w is the
+    compliance at which one projection removes half of a stick's error."""
     checks = []
     L, d = 0.5, 1.5
-    runs = [("coloured", 1.0), ("coloured", 0.5), ("jacobi", 1.0)]
+    runs = [("coloured", 0.0), ("coloured", 0.2), ("coloured", 1.0), ("jacobi", 0.0)]
     if size == "bench":
-        runs += [("coloured", 0.1), ("jacobi", 0.5)]
-    for solver, k in runs:
-        case = f"over-constrained: one particle pinned two ways ({solver}, k = {k})"
+        runs += [("coloured", 10.0)]
+    for solver, ratio in runs:
         iterations = 8
-        sim = Simulator(scene({"iterations": iterations, "gravity": [0.0, 0.0, 0.0], "solver": solver},
-                              {"name": "rope", "resolution": [1, 3], "size": [0.0, 2 * L], "pins": [0, 2],
-                               "sticks": {"structural": k}}), device)
+        cloth = {"name": "rope", "resolution": [1, 3], "size": [0.0, 2 * L], "pins": [0, 2], "sticks": ["structural"]}
+        probe = Simulator(scene({"iterations": iterations, "gravity": [0.0, 0.0, 0.0]}, cloth), "cpu")
+        w, dt = float(probe.model.host_inv_mass[1]), probe.settings.dt
+        alpha = ratio * w * dt * dt  # m/N
+        if alpha:
+            cloth["compliance"] = {"structural": alpha}
+        label = f"alpha = {alpha:.3g} m/N (alpha~ = {ratio:g} w)" if alpha else "rigid"
+        case = f"over-constrained: one particle pinned two ways ({solver}, {label})"
+        sim = Simulator(scene({"iterations": iterations, "gravity": [0.0, 0.0, 0.0], "solver": solver}, cloth),
+                        device)
         x = sim.positions()
         x[2, 0] = d
-        set_positions(sim, x)
-        kp = 1.0 - (1.0 - k) ** (1.0 / iterations)
+        sim.state.set_positions(x)
         if solver == "coloured":
-            first = tuple(sim.model.host_sticks[0])  # sticks are stored in launch (colour) order
-            u_star = ((1 - kp) * L + d - L) / (2 - kp)
-            if first == (1, 2):  # stick B first: mirror
-                u_star = d - u_star
+            a_first = tuple(sim.model.host_sticks[0]) == (0, 1)  # sticks are stored in launch (colour) order
+            b = xpbd_sweeps(0.0, L, d, w, alpha / (dt * dt), iterations, a_first)
+            a = xpbd_sweeps(1.0, L, d, w, alpha / (dt * dt), iterations, a_first) - b
+            u_star = b / (1.0 - a)
         else:
             u_star = d / 2
         excursion = -np.inf

@@ -1,4 +1,4 @@
-"""Stiff cases: stiffness 1 with many sweeps, bend sticks on a large grid, mass ratios of 1e4."""
+"""Stiff cases: rigid sticks with many sweeps, bend sticks on a large grid, mass ratios of 1e4."""
 
 from __future__ import annotations
 
@@ -8,18 +8,19 @@ import numpy as np
 
 from warp_verlet.simulator import Simulator
 
-from .base import G, Check, count_check, hanging, nonfinite, run_with_energy, scene
+from .base import G, Check, count_check, damping, hanging, nonfinite, run_with_energy, scene
 
 
 def stiff_iterations(device: str = "cpu", size: str = "test") -> list[Check]:
-    """Stiffness 1 and 200 sweeps: a hanging cloth settled (drag 0.95 per substep) must be nearly
-    inextensible (the exact answer has stretch 0), and far less stretched than with 8 sweeps."""
-    case = "stiff: k = 1, 200 iterations"
+    """Rigid sticks and 200 sweeps: a hanging cloth settled (damping 12.3 /s: 0.95 of the velocity kept per
+    substep) must be nearly inextensible (the exact answer has stretch 0), and far less stretched than with 8
+    sweeps."""
+    case = "stiff: rigid, 200 iterations"
     n, frames = (16, 30) if size == "test" else (48, 60)
-    sticks = {"structural": 1.0, "shear": 1.0}
+    sticks = ["structural", "shear"]
     stretch, bad = {}, 0
     for iterations in (8, 200):
-        sim = Simulator(hanging(n, {"iterations": iterations, "drag": 0.95}, sticks), device)
+        sim = Simulator(hanging(n, {"iterations": iterations, "damping": damping(0.95)}, sticks), device)
         for _ in range(frames):
             sim.step_frame()
         points = sim.positions()
@@ -39,12 +40,12 @@ def stiff_iterations(device: str = "cpu", size: str = "test") -> list[Check]:
 
 
 def bend_grid(device: str = "cpu", size: str = "test") -> list[Check]:
-    """Structural, shear and bend sticks all at stiffness 1 on a large grid (256^2 in the bench, 48^2 in the
-    test), undamped for 1 s: finite, and energy never grows (the 256^2 cloth is badly stretched at 8
-    sweeps, README, but stretch is not this case's criterion)."""
+    """Structural, shear and bend sticks all rigid on a large grid (256^2 in the bench, 48^2 in the test),
+    undamped for 1 s: finite, and energy never grows (the 256^2 cloth is badly stretched at 8 sweeps, README,
+    but stretch is not this case's criterion)."""
     n = 48 if size == "test" else 256
     case = f"stiff: bend sticks on {n}x{n}"
-    sim = Simulator(hanging(n, {"iterations": 8, "drag": 1.0}, {"structural": 1.0, "shear": 1.0, "bend": 1.0}), device)
+    sim = Simulator(hanging(n, {"iterations": 8, "damping": 0.0}, ["structural", "shear", "bend"]), device)
     log = run_with_energy(sim, 240, every=1 if size == "test" else 4)
     checks = log.checks(case)
     return [replace(c, note=f"{c.note}; stretch max {sim.stretch().max:.3g}") if c.note else c for c in checks]
@@ -61,28 +62,30 @@ def mass_ratio(device: str = "cpu", size: str = "test") -> list[Check]:
     case = "stiff: mass ratio 1e4 (checkerboard)"
     n = 16 if size == "test" else 64
     masses = checkerboard_masses(n, 1e-2, 1e-6)
-    sticks = {"structural": 1.0, "shear": 1.0}
-    sim = Simulator(hanging(n, {"iterations": 8, "drag": 1.0}, sticks, particle_masses=masses), device)
+    sticks = ["structural", "shear"]
+    sim = Simulator(hanging(n, {"iterations": 8, "damping": 0.0}, sticks, particle_masses=masses), device)
     checks = run_with_energy(sim, 480).checks(case)
-    settled = Simulator(hanging(n, {"iterations": 8, "drag": 0.95}, sticks, particle_masses=masses), device)
+    settled = Simulator(hanging(n, {"iterations": 8, "damping": damping(0.95)}, sticks, particle_masses=masses),
+                        device)
     for _ in range(60):
         settled.step_frame()
     stretch = settled.stretch().max
-    uniform = Simulator(hanging(n, {"iterations": 8, "drag": 0.95}, sticks), device)
+    uniform = Simulator(hanging(n, {"iterations": 8, "damping": damping(0.95)}, sticks), device)
     for _ in range(60):
         uniform.step_frame()
     return checks + [
         # A light particle between two heavy ones is moved by nearly the whole correction of both sticks,
         # so the heavy lattice is held by corrections 1e-4 as large: it hangs very stretched. The bound
         # is from measurement, to catch it getting worse (measured 1.7 at 16^2, 2.7 at 64^2).
-        Check(case, "max structural stretch after settling (1 s, drag 0.95)", stretch, 5.0,
+        Check(case, "max structural stretch after settling (1 s, 0.95 of the velocity kept per substep)", stretch, 5.0,
               "measured 1.7 (16^2), 2.7 (64^2), x1.9", f"uniform mass: {uniform.stretch().max:.3g}"),
     ]
 
 
 def heavy_chain(device: str = "cpu", size: str = "test") -> list[Check]:
     """A 20-particle, 1 m rope pinned at one end, its last particle 1e4 x heavier than the others, released
-    horizontal and settled (drag 0.99). The analytic hanging length is L = 1 m (inextensible). Position-based
+    horizontal and settled (damping 4.85 /s: 0.98 of the velocity kept per substep). The analytic hanging length
+    is L = 1 m (inextensible). Position-based
     relaxation stretches it: each sweep moves the heavy end by m_l / (m_h + m_l) of the last stick's error,
     so holding it against the g dt^2 it gains per substep takes an error e = g dt^2 (1 + m_h / m_l) / K per
     stick, about (N - 1) e over the chain: the PBD hanging length is L + (N - 1) e, -> L as K grows."""
@@ -91,11 +94,11 @@ def heavy_chain(device: str = "cpu", size: str = "test") -> list[Check]:
     n, length, light = 20, 1.0, 1e-3
     for ratio, iterations in runs:
         case = f"stiff: heavy end ({ratio:.0e} x) on a light chain, {iterations} iterations"
-        sc = scene({"iterations": iterations, "drag": 0.98},
+        sc = scene({"iterations": iterations, "damping": damping(0.98)},
                    {"name": "chain", "resolution": [1, n], "size": [0.0, length], "mass": light * n,
                     "pins": ["top-left"], "particle_masses": [[0, n - 1, light * ratio]]})
         sim = Simulator(sc, device)
-        for _ in range(480):  # 8 s: the swing (period ~2.5 s) decays e-fold in ~50 substeps of drag
+        for _ in range(480):  # 8 s: the swing (period ~2.5 s) decays e-fold in ~50 substeps of damping
             sim.step_frame()
         p = sim.positions().astype(np.float64)
         dt = sim.settings.dt
@@ -111,7 +114,7 @@ def heavy_chain(device: str = "cpu", size: str = "test") -> list[Check]:
                   f"end at y = {p[-1, 1]:.4f} m; L = {length} m, estimate L + {estimate:.4f} m"),
             Check(case, "chain length / (L + 2 x estimate)", chain / (length + 2 * estimate), 1.0,
                   "analytic estimate, x2", f"chain {chain:.4f} m"),
-            # 8 s of drag 0.98 per substep leave e^-40 of the swing; measured 1e-8 - 3e-8.
+            # 8 s of 0.98 per substep leave e^-40 of the swing; measured 1e-8 - 3e-8.
             Check(case, "heavy end horizontal offset / L (settled straight down)", abs(p[-1, 0] - p[0, 0]) / length,
                   1e-5, "physics: a settled hanging chain is vertical; 1e-5 for float32"),
         ]
