@@ -13,9 +13,9 @@ from .base import Check, count_check, nonfinite, scene
 def pins_apart(device: str = "cpu", size: str = "test") -> list[Check]:
     """The top-right pin moved 2 m further right after construction (pins 3 m apart; the top edge is 1 m
     long): nothing can satisfy the sticks. Undamped for 2 s, the cloth stays finite and every particle stays
-    inside the pins' bounding box grown by twice the cloth size (1 m). Once is not enough for a cloth of
-    finite stiffness: the same cloth with its pins in place already swings 1.007 m (16^2) to 1.157 m (64^2)
-    below them (8 sweeps); over-constrained it reaches 0.88 m and 1.006 m."""
+    inside the pins' bounding box grown by twice the cloth size (1 m). Once is not enough for rigid sticks
+    relaxed by 8 sweeps, which stretch: the same cloth with its pins in place already swings 1.003 m (16^2) to
+    1.089 m (64^2) below them; over-constrained it reaches 0.74 m and 1.003 m."""
     n = 16 if size == "test" else 64
     case = f"over-constrained: pins 3 m apart ({n}x{n}, 1 m cloth)"
     reach = {}
