@@ -35,10 +35,6 @@ class ColliderModel:
                 self.key_times = wp.array([t for s in self.spheres for t, _ in s.keyframes], dtype=float)
                 self.key_centres = wp.array([c for s in self.spheres for _, c in s.keyframes], dtype=wp.vec3)
 
-    @property
-    def any(self) -> bool:
-        return bool(self.planes or self.spheres)
-
     def moving_centres(self, state) -> np.ndarray:
         """Centres of the moving spheres only, in scene order: what the cache samples per frame. Costs no
         device copy when nothing moves."""

@@ -89,11 +89,6 @@ class VerletSolver:
                 self._bound[state] = [(s.name, s.bind(self.model, state, self)) for s in STAGES if s.needed(self.need)]
         return [(name, bound.run) for name, bound in self._bound[state]]
 
-    def relax_phases(self, state: State) -> list[list[Task | None]]:
-        """One sweep's phases, each one task per CPU thread (None where a thread has nothing)."""
-        self.bind(state)
-        return next((bound.phases for name, bound in self._bound[state] if name == "relax"), [])
-
     # ------------------------------------------------------------------ limits
     def _smallest_resolved_dt(self) -> float:
         """The smallest dt whose gravity-and-wind step |a| dt^2 is at least 4 float32 spacings of the scene's
