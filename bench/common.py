@@ -89,6 +89,7 @@ def device_arrays(sim) -> dict[int, wp.array]:
         return [a for a in vars(obj).values() if isinstance(a, wp.array)]
 
     found = arrays_of(sim.model) + arrays_of(sim.model.colliders) + list(sim.state.arrays().values())
+    found += [a for level in sim.model.levels for a in arrays_of(level)]
     found += list(sim.solver._scratch.values())
     return {a.ptr: a for a in found}
 

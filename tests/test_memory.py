@@ -38,6 +38,7 @@ def simulator_bytes(sim: Simulator) -> int:
     # clone() and assign() copy what arrays() lists: every array a State holds must be there.
     assert {a.ptr for a in device_arrays(state)} == {a.ptr for a in state.arrays().values()}
     arrays = device_arrays(sim.model) + device_arrays(sim.model.colliders) + list(state.arrays().values())
+    arrays += [a for level in sim.model.levels for a in device_arrays(level)]
     arrays += list(sim.solver._scratch.values())
     return sum(a.capacity for a in {a.ptr: a for a in arrays}.values())
 
@@ -61,6 +62,8 @@ CASES = {
                           "tether_scale": 2.0}),
     "compliance": ({}, {"compliance": {"bend": 1e-3}}),
     "compliance-tear": ({}, {"compliance": {"shear": 1e-4, "bend": 1e-3}, "tear_threshold": 1.5}),
+    "multilevel": ({"multilevel": True}, {"pins": ["top-left", "top-right"]}),
+    "jacobi-multilevel": ({"solver": "jacobi", "multilevel": True}, {}),
     "planes": ({}, {}, [GROUND, WALL]),
     "still-sphere": ({}, {}, [BALL]),
     "moving-sphere": ({}, {}, [SWEEP, GROUND]),

@@ -21,6 +21,7 @@ import warp as wp
 
 from .colliders import ColliderModel
 from .colouring import Colouring, check_partition, graph_colouring, grid_colouring
+from .multilevel import grid_hierarchy, merge_levels
 from .tethers import TetherTable, build_tethers
 from .scene import Scene
 from .faces import edge_faces
@@ -47,6 +48,18 @@ class ClothSlot:
         return slice(self.first, self.first + self.count)
 
 
+@dataclass(frozen=True)
+class DeviceLevel:
+    """One level of the multilevel hierarchy on the device (see warp_verlet/multilevel.Level)."""
+
+    ends: wp.array  # (Mc,) vec2i
+    limit: wp.array  # (Mc,) float32, m
+    colour_ranges: tuple[tuple[int, int], ...]
+    child: wp.array  # (C,) int32
+    parents: wp.array  # (C,) vec4i
+    weights: wp.array  # (C,) vec4 float32
+
+
 class Model:
     """Device arrays (read by the kernels, never written) and the host copies the metrics need.
 
@@ -59,7 +72,8 @@ class Model:
     tear): ``tear_ends`` and ``tear_length`` (E,), one entry per stick (coloured) or per stick end (Jacobi).
     Tethers (only when a cloth uses them; T tethered particles, K pins each): ``tether_particle`` (T,) int32,
     ``tether_pin`` (T, K) int32 (-1: none) and ``tether_length`` (T, K) float32 m, the rest-pose lengths a
-    State's copy starts from when a cloth can tear.
+    State's copy starts from when a cloth can tear. Multilevel (only when the scene asks): ``levels``, one
+    DeviceLevel per level, coarsest first.
     """
 
     def __init__(self, scene: Scene, device, colouring: str = "auto"):
@@ -127,6 +141,7 @@ class Model:
         if self.tears:
             self._build_tearing(tear_length, grid_class, anchor, owner, device, csr_stick, csr_ends)
         self.colliders = ColliderModel(scene, device)
+        self.levels = self._build_levels(scene, device) if scene.simulation.multilevel else []
         self.tether_table: TetherTable | None = build_tethers(self.cloths, scene.cloths, scene.tethers_per_particle)
         if self.tether_table is not None:
             table = self.tether_table
@@ -134,6 +149,15 @@ class Model:
             self.tether_pin = wp.array2d(table.pin, dtype=int, device=device)
             self.tether_length = wp.array2d(table.length, dtype=float, device=device)
         self._frozen = True
+
+    def _build_levels(self, scene: Scene, device) -> list[DeviceLevel]:
+        per_cloth = [grid_hierarchy(s.topology.rows, s.topology.cols, s.topology.positions, s.first) for s in self.cloths]
+        return [DeviceLevel(
+            ends=wp.array(level.ends, dtype=wp.vec2i, device=device),
+            limit=wp.array(level.limit, dtype=float, device=device), colour_ranges=level.colour_ranges,
+            child=wp.array(level.child, dtype=int, device=device),
+            parents=wp.array(level.parents, dtype=wp.vec4i, device=device),
+            weights=wp.array(level.weights, dtype=wp.vec4, device=device)) for level in merge_levels(per_cloth)]
 
     def __setattr__(self, name, value):
         if getattr(self, "_frozen", False):

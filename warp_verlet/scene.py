@@ -51,6 +51,8 @@ class SimulationSettings:
     wind: tuple[float, float, float] = (0.0, 0.0, 0.0)
     damping: float = 0.0  # 1/s: the implicit velocity decays as exp(-damping t), whatever the substeps
     solver: str = "coloured"
+    multilevel: bool = False  # a coarse-to-fine pass over each grid's hierarchy before every substep's sweeps
+    multilevel_sweeps: int = 1  # sweeps per coarse level per substep
     max_dt_ratio: float = 2.0
     max_frame_time: float = 0.1
     position_bound: float = 1.0e4
@@ -174,6 +176,16 @@ class Scene:
     @property
     def tethers_per_particle(self) -> int:
         return max((c.tethers_per_particle for c in self.cloths), default=0)
+
+    @property
+    def multilevel_counts(self) -> tuple[int, int]:
+        """(coarse sticks, children) of the multilevel hierarchy over all cloths; (0, 0) when it is off."""
+        if not self.simulation.multilevel:
+            return 0, 0
+        from .multilevel import hierarchy_counts
+
+        counts = [hierarchy_counts(*c.resolution) for c in self.cloths]
+        return sum(s for s, _ in counts), sum(n for _, n in counts)
 
     @property
     def compliant(self) -> bool:
@@ -344,6 +356,8 @@ def _read_simulation(file: str, data: Any) -> SimulationSettings:
         wind=t.take("wind", vector(3, _any_real), d.wind),
         damping=t.take("damping", real(0.0), d.damping),
         solver=t.take("solver", choice(SOLVERS), d.solver),
+        multilevel=t.take("multilevel", _boolean, d.multilevel),
+        multilevel_sweeps=t.take("multilevel_sweeps", integer(1, 1000), d.multilevel_sweeps),
         max_dt_ratio=t.take("max_dt_ratio", real(1.0), d.max_dt_ratio),
         max_frame_time=t.take("max_frame_time", real(0.0, lo_open=True), d.max_frame_time),
         position_bound=t.take("position_bound", real(0.0, lo_open=True), d.position_bound),
@@ -577,6 +591,16 @@ def parse_scene(data: dict, file: str = "<scene>", scene_path: Path | None = Non
                 raise SceneError(file, f"cloth[{i}].compliance", 'soft sticks need the coloured solver (XPBD '
                                  'accumulates each stick\'s tension in order); remove compliance or set '
                                  'simulation.solver = "coloured"')
+    if simulation.multilevel:
+        for i, spec in enumerate(cloth_specs):
+            if spec.tear_threshold is not None:
+                raise SceneError(file, "simulation.multilevel", f"cloth[{i}] ({spec.name!r}) can tear, and the "
+                                 "coarse levels would hold a torn piece on: set multilevel = false or remove "
+                                 "its tear_threshold")
+            if spec.compliance.get("structural", 0.0) > 0.0:
+                raise SceneError(file, "simulation.multilevel", f"cloth[{i}] ({spec.name!r}) has soft structural "
+                                 "sticks, and the coarse levels limit stretch to the rest pose: set "
+                                 "multilevel = false or make its structural sticks rigid")
     for section, items in (("cloth", cloth_specs), ("collider", collider_specs)):
         names = [c.name for c in items]
         for i, n in enumerate(names):

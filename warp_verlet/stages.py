@@ -47,6 +47,8 @@ class Need:
     planes: int
     tethered: int = 0  # free particles of tethered cloths
     tethers_per_particle: int = 0
+    coarse_sticks: int = 0  # multilevel: coarse sticks over all levels
+    coarse_children: int = 0  # multilevel: particles moved by interpolation, over all levels
 
     @classmethod
     def of(cls, scene: "Scene") -> "Need":
@@ -60,6 +62,7 @@ class Need:
             compliant=scene.compliant, tears=scene.tears, spheres=len(scene.spheres),
             sphere_keys=sum(len(s.keyframes) for s in scene.spheres) if moving else 0, planes=len(scene.planes),
             tethered=scene.tethered_particles, tethers_per_particle=scene.tethers_per_particle,
+            coarse_sticks=scene.multilevel_counts[0], coarse_children=scene.multilevel_counts[1],
         )
 
 
@@ -131,7 +134,8 @@ class Integrate:
 
 class Relax:
     """``iterations`` sweeps; a sweep runs every constraint set of CONSTRAINT_SETS that the scene needs, in
-    table order (Gauss-Seidel across sets, and across colours inside a set)."""
+    table order (Gauss-Seidel across sets, and across colours inside a set). Before the sweeps, each set's
+    per-substep work runs, in table order (the multilevel pass, a soft stick's tension reset)."""
 
     name = "relax"
 
@@ -289,6 +293,42 @@ class Sticks:
                             split_tasks(copy_back, 0, m.particle_count, threads)])
 
 
+class Multilevel:
+    """The multilevel pass (warp_verlet/multilevel.py, kernels/multilevel.py): once per substep, before the
+    sweeps, coarsest level first: ``multilevel_sweeps`` sweeps of a level's unilateral coarse sticks, then its
+    moves interpolated to the next finer level's other particles. It must run first in the relaxation: it
+    measures each particle's move from the Verlet prediction."""
+
+    name = "multilevel"
+
+    def needed(self, need: Need) -> bool:
+        return need.coarse_sticks > 0
+
+    def device_bytes(self, need: Need) -> int:
+        # ends and limit per coarse stick; child, four parents and four weights per child
+        return need.coarse_sticks * (VEC2I + FLOAT) + need.coarse_children * (INT + 4 * INT + 4 * FLOAT)
+
+    def bind(self, model: "Model", state: "State", solver) -> Bound:
+        from warp_verlet.kernels.multilevel import limit_coarse_colour, prolongate
+
+        x, x_inertial, inv_mass = state.particle_q, state.particle_q_inertial, model.inv_mass
+        sweeps = solver.settings.multilevel_sweeps
+        tasks = []
+        for level in model.levels:
+            colours = [recorded(limit_coarse_colour, n, [x, inv_mass, level.ends, level.limit, f])
+                       for f, n in level.colour_ranges]
+            tasks += colours * sweeps
+            tasks.append(recorded(prolongate, level.child.shape[0], [x, x_inertial, inv_mass, level.child,
+                                                                     level.parents, level.weights]))
+        runs = [task.run for task in tasks]
+
+        def run(state: "State", dt: float) -> None:
+            for task in runs:
+                task()
+
+        return Bound(run, [])
+
+
 class Tethers:
     """Long-range attachments (kernels/tether.py): one launch per sweep, before the sticks, so that every sweep
     starts from particles within reach of their pins. When the torn set changes, tethers cut off from their
@@ -325,7 +365,7 @@ class Tethers:
         state.tether_length.assign(cut_tethers(model.tether_table, model.particle_count, model.host_sticks[~torn]))
 
 
-CONSTRAINT_SETS = (Tethers(), Sticks())
+CONSTRAINT_SETS = (Multilevel(), Tethers(), Sticks())
 """Constraint sets in the order a sweep projects them."""
 
 STAGES = (Integrate(), Relax(), Collide(), Tear())
