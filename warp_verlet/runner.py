@@ -42,6 +42,7 @@ class RunSummary:
     stretch_rms: float
     torn: int | None = None  # sticks torn by the end; None when no cloth can tear
     threads: int = 1  # CPU threads the relaxation ran on
+    budget: str | None = None  # what a target_stretch budget chose (warp_verlet/budget.py)
 
     def format(self) -> str:
         rate = self.frames / self.wall_seconds if self.wall_seconds > 0 else float("inf")
@@ -58,6 +59,8 @@ class RunSummary:
             f"colours          {colours}",
             f"stretch |D-L|/L  max {self.stretch_max:.3e}, rms {self.stretch_rms:.3e} (structural sticks, last frame)",
         ]
+        if self.budget is not None:
+            lines.append(f"budget           {self.budget}")
         if self.torn is not None:
             lines.append(f"torn sticks      {self.torn} of {self.sticks}")
         if self.stretch_max > UNCONVERGED_STRETCH:
@@ -124,7 +127,7 @@ def run_scene(
         simulated_seconds=sim.time, wall_seconds=wall, particles=model.particle_count, sticks=model.stick_count,
         colours=model.colour_count, colour_balance=colouring.balance if colouring else 0.0,
         stretch_max=stretch.max, stretch_rms=stretch.rms, torn=sim.torn_count() if model.tears else None,
-        threads=sim.threads,
+        threads=sim.threads, budget=sim.budget.report() if sim.budget is not None else None,
     )
 
 

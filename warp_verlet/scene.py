@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 import re
 import sys
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Callable
 
@@ -41,6 +41,9 @@ NAMED_PINS: dict[str, Callable[[int, int], list[tuple[int, int]]]] = {
 _PRIM_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
 
+TARGET_ITERATIONS = 2  # sweeps per substep when target_stretch chooses the substeps (warp_verlet/budget.py)
+
+
 @dataclass(frozen=True)
 class SimulationSettings:
     fps: float = 60.0
@@ -53,6 +56,8 @@ class SimulationSettings:
     solver: str = "coloured"
     multilevel: bool = False  # a coarse-to-fine pass over each grid's hierarchy before every substep's sweeps
     multilevel_sweeps: int = 1  # sweeps per coarse level per substep
+    target_stretch: float | None = None  # RMS structural stretch (fraction) the substeps are chosen to stay under
+    max_substeps: int = 1024  # the most substeps a target_stretch budget may choose
     max_dt_ratio: float = 2.0
     max_frame_time: float = 0.1
     position_bound: float = 1.0e4
@@ -361,8 +366,19 @@ def _read_simulation(file: str, data: Any) -> SimulationSettings:
         max_dt_ratio=t.take("max_dt_ratio", real(1.0), d.max_dt_ratio),
         max_frame_time=t.take("max_frame_time", real(0.0, lo_open=True), d.max_frame_time),
         position_bound=t.take("position_bound", real(0.0, lo_open=True), d.position_bound),
+        target_stretch=t.take("target_stretch", real(0.0, 1.0, lo_open=True, hi_open=True), None),
+        max_substeps=t.take("max_substeps", integer(1, 100_000), d.max_substeps),
     )
     t.finish()
+    if settings.target_stretch is not None:
+        if "substeps" in t.data:
+            raise t.error("target_stretch", "substeps chosen by the scene: with target_stretch the simulator "
+                          "chooses them (set max_substeps to cap it), so remove one of the two")
+        if settings.max_dt_ratio < 2.0:
+            raise t.error("target_stretch", f"max_dt_ratio >= 2, since the budget doubles the substeps (halves "
+                          f"dt) in one step; got max_dt_ratio = {settings.max_dt_ratio:g}")
+        if "iterations" not in t.data:
+            settings = replace(settings, iterations=TARGET_ITERATIONS)
     return settings
 
 

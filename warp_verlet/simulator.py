@@ -31,6 +31,7 @@ from .memory import available_host_bytes, check_fits
 from .model import Model
 from .scene import Scene
 from .solver import VerletSolver
+from .budget import Budget
 from .stages import CONSTRAINT_SETS, Need
 from .state import State
 
@@ -90,13 +91,28 @@ class Simulator:
         self._initial = None  # a clone of the start, made by the first reset()
         self._accumulator = 0.0
         self._first_diverged = None  # allocated by the first divergence check
-        self._frame_graph = None
+        self._frame_graphs: dict[int, object] = {}  # substeps -> the captured frame
+        self.budget = None
+        if self.settings.target_stretch is not None:
+            floor = int(1.0 / (self.settings.fps * self.min_dt)) if self.min_dt > 0 else self.settings.max_substeps
+            self.budget = Budget(self.settings.target_stretch, self.settings.substeps,
+                                 max(1, min(self.settings.max_substeps, floor)))
         # A frame's substeps are captured once and replayed: a CUDA graph, or on the CPU Warp's own capture
         # (replayed in C++: 2.4 -> 1.2 ms per frame at 32^2, bit-identical). Threaded relaxation needs its
         # launches issued from Python, so it is not captured.
         self._use_graph = use_graph and self.threads == 1
-        if self.settings.dt < self.min_dt:
-            raise WarpVerletError(self.solver.too_small(self.settings.dt) + " (raise it with fewer simulation.substeps)")
+        if self.dt < self.min_dt:
+            raise WarpVerletError(self.solver.too_small(self.dt) + " (raise it with fewer simulation.substeps)")
+
+    @property
+    def substeps(self) -> int:
+        """Substeps of the next frame: the scene's, or what the target_stretch budget chose."""
+        return self.budget.substeps if self.budget is not None else self.settings.substeps
+
+    @property
+    def dt(self) -> float:
+        """The fixed step of the next frame, in seconds."""
+        return 1.0 / (self.settings.fps * self.substeps)
 
     @property
     def time(self) -> float:
@@ -128,30 +144,35 @@ class Simulator:
     # ------------------------------------------------------------------ stepping
     def step(self, dt: float | None = None) -> None:
         """Advance by one substep of ``dt`` seconds (the scene's fixed dt by default)."""
-        dt = self.settings.dt if dt is None else float(dt)
+        dt = self.dt if dt is None else float(dt)
         self.solver.check_step(self.state, dt)
         self.solver.step(self.state, dt)
 
     def step_frame(self) -> None:
         """The scene's ``substeps`` fixed steps of one frame, replayed from a capture (a CUDA graph, or Warp's
         CPU capture) once the first frame (which initialises x_prev) has run, unless the CPU relaxation is
-        threaded."""
-        n, dt, state = self.settings.substeps, self.settings.dt, self.state
+        threaded. With a target_stretch, the budget then chooses the next frame's substeps from this frame's
+        stretch (one host copy of the positions per frame)."""
+        n, dt, state = self.substeps, self.dt, self.state
+        if state.dt_prev is not None:
+            self.solver.check_step(state, dt)
         with wp.ScopedDevice(self.device):
             if not self._use_graph or state.dt_prev != dt:
                 for _ in range(n):
                     self.solver.step(state, dt)
-                return
-            if self._frame_graph is None:
-                time, steps = state.time, state.steps
-                with wp.ScopedCapture() as capture:
-                    for _ in range(n):
-                        self.solver.step(state, dt)
-                self._frame_graph = capture.graph
-                state.time, state.steps = time, steps  # capture recorded the work; it has not run yet
-            wp.capture_launch(self._frame_graph)
-            state.time += n * dt
-            state.steps += n
+            else:
+                if n not in self._frame_graphs:
+                    time, steps = state.time, state.steps
+                    with wp.ScopedCapture() as capture:
+                        for _ in range(n):
+                            self.solver.step(state, dt)
+                    self._frame_graphs[n] = capture.graph
+                    state.time, state.steps = time, steps  # capture recorded the work; it has not run yet
+                wp.capture_launch(self._frame_graphs[n])
+                state.time += n * dt
+                state.steps += n
+        if self.budget is not None:
+            self.budget.observe(self.stretch().rms)
 
     def advance(self, frame_time: float) -> float:
         """Real-time stepping: bank ``frame_time`` seconds, run as many fixed substeps as it pays for, and
@@ -161,7 +182,7 @@ class Simulator:
         queue more substeps than the next frame can afford: the spiral of death."""
         if not (frame_time >= 0.0 and np.isfinite(frame_time)):
             raise ValueError(f"frame_time must be a finite number of seconds >= 0, got {frame_time}")
-        dt = self.settings.dt
+        dt = self.dt
         self._accumulator = min(self._accumulator + frame_time, self.settings.max_frame_time)
         # The tiny epsilon keeps 1/60 s from paying for 3.9999999 substeps of 1/240 s instead of 4.
         n = int(self._accumulator / dt + 1e-9)

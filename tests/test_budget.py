@@ -1,0 +1,85 @@
+"""A substep budget chosen from a target stretch: the controller's rules, a simulation that meets its target at
+the least substeps it found, and the scene keys."""
+
+import pytest
+
+from warp_verlet.budget import CALM_FRAMES, Budget
+from warp_verlet.errors import SceneError
+from warp_verlet.scene import TARGET_ITERATIONS, parse_scene
+from warp_verlet.simulator import Simulator
+
+from tests.test_multilevel import hanging
+
+
+def test_doubles_over_the_target_and_halves_only_after_calm_frames():
+    b = Budget(target=0.01, substeps=4, max_substeps=32)
+    b.observe(0.02)
+    assert b.substeps == 8
+    b.observe(0.009)  # under, but not under a quarter: keep
+    assert b.substeps == 8
+    for _ in range(CALM_FRAMES - 1):
+        b.observe(0.001)
+    assert b.substeps == 8  # one calm frame short
+    b.observe(0.001)
+    assert b.substeps == 4
+    for _ in range(5):
+        b.observe(1.0)
+    assert b.substeps == 32 and b.over_at_max == 2  # 4 -> 8 -> 16 -> 32, then stuck at the cap twice
+    assert b.frames_at == {4: 2, 8: CALM_FRAMES + 2, 16: 1, 32: 2}
+    assert "raise max_substeps" in b.report() and "32 x 2" in b.report()
+
+
+def scene(target: float, n: int = 48, **simulation):
+    data = hanging(n, tethers=True, target_stretch=target, **simulation)
+    del data["simulation"]["substeps"], data["simulation"]["iterations"]
+    return parse_scene(data, file="<budget>")
+
+
+def run(target: float) -> Simulator:
+    sim = Simulator(scene(target), "cpu", threads=1)
+    for _ in range(40):
+        sim.step_frame()
+    return sim
+
+
+def test_the_budget_keeps_a_hanging_cloth_under_its_target_and_spends_less_on_a_looser_one():
+    tight, loose = run(0.0005), run(0.01)
+    assert tight.stretch().rms < 0.0005 and loose.stretch().rms < 0.01
+    assert tight.budget.last_rms == pytest.approx(tight.stretch().rms)
+    assert tight.settings.iterations == TARGET_ITERATIONS
+    # The tight target needed more substeps than the 4 it started from; the loose one fewer.
+    assert max(tight.budget.frames_at) > 4 and min(loose.budget.frames_at) < 4
+    assert tight.state.steps > 2 * loose.state.steps
+    # It changed dt on the way, as the Verlet step's time-step-corrected form allows, and time stayed exact.
+    assert tight.time == pytest.approx(40 / 60.0, rel=1e-12)
+
+
+def test_without_a_target_the_substeps_are_the_scene_s():
+    sim = Simulator(parse_scene(hanging(16, substeps=3), file="<fixed>"), "cpu")
+    assert sim.budget is None and sim.substeps == 3
+    sim.step_frame()
+    assert sim.state.steps == 3
+
+
+@pytest.mark.parametrize("simulation, words", [
+    ({"target_stretch": 0.01, "substeps": 8}, "remove one of the two"),
+    ({"target_stretch": 0.01, "max_dt_ratio": 1.5}, "max_dt_ratio >= 2"),
+    ({"target_stretch": 0.0}, "target_stretch"),
+    ({"target_stretch": 1.0}, "target_stretch"),
+    ({"max_substeps": 0}, "max_substeps"),
+])
+def test_budget_keys_are_checked(simulation, words):
+    data = hanging(8)
+    del data["simulation"]["substeps"]
+    data["simulation"].update(simulation)
+    with pytest.raises(SceneError) as err:
+        parse_scene(data, file="scene.toml")
+    assert words in str(err.value) and "scene.toml" in str(err.value)
+
+
+def test_the_run_summary_says_what_the_budget_chose(tmp_path):
+    from warp_verlet.runner import run_scene
+
+    summary = run_scene(scene(0.001, n=16), tmp_path / "cache.usda", device="cpu", frames=5)
+    line = next(l for l in summary.format().splitlines() if l.startswith("budget"))
+    assert "target rms 0.100%" in line and "(substeps x frames)" in line
