@@ -422,7 +422,7 @@ def test_shipped_scenes_say_what_the_brief_says():
     big = load_scene(SCENES / "big_grid_1024.toml")
     assert big.cloths[0].resolution == (1024, 1024) and big.particle_count == 1 << 20
     assert big.cloths[0].sticks == ("structural", "shear", "bend")
-    assert (big.simulation.frames, big.simulation.substeps, big.simulation.iterations) == (60, 4, 8)
+    assert (big.simulation.frames, big.simulation.substeps, big.simulation.iterations) == (60, 32, 1)
 
 
 def test_defaults_apply_when_sections_are_missing(tmp_path):

@@ -1,0 +1,39 @@
+"""Every shipped scene, run to its last frame with its own settings, ends as cloth: under 1% RMS and 10% max
+structural stretch |D - L| / L (issue 17's defaults). big_grid_1024 is checked on a GPU only (bench/gpu_session.sh
+runs it); on this 2-core CI machine it would take an hour."""
+
+from pathlib import Path
+
+import pytest
+import warp as wp
+
+from warp_verlet.scene import load_scene
+from warp_verlet.simulator import Simulator
+
+SCENES = Path(__file__).resolve().parent.parent / "scenes"
+RMS, MAX = 0.01, 0.10
+
+CASES = [
+    "hanging_cloth", "wind_sheet", "ball_through_net", "cloth_on_sphere", "sphere_sweep", "rope",
+    pytest.param("flag_tear", marks=pytest.mark.xfail(strict=True, reason=(
+        "tearing is a stretch threshold, so the flag tears only while the relaxation leaves its pole sticks "
+        "stretched: with the budget that makes it converge (32 x 2) it does not tear at all. It ends at 2.6% RMS, "
+        "37% max. A tension criterion is the fix (issue 17 closing note)"))),
+]
+
+
+@pytest.mark.parametrize("name", CASES)
+def test_shipped_scene_ends_under_one_percent_rms_and_ten_percent_max(name):
+    scene = load_scene(SCENES / f"{name}.toml")
+    sim = Simulator(scene, "cpu")
+    torn = 0
+    for _ in range(scene.simulation.frames):
+        sim.step_frame()
+        if scene.tears and sim.torn_count() != torn:
+            torn = sim.torn_count()
+            sim.sync_tears()
+    stretch = sim.stretch()
+    sim.close()
+    assert stretch.rms < RMS and stretch.max < MAX, f"{name}: rms {stretch.rms:.3%}, max {stretch.max:.3%}"
+    if scene.tears:
+        assert torn > 0  # the tearing scenes still tear with their converged budget
