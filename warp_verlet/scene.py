@@ -23,6 +23,7 @@ else:  # pragma: no cover - exercised on Python 3.10 only
 from .errors import SceneError
 
 SOLVERS = ("coloured", "jacobi")
+PRECISIONS = ("auto", "float32", "float64")  # positions' float type; "auto" is resolved in precision.py
 ORIENTATIONS = ("vertical", "horizontal")
 STICK_FAMILIES = ("structural", "shear", "bend")
 UP_AXES = ("Y", "Z")
@@ -54,6 +55,7 @@ class SimulationSettings:
     max_dt_ratio: float = 2.0
     max_frame_time: float = 0.1
     position_bound: float = 1.0e4
+    precision: str = "auto"  # positions' float type: "float32", "float64", or "auto" (warp_verlet/precision.py)
 
     @property
     def dt(self) -> float:
@@ -347,6 +349,7 @@ def _read_simulation(file: str, data: Any) -> SimulationSettings:
         max_dt_ratio=t.take("max_dt_ratio", real(1.0), d.max_dt_ratio),
         max_frame_time=t.take("max_frame_time", real(0.0, lo_open=True), d.max_frame_time),
         position_bound=t.take("position_bound", real(0.0, lo_open=True), d.position_bound),
+        precision=t.take("precision", choice(PRECISIONS), d.precision),
     )
     t.finish()
     return settings
