@@ -12,56 +12,61 @@ A collider's thickness is added to its surface: the cloth rests that far outside
 sphere or plane, so the two never z-fight.
 """
 
+from typing import Any
+
 import warp as wp
+
+from .positions import for_positions, scaled
 
 
 @wp.func
 def project_out(
     i: int,
-    xi: wp.vec3,
-    normal: wp.vec3,
-    depth: float,
+    xi: Any,
+    normal: Any,
+    depth: Any,
     friction: float,
-    x_inertial: wp.array(dtype=wp.vec3),
-    delta: wp.array(dtype=wp.vec3),
+    x_inertial: wp.array(dtype=Any),
+    delta: wp.array(dtype=Any),
 ):
     """Move xi out by depth along normal, apply friction to its implicit velocity, return the new position."""
     xi = xi + normal * depth
     if friction > 0.0:
         v = xi - (x_inertial[i] - delta[i])
         tangential = v - normal * wp.dot(v, normal)
-        delta[i] = delta[i] - tangential * friction
+        delta[i] = delta[i] - scaled(tangential, friction)
     return xi
 
 
 @wp.kernel
 def collide_planes(
-    x: wp.array(dtype=wp.vec3),
-    x_inertial: wp.array(dtype=wp.vec3),
-    delta: wp.array(dtype=wp.vec3),
+    x: wp.array(dtype=Any),
+    x_inertial: wp.array(dtype=Any),
+    delta: wp.array(dtype=Any),
     inv_mass: wp.array(dtype=float),
     points: wp.array(dtype=wp.vec3),
     normals: wp.array(dtype=wp.vec3),
     thickness: wp.array(dtype=float),
     friction: wp.array(dtype=float),
 ):
+    """Collider data is float32; it is converted to the positions' precision (x.dtype) before any use."""
     i = wp.tid()
     if inv_mass[i] == 0.0:
         return  # pins are where the user put them
     xi = x[i]
     for p in range(points.shape[0]):
-        n = normals[p]
-        depth = thickness[p] - wp.dot(xi - points[p], n)
-        if depth > 0.0:
+        n = x.dtype(normals[p])
+        depth = type(xi[0])(thickness[p]) - wp.dot(xi - x.dtype(points[p]), n)
+        if depth > type(depth)(0.0):
             xi = project_out(i, xi, n, depth, friction[p], x_inertial, delta)
     x[i] = xi
 
 
 @wp.kernel
 def collide_spheres(
-    x: wp.array(dtype=wp.vec3),
-    x_inertial: wp.array(dtype=wp.vec3),
-    delta: wp.array(dtype=wp.vec3),
+    x: wp.array(dtype=Any),
+    x_inertial: wp.array(dtype=Any),
+    delta: wp.array(dtype=Any),
     inv_mass: wp.array(dtype=float),
     centres: wp.array(dtype=wp.vec3),
     radii: wp.array(dtype=float),
@@ -73,17 +78,21 @@ def collide_spheres(
         return
     xi = x[i]
     for s in range(centres.shape[0]):
-        d = xi - centres[s]
+        d = xi - x.dtype(centres[s])
         distance = wp.length(d)
-        depth = radii[s] - distance
-        if depth > 0.0:
+        depth = type(distance)(radii[s]) - distance
+        if depth > type(depth)(0.0):
             # A particle exactly at the centre has no outward direction: push it up (+Y), a fixed choice so
             # that the result stays deterministic.
-            n = wp.vec3(0.0, 1.0, 0.0)
-            if distance > 1.0e-12:
+            n = x.dtype(wp.vec3(0.0, 1.0, 0.0))
+            if distance > type(distance)(1.0e-12):
                 n = d / distance
             xi = project_out(i, xi, n, depth, friction[s], x_inertial, delta)
     x[i] = xi
+
+
+for_positions(collide_planes, arrays=("x", "x_inertial", "delta"))
+for_positions(collide_spheres, arrays=("x", "x_inertial", "delta"))
 
 
 @wp.kernel

@@ -5,14 +5,17 @@ Both run at the start of a substep's relaxation, when every free particle still 
 Verlet step predicted (``x_inertial``): a particle's move in the pass is x - x_inertial, with no snapshot.
 """
 
+from typing import Any
+
 import warp as wp
 
-from warp_verlet.kernels.relax import stick_correction
+from .positions import for_positions, scaled
+from .relax import stick_correction
 
 
 @wp.kernel
 def limit_coarse_colour(
-    x: wp.array(dtype=wp.vec3),
+    x: wp.array(dtype=Any),
     inv_mass: wp.array(dtype=float),
     ends: wp.array(dtype=wp.vec2i),
     limit: wp.array(dtype=float),
@@ -26,19 +29,20 @@ def limit_coarse_colour(
     j = e[1]
     xi = x[i]
     xj = x[j]
-    if wp.length(xj - xi) <= limit[s]:
+    length = wp.length(xj - xi)
+    if length <= type(length)(limit[s]):
         return
     wi = inv_mass[i]
     wj = inv_mass[j]
     c = stick_correction(xi, xj, wi, wj, limit[s], 1.0)
-    x[i] = xi + c * wi
-    x[j] = xj - c * wj
+    x[i] = xi + scaled(c, wi)
+    x[j] = xj - scaled(c, wj)
 
 
 @wp.kernel
 def prolongate(
-    x: wp.array(dtype=wp.vec3),
-    x_inertial: wp.array(dtype=wp.vec3),
+    x: wp.array(dtype=Any),
+    x_inertial: wp.array(dtype=Any),
     inv_mass: wp.array(dtype=float),
     child: wp.array(dtype=int),
     parents: wp.array(dtype=wp.vec4i),
@@ -52,8 +56,13 @@ def prolongate(
         return
     ps = parents[t]
     ws = weights[t]
-    shift = wp.vec3(0.0)
+    xp = x[p]
+    shift = type(xp)(0.0)
     for k in range(4):
         a = ps[k]
-        shift += ws[k] * (x[a] - x_inertial[a])
-    x[p] = x[p] + shift
+        shift += scaled(x[a] - x_inertial[a], ws[k])
+    x[p] = xp + shift
+
+
+for_positions(limit_coarse_colour, arrays=("x",))
+for_positions(prolongate, arrays=("x", "x_inertial"))

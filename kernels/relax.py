@@ -14,25 +14,30 @@ spring of stiffness 1 / alpha at any substep and iteration count, where a per-sw
 would make the cloth softer with fewer sweeps. With alpha = 0 it is the rigid projection.
 """
 
+from typing import Any
+
 import warp as wp
+
+from .positions import for_positions, scaled
 
 MIN_LENGTH = wp.constant(1.0e-9)
 
 
 @wp.func
-def stick_correction(xi: wp.vec3, xj: wp.vec3, wi: float, wj: float, rest: float, k: float):
-    """The move of particle i, per unit of w_i, that satisfies the stick: x_i += w_i * result."""
+def stick_correction(xi: Any, xj: Any, wi: float, wj: float, rest: float, k: float):
+    """The move of particle i, per unit of w_i, that satisfies the stick: x_i += w_i * result. Computed in the
+    positions' precision (the float32 masses, rest length and weight are converted first)."""
     d = xj - xi
     length = wp.length(d)
-    w = wi + wj
-    if w == 0.0 or length < MIN_LENGTH:
-        return wp.vec3(0.0)
-    return d * (k * (length - rest) / (length * w))
+    w = type(length)(wi) + type(length)(wj)
+    if w == type(length)(0.0) or length < type(length)(MIN_LENGTH):
+        return type(d)(0.0)
+    return d * (type(length)(k) * (length - type(length)(rest)) / (length * w))
 
 
 @wp.kernel
 def relax_colour(
-    x: wp.array(dtype=wp.vec3),
+    x: wp.array(dtype=Any),
     inv_mass: wp.array(dtype=float),
     ends: wp.array(dtype=wp.vec2i),
     rest: wp.array(dtype=float),
@@ -50,13 +55,13 @@ def relax_colour(
     xi = x[i]
     xj = x[j]
     c = stick_correction(xi, xj, wi, wj, rest[s], weight[s])
-    x[i] = xi + c * wi
-    x[j] = xj - c * wj
+    x[i] = xi + scaled(c, wi)
+    x[j] = xj - scaled(c, wj)
 
 
 @wp.kernel
 def relax_colour_compliant(
-    x: wp.array(dtype=wp.vec3),
+    x: wp.array(dtype=Any),
     inv_mass: wp.array(dtype=float),
     ends: wp.array(dtype=wp.vec2i),
     rest: wp.array(dtype=float),
@@ -66,7 +71,9 @@ def relax_colour_compliant(
     first: int,
     tension: wp.array(dtype=float),
 ):
-    """XPBD over one colour (see the module docstring); ``tension`` is mu, in N s^2, per stick."""
+    """XPBD over one colour (see the module docstring); ``tension`` is mu, in N s^2, per stick. It is computed
+    in the positions' precision and stored as float32: it restarts from 0 every substep, so its rounding does
+    not accumulate across steps."""
     s = first + wp.tid()
     e = ends[s]
     i = e[0]
@@ -77,30 +84,30 @@ def relax_colour_compliant(
     xj = x[j]
     d = xj - xi
     length = wp.length(d)
-    w = wi + wj
-    if w == 0.0 or length < MIN_LENGTH:
+    w = type(length)(wi) + type(length)(wj)
+    if w == type(length)(0.0) or length < type(length)(MIN_LENGTH):
         return
-    alpha = compliance[s] * inv_dt2
-    mu = tension[s]
+    alpha = type(length)(compliance[s]) * type(length)(inv_dt2)
+    mu = type(length)(tension[s])
     # The same operations, in the same order, as stick_correction: with alpha = 0 this is the rigid kernel
     # bit for bit.
-    error = weight[s] * (length - rest[s] - alpha * mu)
-    tension[s] = mu + error / (w + alpha)
+    error = type(length)(weight[s]) * (length - type(length)(rest[s]) - alpha * mu)
+    tension[s] = float(mu + error / (w + alpha))
     c = d * (error / (length * (w + alpha)))
-    x[i] = xi + c * wi
-    x[j] = xj - c * wj
+    x[i] = xi + scaled(c, wi)
+    x[j] = xj - scaled(c, wj)
 
 
 @wp.kernel
 def relax_jacobi(
-    x_in: wp.array(dtype=wp.vec3),
+    x_in: wp.array(dtype=Any),
     inv_mass: wp.array(dtype=float),
     neighbour_start: wp.array(dtype=int),
     neighbour: wp.array(dtype=int),
     neighbour_rest: wp.array(dtype=float),
     neighbour_weight: wp.array(dtype=float),
     first: int,
-    x_out: wp.array(dtype=wp.vec3),
+    x_out: wp.array(dtype=Any),
 ):
     """Jacobi: every particle gathers the corrections of all its sticks from the same old positions and
     applies their average (Mueller et al. 2007, section 3.5). The gather form needs no atomics, so the
@@ -112,7 +119,7 @@ def relax_jacobi(
     if wi == 0.0:
         x_out[i] = xi
         return
-    total = wp.vec3(0.0)
+    total = type(xi)(0.0)
     start = neighbour_start[i]
     end = neighbour_start[i + 1]
     for n in range(start, end):
@@ -120,5 +127,10 @@ def relax_jacobi(
         total += stick_correction(xi, x_in[j], wi, inv_mass[j], neighbour_rest[n], neighbour_weight[n])
     count = end - start
     if count > 0:
-        xi = xi + total * (wi / float(count))
+        xi = xi + total * (type(xi[0])(wi) / type(xi[0])(float(count)))
     x_out[i] = xi
+
+
+for_positions(relax_colour, arrays=("x",))
+for_positions(relax_colour_compliant, arrays=("x",))
+for_positions(relax_jacobi, arrays=("x_in", "x_out"))

@@ -9,12 +9,16 @@ of torn sticks is the same whatever the thread order. The counter is an integer 
 depend on order either; the host reads that one integer per frame to learn whether anything tore.
 """
 
+from typing import Any
+
 import warp as wp
+
+from .positions import for_positions
 
 
 @wp.kernel
 def tear_sticks(
-    x: wp.array(dtype=wp.vec3),
+    x: wp.array(dtype=Any),
     ends: wp.array(dtype=wp.vec2i),
     tear_length: wp.array(dtype=float),
     weight: wp.array(dtype=float),
@@ -24,6 +28,10 @@ def tear_sticks(
     if weight[s] == 0.0:
         return  # already torn
     e = ends[s]
-    if wp.length(x[e[1]] - x[e[0]]) > tear_length[s]:
+    length = wp.length(x[e[1]] - x[e[0]])
+    if length > type(length)(tear_length[s]):
         weight[s] = 0.0
         wp.atomic_add(torn_count, 0, 1)
+
+
+for_positions(tear_sticks, arrays=("x",))

@@ -9,12 +9,16 @@ Why: a Gauss-Seidel sweep carries a correction about one stick per colour pass, 
 a few pins stays stretched for hundreds of sweeps. A tether gives every particle the pin's answer at once.
 """
 
+from typing import Any
+
 import warp as wp
+
+from .positions import for_positions
 
 
 @wp.kernel
 def pull_tethers(
-    x: wp.array(dtype=wp.vec3),
+    x: wp.array(dtype=Any),
     particle: wp.array(dtype=int),
     pin: wp.array2d(dtype=int),
     length: wp.array2d(dtype=float),
@@ -28,7 +32,10 @@ def pull_tethers(
         if a >= 0:
             d = xp - x[a]
             distance = wp.length(d)
-            limit = length[t, k]
+            limit = type(distance)(length[t, k])
             if distance > limit:
                 xp = x[a] + d * (limit / distance)
     x[p] = xp
+
+
+for_positions(pull_tethers, arrays=("x",))

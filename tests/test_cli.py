@@ -138,6 +138,7 @@ def test_validate_command(scene_file, capsys):
     out = capsys.readouterr().out
     assert "valid scene, 2 cloth(s), 47 particles" in out
     assert "memory: about 0.00 GiB of device arrays" in out
+    assert "positions: float32\n" in out
     assert main(["validate", str(scene_file.parent / "missing.toml")]) == 2
 
 

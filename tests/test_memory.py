@@ -71,6 +71,14 @@ CASES = {
                         "tethers": True, "tether_scale": 2.0}, [SWEEP, BALL, GROUND, WALL]),
     "jacobi-everything": ({"solver": "jacobi"}, {"pins": ["top-edge"], "tear_threshold": 1.5, "tethers": True,
                                                  "tether_scale": 2.0}, [SWEEP, BALL, GROUND]),
+    # float64 positions: 24 bytes for each of the State's three and the Jacobi scratch, the rest float32 as before
+    "float64": ({"precision": "float64"}, {}),
+    "float64-everything": ({"precision": "float64"}, {"pins": ["top-edge"], "compliance": {"bend": 1e-3},
+                                                      "tear_threshold": 1.5, "tethers": True, "tether_scale": 2.0},
+                           [SWEEP, BALL, GROUND, WALL]),
+    "float64-jacobi-everything": ({"solver": "jacobi", "precision": "float64"}, {"pins": ["top-edge"],
+                                  "tear_threshold": 1.5, "tethers": True, "tether_scale": 2.0}, [SWEEP, BALL, GROUND]),
+    "auto-float64": ({"substeps": 1000, "solver": "jacobi"}, {}),  # "auto" below the float32 floor
 }
 
 
@@ -82,6 +90,7 @@ def test_estimate_matches_the_arrays_allocated(case):
                         file="<test>")
     sim = Simulator(scene, "cpu", use_graph=False)
     sim.step()
+    assert sim.precision == ("float64" if "float64" in case else "float32")
     # The only arrays not in the estimate are one-element counters: the tear counter (4 bytes), and the
     # Jacobi CSR's extra row start (4 bytes). A moving sphere's key starts are counted (spheres + 1 of them).
     counters = 4 * (scene.tears + (scene.simulation.solver == "jacobi"))

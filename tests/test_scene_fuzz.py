@@ -100,7 +100,7 @@ ACCEPTS = {"number": {"int", "float"}, "integer": {"int"}, "string": {"string"},
 
 SIM_KEYS = {"fps": "number", "frames": "integer", "substeps": "integer", "iterations": "integer",
             "gravity": "array", "wind": "array", "damping": "number", "solver": "string", "max_dt_ratio": "number",
-            "max_frame_time": "number", "position_bound": "number"}
+            "max_frame_time": "number", "position_bound": "number", "precision": "string"}
 OUT_KEYS = {"path": "string", "save_every": "integer", "up_axis": "string", "meters_per_unit": "number"}
 CLOTH_KEYS = {"name": "string", "resolution": "array", "size": "array", "origin": "array", "orientation": "string",
               "mass": "number", "sticks": "array", "compliance": "table", "pins": "array", "tear_threshold": "number",
@@ -118,7 +118,7 @@ def full_scene() -> dict:
     return {
         "simulation": {"fps": 60.0, "frames": 10, "substeps": 2, "iterations": 4, "gravity": [0.0, -9.81, 0.0],
                        "wind": [1.0, 0.0, 0.5], "damping": 0.5, "solver": "coloured", "max_dt_ratio": 2.0,
-                       "max_frame_time": 0.1, "position_bound": 100.0},
+                       "max_frame_time": 0.1, "position_bound": 100.0, "precision": "float64"},
         "output": {"path": "fuzz.usdc", "save_every": 5, "up_axis": "Y", "meters_per_unit": 1.0},
         "cloth": [{"name": "sheet", "resolution": [3, 4], "size": [0.5, 0.6], "origin": [0.0, 1.0, 0.0],
                    "orientation": "vertical", "mass": 0.2, "sticks": ["structural", "shear", "bend"],
@@ -556,7 +556,8 @@ def valid_scenes(draw) -> dict:
                        "iterations": draw(st.integers(0, 100_000)), "gravity": draw(vec3), "wind": draw(vec3),
                        "damping": draw(st.floats(0.0, 1e6)), "solver": solver,
                        "max_dt_ratio": draw(st.floats(1.0, 1e6)), "max_frame_time": draw(positive),
-                       "position_bound": draw(positive)},
+                       "position_bound": draw(positive),
+                       "precision": draw(st.sampled_from(["auto", "float32", "float64"]))},
         "output": {"path": draw(st.text(st.characters(codec="utf-8", exclude_characters="\0/"), min_size=1, max_size=8))
                    + draw(st.sampled_from([".usd", ".usdc", ".usda"])), "save_every": draw(st.integers(1, 1000)),
                    "up_axis": draw(st.sampled_from(["Y", "Z"])), "meters_per_unit": draw(positive)},

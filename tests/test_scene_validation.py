@@ -512,14 +512,15 @@ def has_raw(v) -> bool:
 
 KNOWN_KEYS = [
     "simulation", "output", "cloth", "fps", "frames", "substeps", "iterations", "gravity", "wind", "damping",
-    "drag", "solver", "max_dt_ratio", "max_frame_time", "position_bound", "path", "save_every", "up_axis",
+    "drag", "solver", "max_dt_ratio", "max_frame_time", "position_bound", "precision", "path", "save_every", "up_axis",
     "meters_per_unit", "name", "resolution", "size", "origin", "orientation", "mass", "sticks", "compliance",
     "pins", "tear_threshold", "particle_masses", "tethers", "tether_scale", "structural", "shear", "bend",
 ]
 KNOWN_STRINGS = [
     "coloured", "jacobi", "vertical", "horizontal", "Y", "Z", "out.usdc", "out.usda", "x.usd", ".usdc",
     "top-left", "top-right", "bottom-left", "bottom-right", "top-edge", "bottom-edge", "left-edge",
-    "right-edge", "cloth0", "sheet", "", "\0", "1abc", "a\n", "structural", "shear", "bend",
+    "right-edge", "cloth0", "sheet", "", "\0", "1abc", "a\n", "structural", "shear", "bend", "auto", "float32",
+    "float64",
 ]
 RAW_LITERALS = [
     "1979-05-27", "07:32:00", "1979-05-27T07:32:00Z", "1979-05-27T00:32:00.999999-07:00",

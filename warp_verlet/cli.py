@@ -111,6 +111,8 @@ def _validate(args) -> int:
 
     need = estimate(scene)
     print(f"memory: {need.describe()}")
+    how = " (auto: dt is below the float32 limit)" if need.precision == "float64" and sim.precision == "auto" else ""
+    print(f"positions: {need.precision}{how}")
     return 0
 
 

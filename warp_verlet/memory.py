@@ -38,6 +38,7 @@ class MemoryNeed:
     sticks: int
     device_bytes: int  # the simulator's arrays, on the device it runs on
     host_bytes: int  # peak host memory while the sticks are built
+    precision: str = "float32"  # the positions' float type ("auto" resolved), which sets their bytes
 
     def describe(self) -> str:
         return f"about {gib(self.device_bytes)} of device arrays and {gib(self.host_bytes)} of host memory to build them"
@@ -56,6 +57,7 @@ def estimate(scene: Scene) -> MemoryNeed:
         sticks=need.sticks,
         device_bytes=device_bytes(need),
         host_bytes=need.sticks * HOST_BUILD_BYTES_PER_STICK + need.particles * 64,
+        precision=need.precision,
     )
 
 

@@ -24,6 +24,7 @@ from .colouring import Colouring, check_partition, graph_colouring, grid_colouri
 from .multilevel import grid_hierarchy, merge_levels
 from .tethers import TetherTable, build_tethers
 from .scene import Scene
+from .stages import Need
 from .faces import edge_faces
 from .topology import STRUCT_H, STRUCT_V, ClothTopology, build_cloth
 
@@ -64,6 +65,10 @@ class Model:
     """Device arrays (read by the kernels, never written) and the host copies the metrics need.
 
     Particles (N): ``inv_mass`` (N,) float32, 1/kg, 0 for a pin; ``rest_positions`` (N, 3) float32, m (host).
+    Precision: ``precision`` ("float32" or "float64", the scene's ``simulation.precision`` resolved), and the
+    State's position types ``position_dtype`` (``wp.vec3`` or ``wp.vec3d``), ``position_scalar``
+    (``wp.float32`` or ``wp.float64``) and ``host_position_dtype`` (numpy's). Only positions change type:
+    every array of the Model is float32 either way.
     Coloured solver, per stick in colour order (M): ``stick_ends`` (M,) vec2i particle indices,
     ``stick_rest`` (M,) float32 m, ``stick_weight`` (M,) float32 (all 1: the intact weights a State starts
     from), ``stick_compliance`` (M,) float32 m/N or None when every stick is rigid; ``colour_ranges`` the
@@ -82,6 +87,11 @@ class Model:
             raise ValueError(f"colouring must be 'auto', 'grid' or 'graph', got {colouring!r}")
         self.device = device
         self.solver = scene.simulation.solver
+        self.precision = Need.of(scene).precision
+        double = self.precision == "float64"
+        self.position_dtype = wp.vec3d if double else wp.vec3
+        self.position_scalar = wp.float64 if double else wp.float32
+        self.host_position_dtype = np.float64 if double else np.float32
         slots, first = [], 0
         for spec in scene.cloths:
             slots.append(ClothSlot(build_cloth(spec), first))

@@ -110,7 +110,7 @@ def run_scene(
     start = time.perf_counter()
     points = sim.positions()
     with writer:
-        writer.write_frame(0, model.split(points), model.colliders.moving_centres(sim.state))
+        writer.write_frame(0, model.split(cache_points(points)), model.colliders.moving_centres(sim.state))
         background = BackgroundWriter(writer.write_frame) if overlap else None
         write = background.submit if background else writer.write_frame
         try:
@@ -129,6 +129,12 @@ def run_scene(
         stretch_max=stretch.max, stretch_rms=stretch.rms, torn=sim.torn_count() if model.tears else None,
         threads=sim.threads, budget=sim.budget.report() if sim.budget is not None else None,
     )
+
+
+def cache_points(points: np.ndarray) -> np.ndarray:
+    """The points as the cache stores them, float32: converted here, once per frame, when the simulation runs
+    in float64 (no copy in float32). Divergence and stretch checks use the simulation's own precision."""
+    return np.asarray(points, dtype=np.float32)
 
 
 def _step_loop(sim, settings, write: Callable[..., None], progress: Callable[[int], None] | None) -> None:
@@ -150,6 +156,6 @@ def _step_loop(sim, settings, write: Callable[..., None], progress: Callable[[in
             if count != torn:
                 torn = count
                 hidden = model.hidden_faces(sim.sync_tears())
-        write(frame, model.split(points), model.colliders.moving_centres(sim.state), hidden)
+        write(frame, model.split(cache_points(points)), model.colliders.moving_centres(sim.state), hidden)
         if progress is not None:
             progress(frame)

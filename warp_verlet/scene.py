@@ -23,6 +23,7 @@ else:  # pragma: no cover - exercised on Python 3.10 only
 from .errors import SceneError
 
 SOLVERS = ("coloured", "jacobi")
+PRECISIONS = ("auto", "float32", "float64")  # positions' float type; "auto" is resolved in precision.py
 ORIENTATIONS = ("vertical", "horizontal")
 STICK_FAMILIES = ("structural", "shear", "bend")
 UP_AXES = ("Y", "Z")
@@ -61,6 +62,7 @@ class SimulationSettings:
     max_dt_ratio: float = 2.0
     max_frame_time: float = 0.1
     position_bound: float = 1.0e4
+    precision: str = "auto"  # positions' float type: "float32", "float64", or "auto" (warp_verlet/precision.py)
 
     @property
     def dt(self) -> float:
@@ -368,6 +370,7 @@ def _read_simulation(file: str, data: Any) -> SimulationSettings:
         position_bound=t.take("position_bound", real(0.0, lo_open=True), d.position_bound),
         target_stretch=t.take("target_stretch", real(0.0, 1.0, lo_open=True, hi_open=True), None),
         max_substeps=t.take("max_substeps", integer(1, 100_000), d.max_substeps),
+        precision=t.take("precision", choice(PRECISIONS), d.precision),
     )
     t.finish()
     if settings.target_stretch is not None:

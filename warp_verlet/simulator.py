@@ -88,6 +88,7 @@ class Simulator:
         self.solver = VerletSolver(self.model, self.settings, Need.of(scene), threads)
         self.threads = self.solver.threads
         self.min_dt = self.solver.min_dt
+        self.precision = self.model.precision  # "float32" or "float64": the scene's precision, "auto" resolved
         self._initial = None  # a clone of the start, made by the first reset()
         self._accumulator = 0.0
         self._first_diverged = None  # allocated by the first divergence check
@@ -102,7 +103,7 @@ class Simulator:
         # launches issued from Python, so it is not captured.
         self._use_graph = use_graph and self.threads == 1
         if self.dt < self.min_dt:
-            raise WarpVerletError(self.solver.too_small(self.dt) + " (raise it with fewer simulation.substeps)")
+            raise WarpVerletError(self.solver.too_small(self.dt, scene_dt=True))
 
     @property
     def substeps(self) -> int:
@@ -193,7 +194,8 @@ class Simulator:
 
     # ------------------------------------------------------------------ reading state
     def positions(self) -> np.ndarray:
-        """All particle positions, (particle_count, 3) float32: a snapshot on the host."""
+        """All particle positions, (particle_count, 3) float32 (float64 where ``model.precision`` is): a snapshot
+        on the host."""
         return self.state.positions()
 
     def previous_positions(self) -> np.ndarray:
@@ -203,7 +205,7 @@ class Simulator:
     def render_positions(self, alpha: float) -> np.ndarray:
         """Positions interpolated between the last two substeps: x_prev + alpha (x - x_prev)."""
         x, x_prev = self.positions(), self.previous_positions()
-        return x_prev + np.float32(alpha) * (x - x_prev)
+        return x_prev + x.dtype.type(alpha) * (x - x_prev)
 
     def diverged_particle(self) -> int | None:
         """The lowest index of a particle that is not finite or beyond ``position_bound``, or None. Checked on

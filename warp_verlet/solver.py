@@ -19,6 +19,7 @@ from warp_verlet.kernels.integrate import verlet_start
 from .cpu_team import COLOURED_SECONDS_PER_STICK, JACOBI_SECONDS_PER_ENTRY, PhaseTeam, auto_threads
 from .errors import WarpVerletError
 from .model import Model
+from .precision import acceleration, smallest_dt
 from .scene import SimulationSettings
 from .stages import STAGES, Need, Task
 from .state import State
@@ -33,9 +34,12 @@ class VerletSolver:
 
     def __init__(self, model: Model, settings: SimulationSettings, need: Need, threads: int | None = None):
         self.model, self.settings, self.need = model, settings, need
+        if need.precision != model.precision:
+            raise ValueError(f"need.precision = {need.precision!r} but the model's positions are {model.precision}")
+        self.precision = model.precision
         accel = np.add(settings.gravity, settings.wind)
-        self.accel = wp.vec3(*accel)
-        self.accel_magnitude = float(np.linalg.norm(accel))
+        self.accel = model.position_dtype(*accel)  # in the positions' type, as every factor of the step
+        self.accel_magnitude = acceleration(settings)
         self.threads = self._thread_count(threads)
         self.stage_names = tuple(s.name for s in STAGES if s.needed(need))
         self._scratch: dict[str, wp.array] = {}
@@ -91,17 +95,14 @@ class VerletSolver:
 
     # ------------------------------------------------------------------ limits
     def _smallest_resolved_dt(self) -> float:
-        """The smallest dt whose gravity-and-wind step |a| dt^2 is at least 4 float32 spacings of the scene's
-        coordinates. Below it, x + step rounds back to x, the relaxation corrects the rounding-level stick
-        errors, and that correction enters the implicit velocity and cancels the acceleration: a cloth at
-        dt = 1e-5 s does not fall at all, at 1e-4 s (|a| dt^2 below one spacing) it falls 1.8% short. Without
-        relaxation nothing feeds rounding back into velocity, so there is no limit."""
-        a = self.accel_magnitude
-        if "relax" not in self.stage_names or a == 0.0:
+        """The smallest dt whose gravity-and-wind step |a| dt^2 is at least 4 spacings, in the positions'
+        precision, of the scene's coordinates (warp_verlet/precision.py says why): about 2e-4 s for a 1 m scene
+        in float32, 1e-8 s in float64. Without relaxation there is no limit."""
+        if "relax" not in self.stage_names:
             return 0.0
         m = self.model
         scale = float(np.abs(m.rest_positions).max()) if m.particle_count else 1.0
-        return float(np.sqrt(4.0 * np.spacing(np.float32(max(scale, 1e-3))) / a))
+        return smallest_dt(self.precision, self.accel_magnitude, scale)
 
     def check_step(self, state: State, dt: float) -> None:
         """Raise one clear error for a dt this solver cannot take from ``state``."""
@@ -119,11 +120,18 @@ class VerletSolver:
                 f"factor max_dt_ratio = {self.settings.max_dt_ratio:g} (shrink it over several steps), or the "
                 "relaxation's residual stretch would turn into spurious velocity")
 
-    def too_small(self, dt: float) -> str:
-        return (f"dt = {dt:.3g} s is too small for float32 positions: one step's acceleration moves a particle by "
+    def too_small(self, dt: float, scene_dt: bool = False) -> str:
+        """The error for a dt below ``min_dt``, with what lifts it (``scene_dt``: the scene's own fixed dt)."""
+        p = self.precision
+        remedies = ["raise it with fewer simulation.substeps"] if scene_dt else []
+        if p == "float32":
+            remedies.append('set simulation.precision = "float64", which lowers this limit to about 1e-8 s for a '
+                            "1 m scene")
+        return (f"dt = {dt:.3g} s is too small for {p} positions: one step's acceleration moves a particle by "
                 f"|a| dt^2 = {self.accel_magnitude * dt * dt:.2g} m, "
-                f"under 4 float32 spacings of this scene's coordinates, so the relaxation's rounding would cancel "
-                f"it; the smallest dt resolved here is {self.min_dt:.3g} s")
+                f"under 4 {p} spacings of this scene's coordinates, so the relaxation's rounding would cancel "
+                f"it; the smallest dt resolved here is {self.min_dt:.3g} s"
+                + (f" ({'; or '.join(remedies)})" if remedies else ""))
 
     # ------------------------------------------------------------------ stepping
     def step(self, state: State, dt: float) -> None:
@@ -134,7 +142,7 @@ class VerletSolver:
             if state.dt_prev is None:
                 # Exact start for constant acceleration: x_prev = x0 - v0 dt + a dt^2 / 2.
                 wp.launch(verlet_start, self.model.particle_count,
-                          inputs=[state.particle_q, self.model.inv_mass, self.accel, dt],
+                          inputs=[state.particle_q, self.model.inv_mass, self.accel, self.model.position_scalar(dt)],
                           outputs=[state.particle_q_inertial, state.particle_dq])
                 state.dt_prev = dt
             for _, run in stages:

@@ -29,6 +29,7 @@ if TYPE_CHECKING:  # pragma: no cover
     from .state import State
 
 VEC3, FLOAT, INT, VEC2I, FLOAT64 = 12, 4, 4, 8, 8
+VEC3D = 24  # a float64 position
 
 
 @dataclass(frozen=True)
@@ -49,14 +50,24 @@ class Need:
     tethers_per_particle: int = 0
     coarse_sticks: int = 0  # multilevel: coarse sticks over all levels
     coarse_children: int = 0  # multilevel: particles moved by interpolation, over all levels
+    precision: str = "float32"  # the positions' float type, resolved ("auto" never appears here)
+
+    @property
+    def position_bytes(self) -> int:
+        """Bytes of one position (a vec3 of the precision's float)."""
+        return VEC3D if self.precision == "float64" else VEC3
 
     @classmethod
     def of(cls, scene: "Scene") -> "Need":
+        """The scene's need, with ``simulation.precision`` resolved (warp_verlet/precision.py)."""
+        from dataclasses import replace
+
         from .memory import stick_count  # the grid's stick count, without building it
+        from .precision import resolve
 
         moving = any(s.moving for s in scene.spheres)
         free = any(len(set(c.pins)) < c.particle_count for c in scene.cloths)
-        return cls(
+        need = cls(
             particles=scene.particle_count, sticks=sum(stick_count(c) for c in scene.cloths),
             solver=scene.simulation.solver, iterations=scene.simulation.iterations, free_particles=free,
             compliant=scene.compliant, tears=scene.tears, spheres=len(scene.spheres),
@@ -64,6 +75,7 @@ class Need:
             tethered=scene.tethered_particles, tethers_per_particle=scene.tethers_per_particle,
             coarse_sticks=scene.multilevel_counts[0], coarse_children=scene.multilevel_counts[1],
         )
+        return replace(need, precision=resolve(scene, relaxes=RELAX.needed(need)))
 
 
 @dataclass(frozen=True)
@@ -118,16 +130,19 @@ class Integrate:
         import warp as wp
 
         from warp_verlet.kernels.integrate import verlet_step
+        from warp_verlet.kernels.positions import instance
 
-        settings, accel = solver.settings, solver.accel
+        settings, accel, real = solver.settings, solver.accel, model.position_scalar
+        kernel = instance(verlet_step, model.position_dtype)  # launched every substep: resolved once here
         x, x_inertial, dq, inv_mass, n = (state.particle_q, state.particle_q_inertial, state.particle_dq,
                                           model.inv_mass, model.particle_count)
 
         def run(state: "State", dt: float) -> None:
             ratio = min(dt / state.dt_prev, settings.max_dt_ratio)
-            velocity_scale = math.exp(-settings.damping * dt) * ratio
-            accel_offset = accel * (dt * (dt + state.dt_prev) * 0.5)
-            wp.launch(verlet_step, n, inputs=[x, x_inertial, dq, inv_mass, velocity_scale, accel_offset])
+            # In the positions' type (accel is one too): a float32 factor would cost float64 its precision.
+            velocity_scale = real(math.exp(-settings.damping * dt) * ratio)
+            accel_offset = accel * real(dt * (dt + state.dt_prev) * 0.5)
+            wp.launch(kernel, n, inputs=[x, x_inertial, dq, inv_mass, velocity_scale, accel_offset])
 
         return Bound(run)
 
@@ -247,7 +262,7 @@ class Sticks:
             # ends, rest, weight; soft sticks add a compliance (Model) and a tension (solver scratch)
             return need.sticks * (VEC2I + 2 * FLOAT + (2 * FLOAT if need.compliant else 0))
         # neighbour, rest and weight for both ends; a scratch position and a row start per particle
-        return need.sticks * 2 * (INT + 2 * FLOAT) + need.particles * (VEC3 + INT)
+        return need.sticks * 2 * (INT + 2 * FLOAT) + need.particles * (need.position_bytes + INT)
 
     def bind(self, model: "Model", state: "State", solver) -> Bound:
         import warp as wp
@@ -278,7 +293,7 @@ class Sticks:
             return Bound(prepare, phases)
 
         weight = state.stick_weight if m.tears else m.neighbour_weight
-        scratch = solver.scratch("jacobi_positions", m.particle_count, wp.vec3)
+        scratch = solver.scratch("jacobi_positions", m.particle_count, m.position_dtype)
 
         def gather(f, n):
             return recorded(relax_jacobi, n, [x, m.inv_mass, m.neighbour_start, m.neighbour, m.neighbour_rest,
@@ -368,13 +383,17 @@ class Tethers:
 CONSTRAINT_SETS = (Multilevel(), Tethers(), Sticks())
 """Constraint sets in the order a sweep projects them."""
 
-STAGES = (Integrate(), Relax(), Collide(), Tear())
+RELAX = Relax()
+STAGES = (Integrate(), RELAX, Collide(), Tear())
 """The stages of a substep, in order."""
 
-PARTICLE_BYTES = 3 * VEC3 + FLOAT
-"""Every scene's per-particle arrays: the State's positions, prediction and increment, the Model's inverse mass."""
+
+def particle_bytes(need: Need) -> int:
+    """Every scene's per-particle arrays: the State's positions, prediction and increment (12 bytes each in
+    float32, 24 in float64), the Model's inverse mass (float32 either way)."""
+    return 3 * need.position_bytes + FLOAT
 
 
 def device_bytes(need: Need) -> int:
     """The device memory a scene's arrays take: the sum of what its stages declare."""
-    return need.particles * PARTICLE_BYTES + sum(s.device_bytes(need) for s in STAGES if s.needed(need))
+    return need.particles * particle_bytes(need) + sum(s.device_bytes(need) for s in STAGES if s.needed(need))

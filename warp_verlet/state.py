@@ -20,10 +20,11 @@ class State:
 
     Attributes (N particles, E tear entries: one per stick for the coloured solver, two for Jacobi):
 
-    - ``particle_q``: (N,) ``wp.vec3`` float32, m. Positions.
-    - ``particle_q_inertial``: (N,) ``wp.vec3``, m. The position the last Verlet step predicted (summed form,
+    - ``particle_q``: (N,) ``wp.vec3`` (float32), or ``wp.vec3d`` where the model's precision is float64
+      (``model.position_dtype``), m. Positions.
+    - ``particle_q_inertial``: (N,) of the same type, m. The position the last Verlet step predicted (summed form,
       kernels/integrate.py): x - x_prev = ``particle_dq`` + (x - x_inertial).
-    - ``particle_dq``: (N,) ``wp.vec3``, m. The last step's increment. Before the first step it holds the
+    - ``particle_dq``: (N,) of the same type, m. The last step's increment. Before the first step it holds the
       initial velocity in m/s instead (see :meth:`set_velocity`); the exact start turns it into an increment.
     - ``stick_weight``: (E,) float32, dimensionless, or None. Per tear entry, 1 while the stick holds and 0
       once torn; only when a cloth can tear. The relaxation multiplies a stick's correction by it.
@@ -44,7 +45,7 @@ class State:
     def __init__(self, model: Model):
         self.model = model
         with wp.ScopedDevice(model.device):
-            self.particle_q = wp.array(model.rest_positions, dtype=wp.vec3)
+            self.particle_q = wp.array(model.rest_positions, dtype=model.position_dtype)  # float32 widens exactly
             self.particle_q_inertial = wp.empty_like(self.particle_q)
             self.particle_dq = wp.zeros_like(self.particle_q)  # no initial velocity
             self.stick_weight = wp.clone(model.tear_weight_start) if model.tears else None
@@ -88,22 +89,23 @@ class State:
         """Start again from the current positions, moving at ``velocity`` (m/s): one (3,) vector for every particle, or
         (N, 3). Pinned particles stay at rest. The next step runs the exact start (x = x0 + v0 dt + a dt^2 / 2
         for a constant acceleration a)."""
-        n = self.model.particle_count
-        v = np.broadcast_to(np.asarray(velocity, dtype=np.float32), (n, 3))
+        n, dtype = self.model.particle_count, self.model.host_position_dtype
+        v = np.broadcast_to(np.asarray(velocity, dtype=dtype), (n, 3))
         if not np.isfinite(v).all():
             raise ValueError("velocity must be finite")
-        v = np.where(self.model.host_inv_mass[:, None] > 0, v, 0.0).astype(np.float32)
+        v = np.where(self.model.host_inv_mass[:, None] > 0, v, 0.0).astype(dtype)
         self.particle_dq.assign(v)
         self.dt_prev = None
 
     def positions(self) -> np.ndarray:
-        """Particle positions, (N, 3) float32, m: a host snapshot that later steps do not change."""
+        """Particle positions, (N, 3) m, float32 or float64 as ``model.precision``: a host snapshot that later
+        steps do not change."""
         points = self.particle_q.numpy()
         return points.copy() if self.model.device.is_cpu else points  # on the CPU numpy() is a live view
 
     def set_positions(self, points) -> None:
         """Overwrite the positions, (N, 3) m, keeping the implicit velocity x - x_prev of every particle."""
-        points = np.asarray(points, dtype=np.float32).reshape(self.model.particle_count, 3)
+        points = np.asarray(points, dtype=self.model.host_position_dtype).reshape(self.model.particle_count, 3)
         if self.dt_prev is None:
             self.particle_q.assign(points)
             return
