@@ -8,7 +8,9 @@ the budget doubles or halves the substeps of the next frame from the RMS structu
 - over the target: double (a step may shrink by at most ``max_dt_ratio``, so doubling is the largest move);
 - under a quarter of the target for ``calm_frames`` frames in a row: halve (the stretch grows two to four
   times when the steps double, so a quarter keeps a margin and does not oscillate);
-- never above ``max_substeps`` (and the float32 floor, when there is one), never below 1.
+- never above ``max_substeps``, nor above the float32 floor on dt when the positions are float32 ("auto"
+  precision is resolved from the scene's starting budget; ``precision = "float64"`` lifts the floor), never
+  below 1.
 
 It reports what it chose: how many frames ran at each substep count, and the last stretch against the target.
 """
@@ -57,5 +59,6 @@ class Budget:
         line = f"target rms {self.target:.3%}: substeps {chosen} (substeps x frames); last frame rms {last}"
         if self.over_at_max:
             line += (f"; over the target on {self.over_at_max} frames at the most substeps allowed "
-                     f"({self.max_substeps}): raise max_substeps or iterations")
+                     f"({self.max_substeps}): raise max_substeps or iterations, or set precision = \"float64\" "
+                     "when the cap is the float32 floor on dt")
         return line
