@@ -18,8 +18,8 @@ Scenes (each built as the tables of a scene file, then the method's overrides me
 Methods are data: ``METHODS`` maps a name to overrides merged into the scene's tables ({"simulation": {...}}
 into [simulation], {"cloth": {...}} into every [[cloth]]); adding a method is one line there. ``--methods a+b``
 merges a's and b's overrides. The base scenes have tethers off, so ``plain`` adds nothing. A method the
-installed warp_verlet refuses for a scene (an unknown key such as ``precision`` before float64 lands, tethers
-on the pinless drape, multilevel on the tearing net) is skipped with one printed message.
+installed warp_verlet refuses for a scene (an unknown key, e.g. ``precision`` before float64 landed, tethers on
+the pinless drape, multilevel on the tearing net) is skipped with one printed message.
 
 Per row (scene, grid, method, budget S substeps x K sweeps):
 
@@ -31,16 +31,16 @@ Per row (scene, grid, method, budget S substeps x K sweeps):
 - the RMS and max particle distance to a converged reference at the last frame (m, and / cloth size);
 - torn_net: the sticks torn.
 
-The reference, per (scene, grid, device): the first method of ``REFERENCE_ORDER`` the scene accepts, at
-``--ref`` S x K (default 64 x 16 on the CPU, 64 x 64 on CUDA). S stays at 64 because float32 positions refuse
-dt below about 2.2e-4 s (S <= 75 at 60 fps), so the budget grows in K (4 x the default table's largest, 64 x
-4, on the CPU, 16 x on CUDA); a float64 reference could raise S too. Its self-consistency is its RMS distance
-to the same run at half its K and at half its S: a row's position error is resolved when the larger of the two
-is <= 1/3 of it (the rows' "pos resolved"), and the references table says whether the best row's is. Where the
-final state is chaotic (the drape's folds on a symmetric sphere, where the net tears) the halves differ by
-centimetres and no row is resolved: there the stretch is the measure. References are cached in DIR/STEM.json
-(metadata) and DIR/references/*.npy (positions; not committed) and reused unless ``--fresh`` or the scene,
-method or budget changed.
+The reference, per (scene, grid, device): the first method of ``REFERENCE_ORDER`` the scene accepts, at its
+budget (``--ref`` S x K overrides it): float64 + tethers at 256 x 4 on the CPU, 256 x 8 on CUDA; in float32
+(before float64, or where it is refused) 64 x 16 and 64 x 64, since float32 positions refuse dt below about
+2.2e-4 s (S <= 75 at 60 fps) and only K can grow. The default table's largest budget is 64 x 4. Its self-
+consistency is its RMS distance to the same run at half its K and at half its S: a row's position error is
+resolved when the larger of the two is <= 1/3 of it (the rows' "pos resolved"), and the references table says
+whether the best row's is. Where the final state is chaotic (the drape's folds on a symmetric sphere, where
+the net tears) the halves differ by centimetres and no row is resolved: there the stretch is the measure.
+References are cached in DIR/STEM.json (metadata) and DIR/references/*.npy (positions; not committed) and
+reused unless ``--fresh`` or the scene, method or budget changed.
 
 With ``--peer``, Newton's Style3D and VBD run the hanging cloth in the same process (skipped with a message
 when Newton is absent); their position error includes the model difference (a triangle membrane, not sticks).
@@ -79,16 +79,19 @@ G = 9.81
 METHODS: dict[str, dict] = {
     "plain": {},                                            # the base scenes: tethers off
     "tethers": {"cloth": {"tethers": True}},
-    "multilevel": {"simulation": {"multilevel": True}},      # skipped until warp_verlet knows the key
-    "float64": {"simulation": {"precision": "float64"}},     # skipped until warp_verlet knows the key
+    "multilevel": {"simulation": {"multilevel": True}},      # refused by a tearing cloth (the net)
+    "float64": {"simulation": {"precision": "float64"}},
 }
 """Method name -> scene overrides. Combine with "+" on the command line (``multilevel+tethers``)."""
 
-REFERENCE_ORDER = ("float64+tethers", "float64", "tethers", "plain")
-"""The reference runs the first of these the scene accepts: float64 when it lands (no float32 floor), tethers
-where there are pins (they change the answer only where the cloth is stretched past its rest geodesics, which
-a converged cloth is not), else plain. Multilevel is left out until its converged answer is checked to be the
-plain one (its prototype collapsed an unpinned cloth)."""
+_F64 = {"cpu": (256, 4), "cuda": (256, 8)}  # float64 lifts the dt floor: S grows too
+_F32 = {"cpu": (64, 16), "cuda": (64, 64)}   # float32 refuses dt below ~2.2e-4 s (S <= 75 at 60 fps): K grows
+REFERENCE_ORDER = (("float64+tethers", _F64), ("float64", _F64), ("tethers", _F32), ("plain", _F32))
+"""The reference runs the first of these the scene accepts, at its budget for the device (``--ref`` overrides
+it): float64 (no float32 floor on dt, so S can pass 75: at 64^2 on the CPU, 256 x 4 in float64 is 4 x closer
+to its half-S run than 64 x 16 in float32, at the same time), tethers where there are pins (they change the
+answer only where the cloth is stretched past its rest geodesics, which a converged cloth is not), else plain.
+Multilevel is left out until its converged answer is checked to be the plain one."""
 
 
 def method_overrides(name: str, methods: dict | None = None) -> dict:
@@ -169,7 +172,6 @@ DEFAULT_SIZES = {"cuda": {"hanging": [256, 1024, 2048], "drape": [1024], "torn_n
                  "cpu": {"hanging": [64, 128], "drape": [64], "torn_net": [64]}}
 DEFAULT_BUDGETS = {"cuda": [(4, 8), (16, 2), (32, 1), (64, 1), (64, 2), (64, 4)],
                    "cpu": [(1, 8), (2, 8), (4, 8), (8, 4), (16, 1), (16, 2), (24, 1), (32, 1), (64, 1), (64, 2), (64, 4)]}
-DEFAULT_REFERENCE = {"cuda": (64, 64), "cpu": (64, 16)}
 RESOLVED_RATIO = 1 / 3  # the reference's half-budget difference must be <= this x the best row's error
 
 
@@ -284,22 +286,23 @@ def _hash(tables: dict) -> str:
     return hashlib.sha256(json.dumps(tables, sort_keys=True).encode()).hexdigest()[:16]
 
 
-def reference(kind: str, n: int, device: str, threads: int | None, budget: tuple[int, int], cache: dict,
+def reference(kind: str, n: int, device: str, threads: int | None, budget: tuple[int, int] | None, cache: dict,
               out: Path | None, fresh: bool = False, frames: int | None = None, methods: dict | None = None,
               order=REFERENCE_ORDER, log=print) -> dict | None:
     """The converged reference of (scene, n, device): cached in ``cache`` (the json's "references") with its
     positions in out/references/KEY.npy; computed (with its half-K and half-S runs) when missing, stale or
-    ``fresh``. None when no method of ``order`` is accepted or the run is refused."""
-    s_ref, k_ref = budget
+    ``fresh``. ``budget`` (S, K) overrides ``order``'s. None when no method of ``order`` is accepted or the run
+    is refused."""
     key = f"{kind}-{n}-{device_kind(device)}"
-    for name in order:
+    for name, budgets in order:
+        s_ref, k_ref = budget or budgets[device_kind(device)]
         try:
             scene = build_scene(kind, n, name, s_ref, k_ref, frames, methods)
             break
         except (SceneError, KeyError):
             continue
     else:
-        log(f"reference {key}: no method of {order} accepted; position errors are not measured")
+        log(f"reference {key}: no method of {[m for m, _ in order]} accepted; position errors are not measured")
         return None
     tables = scene_tables(kind, n, name, s_ref, k_ref, frames, methods)
     digest = _hash(tables)
@@ -380,7 +383,6 @@ def run(plan: dict[str, list[int]], methods: list[str], budgets: list[tuple[int,
     "references", updated in place). Returns {"rows", "references", "skipped"}."""
     kind_of_device = device_kind(device)
     threads = 1 if kind_of_device == "cpu" else None
-    ref_budget = ref_budget or DEFAULT_REFERENCE[kind_of_device]
     cache = {} if cache is None else cache
     for m in methods:
         method_overrides(m, method_table)  # a typo fails here, before any work
@@ -451,6 +453,7 @@ def plot_fronts(rows: list[dict], refs: dict, path_for, log=print) -> dict[tuple
     try:
         from matplotlib.backends.backend_agg import FigureCanvasAgg
         from matplotlib.figure import Figure
+        from matplotlib.ticker import NullFormatter
     except ImportError:
         log("matplotlib is not installed (pip install matplotlib): plots skipped")
         return {}
@@ -480,6 +483,8 @@ def plot_fronts(rows: list[dict], refs: dict, path_for, log=print) -> dict[tuple
                     ax.axhline(half, color="grey", ls=":", lw=1, label="reference vs its half budget")
             ax.set_xscale("log")
             ax.set_yscale("log")
+            ax.xaxis.set_minor_formatter(NullFormatter())  # a range under a decade labels every minor tick
+            ax.yaxis.set_minor_formatter(NullFormatter())
             ax.set_xlabel("ms / frame")
             ax.set_ylabel(label)
             ax.grid(True, which="both", alpha=0.3)
@@ -616,7 +621,8 @@ def write_outputs(res: dict, out: Path, stem: str, device: str, command: list[st
         lines += ["Methods skipped (the installed warp_verlet or the scene refuses them):", "",
                   *(f"- {m_} on {', '.join(ks)}: {problem}" for (m_, problem), ks in why.items()), ""]
     lines += ["## References", "",
-              "First accepted method of " + ", ".join(REFERENCE_ORDER) + "; its RMS distance to the same run at half "
+              "First accepted method of " + ", ".join(f"{m} ({b[device_kind(device)][0]} × {b[device_kind(device)][1]})"
+                                                     for m, b in REFERENCE_ORDER) + " (or --ref); its RMS distance to the same run at half "
               f"its K and at half its S must be ≤ {RESOLVED_RATIO:.2g} × a row's position error for that error "
               "to be resolved (the rows' \"pos resolved\" column; \"resolved\" here: is the best row's). "
               "Stretch needs no reference and is resolved at every row.", "",
