@@ -31,7 +31,8 @@ REACH_BUDGETS = (("float32", 16, 2), ("float32", 64, 2), ("float32", 64, 4), ("f
 
 
 def run(n: int, precision: str, substeps: int, iterations: int, frames: int, device: str, threads: int | None) -> dict:
-    data = hanging(n, substeps, iterations, tethers=True)
+    data = hanging(n, substeps, iterations)
+    data["cloth"][0]["tethers"] = True
     data["simulation"]["precision"] = precision
     sim = Simulator(parse_scene(data, file=f"<hanging {n}^2>"), device, threads=threads)
     sim.step_frame()  # the first frame runs the exact start and captures the rest
