@@ -17,7 +17,7 @@ if [ "$PART" = hanging ]; then
     --ref 512x2 --peer --peer-sizes 256 1024 --out "$out" --stem gpu-hanging 2>&1 | tail -60
 else
   timeout 300 python3 -m bench.convergence --device cuda --scenes drape torn_net --drape-sizes 1024 --net-sizes 512 \
-    --methods plain multilevel float64 tethers --budgets 4x8 16x2 64x2 128x1 256x1 --ref 512x2 \
+    --methods plain multilevel float64 tethers --budgets 4x8 16x2 64x2 128x1 256x1 --ref 256x2 \
     --out "$out" --stem gpu-rest 2>&1 | tail -40
   timeout 120 python3 -m bench.throughput --device cuda --sizes 64 256 1024 2048 --repeats 3 --out "$out" 2>&1 | tail -30
   timeout 120 python3 -m warp_verlet run scenes/big_grid_1024.toml --device cuda -o /tmp/big.usdc 2>&1 | tail -16 \
