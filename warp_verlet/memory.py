@@ -16,20 +16,10 @@ import os
 from dataclasses import dataclass
 
 from .errors import WarpVerletError
-from .scene import ClothSpec, Scene
+from .scene import Scene
+from .topology import stick_count  # noqa: F401 (the count before building; memory's callers ask here)
 
 HOST_BUILD_BYTES_PER_STICK = 160
-
-
-def stick_count(spec: ClothSpec) -> int:
-    """The number of sticks ``topology.build_cloth`` makes for a cloth, without building it."""
-    r, c = spec.resolution
-    per_family = {
-        "structural": r * (c - 1) + (r - 1) * c,
-        "shear": 2 * (r - 1) * (c - 1),
-        "bend": r * max(c - 2, 0) + max(r - 2, 0) * c,
-    }
-    return sum(per_family[family] for family in spec.sticks)
 
 
 @dataclass(frozen=True)
@@ -49,7 +39,7 @@ def gib(n: float) -> str:
 
 
 def estimate(scene: Scene) -> MemoryNeed:
-    from .stages import Need, device_bytes  # stages imports this module's stick_count
+    from .stages import Need, device_bytes
 
     need = Need.of(scene)
     return MemoryNeed(

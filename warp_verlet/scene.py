@@ -185,16 +185,6 @@ class Scene:
         return max((c.tethers_per_particle for c in self.cloths), default=0)
 
     @property
-    def multilevel_counts(self) -> tuple[int, int]:
-        """(coarse sticks, children) of the multilevel hierarchy over all cloths; (0, 0) when it is off."""
-        if not self.simulation.multilevel:
-            return 0, 0
-        from .multilevel import hierarchy_counts
-
-        counts = [hierarchy_counts(*c.resolution) for c in self.cloths]
-        return sum(s for s, _ in counts), sum(n for _, n in counts)
-
-    @property
     def compliant(self) -> bool:
         """Does any cloth have soft (XPBD) sticks?"""
         return any(c.compliance for c in self.cloths)

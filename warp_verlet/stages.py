@@ -62,18 +62,21 @@ class Need:
         """The scene's need, with ``simulation.precision`` resolved (warp_verlet/precision.py)."""
         from dataclasses import replace
 
-        from .memory import stick_count  # the grid's stick count, without building it
+        from .multilevel import hierarchy_counts  # counts from the grid's size, without building anything
+        from .topology import stick_count
         from .precision import resolve
 
         moving = any(s.moving for s in scene.spheres)
         free = any(len(set(c.pins)) < c.particle_count for c in scene.cloths)
+        counts = [hierarchy_counts(*c.resolution) for c in scene.cloths] if scene.simulation.multilevel else []
+        coarse = (sum(n for n, _ in counts), sum(n for _, n in counts))
         need = cls(
             particles=scene.particle_count, sticks=sum(stick_count(c) for c in scene.cloths),
             solver=scene.simulation.solver, iterations=scene.simulation.iterations, free_particles=free,
             compliant=scene.compliant, tears=scene.tears, spheres=len(scene.spheres),
             sphere_keys=sum(len(s.keyframes) for s in scene.spheres) if moving else 0, planes=len(scene.planes),
             tethered=scene.tethered_particles, tethers_per_particle=scene.tethers_per_particle,
-            coarse_sticks=scene.multilevel_counts[0], coarse_children=scene.multilevel_counts[1],
+            coarse_sticks=coarse[0], coarse_children=coarse[1],
         )
         return replace(need, precision=resolve(scene, relaxes=RELAX.needed(need)))
 

@@ -82,6 +82,17 @@ def _stick_block(rows: int, cols: int, dr: int, dc: int, grid_class: int):
     return ends, np.full(r.shape, grid_class, np.int8), np.stack([r, c], axis=1)
 
 
+def stick_count(spec: ClothSpec) -> int:
+    """The number of sticks :func:`build_cloth` makes for a cloth, without building it."""
+    r, c = spec.resolution
+    per_family = {
+        "structural": r * (c - 1) + (r - 1) * c,
+        "shear": 2 * (r - 1) * (c - 1),
+        "bend": r * max(c - 2, 0) + max(r - 2, 0) * c,
+    }
+    return sum(per_family[family] for family in spec.sticks)
+
+
 def build_cloth(spec: ClothSpec) -> ClothTopology:
     rows, cols = spec.resolution
     positions = grid_positions(spec)
