@@ -83,3 +83,10 @@ def test_the_run_summary_says_what_the_budget_chose(tmp_path):
     summary = run_scene(scene(0.001, n=16), tmp_path / "cache.usda", device="cpu", frames=5)
     line = next(l for l in summary.format().splitlines() if l.startswith("budget"))
     assert "target rms 0.100%" in line and "(substeps x frames)" in line
+
+
+def test_reset_starts_the_budget_over():
+    sim = run(0.0005)
+    assert sim.substeps > 4
+    sim.reset()
+    assert sim.substeps == 4 and not sim.budget.frames_at

@@ -93,17 +93,21 @@ class Simulator:
         self._accumulator = 0.0
         self._first_diverged = None  # allocated by the first divergence check
         self._frame_graphs: dict[int, object] = {}  # substeps -> the captured frame
-        self.budget = None
-        if self.settings.target_stretch is not None:
-            floor = int(1.0 / (self.settings.fps * self.min_dt)) if self.min_dt > 0 else self.settings.max_substeps
-            self.budget = Budget(self.settings.target_stretch, self.settings.substeps,
-                                 max(1, min(self.settings.max_substeps, floor)))
+        self.budget = self._new_budget()
         # A frame's substeps are captured once and replayed: a CUDA graph, or on the CPU Warp's own capture
         # (replayed in C++: 2.4 -> 1.2 ms per frame at 32^2, bit-identical). Threaded relaxation needs its
         # launches issued from Python, so it is not captured.
         self._use_graph = use_graph and self.threads == 1
         if self.dt < self.min_dt:
             raise WarpVerletError(self.solver.too_small(self.dt, scene_dt=True))
+
+    def _new_budget(self) -> Budget | None:
+        """The target_stretch budget at its start (None without a target), capped by the float32 floor."""
+        if self.settings.target_stretch is None:
+            return None
+        floor = int(1.0 / (self.settings.fps * self.min_dt)) if self.min_dt > 0 else self.settings.max_substeps
+        return Budget(self.settings.target_stretch, self.settings.substeps,
+                      max(1, min(self.settings.max_substeps, floor)))
 
     @property
     def substeps(self) -> int:
@@ -141,6 +145,7 @@ class Simulator:
             self._initial = State(self.model)
         self.state.assign(self._initial)
         self._accumulator = 0.0
+        self.budget = self._new_budget()
 
     # ------------------------------------------------------------------ stepping
     def step(self, dt: float | None = None) -> None:
