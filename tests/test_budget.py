@@ -8,7 +8,7 @@ from warp_verlet.errors import SceneError
 from warp_verlet.scene import TARGET_ITERATIONS, parse_scene
 from warp_verlet.simulator import Simulator
 
-from tests.test_multilevel import hanging
+from test_multilevel import hanging  # tests/ is on sys.path (pytest, rootdir-relative imports)
 
 
 def test_doubles_over_the_target_and_halves_only_after_calm_frames():
