@@ -11,6 +11,7 @@ import warp as wp
 
 from conftest import make_scene
 from warp_verlet.errors import WarpVerletError
+from bench.common import device_arrays as every_device_array
 from warp_verlet.memory import check_fits, estimate, stick_count
 from warp_verlet.scene import parse_scene
 from warp_verlet.simulator import Simulator
@@ -31,16 +32,13 @@ def device_arrays(obj) -> list[wp.array]:
 
 
 def simulator_bytes(sim: Simulator) -> int:
-    """Bytes of every device array the simulator holds: the Model's, its colliders', the State's and the
-    solver's scratch. Arrays shared between them (the coloured solver's tear ends are its stick ends) count
-    once. Call after a step: scratch buffers are allocated when the solver binds its launches."""
+    """Bytes of every device array the simulator holds (bench.common.device_arrays: the Model's, its levels',
+    its colliders', the State's and the solver's scratch, each shared array once). Call after a step: scratch
+    buffers are allocated when the solver binds its launches."""
     state = sim.state
     # clone() and assign() copy what arrays() lists: every array a State holds must be there.
     assert {a.ptr for a in device_arrays(state)} == {a.ptr for a in state.arrays().values()}
-    arrays = device_arrays(sim.model) + device_arrays(sim.model.colliders) + list(state.arrays().values())
-    arrays += [a for level in sim.model.levels for a in device_arrays(level)]
-    arrays += list(sim.solver._scratch.values())
-    return sum(a.capacity for a in {a.ptr: a for a in arrays}.values())
+    return sum(a.capacity for a in every_device_array(sim).values())
 
 
 # (simulation, cloth) overrides on a 24 x 31 cloth with every stick family: each solver with and without
