@@ -21,6 +21,7 @@ from .scene import (
 
 GRID_KEYS = ("resolution", "size", "origin", "orientation")
 _positive = _per_element(real(0.0, lo_open=True))
+_point = _per_element(vector(3, _any_real))  # an error names the element's own key
 
 
 def _scale(value: Any, key: str) -> tuple[float, float, float]:
@@ -43,8 +44,8 @@ def _pin_items(value: Any, key: str) -> tuple[tuple, ...]:
                 raise _Invalid(f"expected a vertex index >= 0, got {_int_text(item)}", item_key)
             items.append(("vertex", item, item_key))
         elif isinstance(item, dict) and set(item) == {"min", "max"}:
-            lo = vector(3, _any_real)(item["min"], f"{item_key}.min")
-            hi = vector(3, _any_real)(item["max"], f"{item_key}.max")
+            lo = _point(item["min"], f"{item_key}.min")
+            hi = _point(item["max"], f"{item_key}.max")
             if any(a > b for a, b in zip(lo, hi)):
                 raise _Invalid(f"expected min <= max on every axis, got min = {list(lo)}, max = {list(hi)}", item_key)
             items.append(("box", lo, hi, item_key))
