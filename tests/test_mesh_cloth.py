@@ -262,7 +262,7 @@ def test_non_manifold_edges_are_simulated_with_a_warning(tmp_path):
     """Three triangles on one edge (a fin): allowed, warned, and no bend stick crosses that edge."""
     points = np.array([[0, 0, 0], [1, 0, 0], [0.5, 1, 0], [0.5, -1, 0], [0.5, 0, 1]], np.float64)
     write_obj(tmp_path / "fin.obj", points, Faces.uniform([[0, 1, 2], [1, 0, 3], [0, 1, 4]]))
-    with pytest.warns(NonManifoldWarning, match="1 edges are shared by more than two faces"):
+    with pytest.warns(NonManifoldWarning, match="1 edge is shared by more than two faces"):
         scene = mesh_scene(tmp_path, {"mesh": "fin.obj", "sticks": ALL})
     topology = build_cloth(scene.cloths[0])
     assert (topology.family == 2).sum() == 0

@@ -216,8 +216,9 @@ def prepare(source: SourceMesh, weld_distance: float | None = None) -> ClothMesh
     counts = _edge_face_counts(welded_faces)
     crowded = int((counts > 2).sum())
     if crowded:
-        warnings.warn(f"{what}: {crowded} edges are shared by more than two faces (a non-manifold mesh); they "
-                      "are simulated, but no bend stick crosses them", NonManifoldWarning, stacklevel=2)
+        edges = "1 edge is" if crowded == 1 else f"{crowded} edges are"
+        warnings.warn(f"{what}: {edges} shared by more than two faces (a non-manifold mesh); it is simulated, but "
+                      "no bend stick crosses those edges", NonManifoldWarning, stacklevel=2)
     return ClothMesh(source=source, particle_of_vertex=particle_of_vertex, particle_points=particle_points,
                      faces=welded_faces, weld_distance=distance, non_manifold_edges=crowded)
 
