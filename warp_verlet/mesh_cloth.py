@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import WarpVerletError
-from .faces import Faces, next_corner
+from .faces import Faces, edge_keys, next_corner
 from .tethers import connected_labels
 
 # The default weld distance, as a fraction of the mesh's bounding-box diagonal: far below any edge a cloth
@@ -223,15 +223,10 @@ def prepare(source: SourceMesh, weld_distance: float | None = None) -> ClothMesh
                      faces=welded_faces, weld_distance=distance, non_manifold_edges=crowded)
 
 
-def _edge_keys(pairs: np.ndarray, base: int) -> np.ndarray:
-    lo, hi = np.minimum(pairs[:, 0], pairs[:, 1]), np.maximum(pairs[:, 0], pairs[:, 1])
-    return lo.astype(np.int64) * base + hi
-
-
 def _edge_face_counts(faces: Faces) -> np.ndarray:
     """How many faces each distinct edge has."""
     pairs, _ = faces.sides()
-    _, counts = np.unique(_edge_keys(pairs, int(faces.indices.max()) + 1), return_counts=True)
+    _, counts = np.unique(edge_keys(pairs, int(faces.indices.max()) + 1), return_counts=True)
     return counts
 
 
@@ -239,7 +234,7 @@ def _unique_pairs(pairs: np.ndarray, base: int, exclude: np.ndarray | None = Non
     """Distinct undirected pairs as sorted (low, high) rows, in key order, without self-pairs and without the
     keys in ``exclude``."""
     pairs = pairs[pairs[:, 0] != pairs[:, 1]]
-    keys = np.unique(_edge_keys(pairs, base))
+    keys = np.unique(edge_keys(pairs, base))
     if exclude is not None and len(exclude):
         keys = keys[~np.isin(keys, exclude)]
     return np.stack([keys // base, keys % base], axis=1).astype(np.int32)
@@ -253,13 +248,13 @@ def stick_families(mesh: ClothMesh, families: tuple[str, ...]) -> tuple[np.ndarr
     pairs, face_of_side = faces.sides()
     structural = _unique_pairs(pairs, base)
     blocks = {"structural": structural}
-    taken = _edge_keys(structural, base)
+    taken = edge_keys(structural, base)
     if "shear" in families:
         quads = np.flatnonzero(faces.counts == 4)
         corners = faces.indices[faces.offsets[quads][:, None] + np.arange(4)]
         diagonals = np.concatenate([corners[:, [0, 2]], corners[:, [1, 3]]]) if len(quads) else np.zeros((0, 2), np.int32)
         blocks["shear"] = _unique_pairs(diagonals, base, taken)
-        taken = np.concatenate([taken, _edge_keys(blocks["shear"], base)])
+        taken = np.concatenate([taken, edge_keys(blocks["shear"], base)])
     if "bend" in families:
         blocks["bend"] = _unique_pairs(_bend_pairs(faces, pairs, face_of_side, base), base, taken)
     chosen = [f for f in ("structural", "shear", "bend") if f in families]
@@ -282,7 +277,7 @@ def _bend_pairs(faces: Faces, pairs: np.ndarray, face_of_side: np.ndarray, base:
     lo_first = pairs[:, 0] < pairs[:, 1]
     other_of_lo = np.where(lo_first, first_other, second_other)
     other_of_hi = np.where(lo_first, second_other, first_other)
-    keys = _edge_keys(pairs, base)
+    keys = edge_keys(pairs, base)
     order = np.argsort(keys, kind="stable")
     keys = keys[order]
     new = np.ones(len(keys), bool)
