@@ -288,3 +288,18 @@ def test_bad_mesh_keys_name_the_key(tmp_path):
     write_obj(tmp_path / "c.obj", points, triangulated(faces))
     assert "pins by primvar ('x') need a USD file" in scene_error(tmp_path, {"mesh": "c.obj", "pins": [{"primvar": "x"}]})
     assert "prim is for USD files only" in scene_error(tmp_path, {"mesh": "c.obj", "prim": "/A"})
+
+
+def test_validate_reports_the_mesh_and_its_welding(tmp_path, capsys):
+    """`warp-verlet validate` as a user runs it on a mesh scene: the weld and pins are stated, nothing is run."""
+    from warp_verlet.cli import main
+
+    points, faces = grid_mesh(3, 4)
+    write_usd_mesh(tmp_path / "a.usda", np.concatenate([points, points[:2]]),
+                   Faces(np.r_[faces.counts, 3], np.r_[faces.indices, 12, 13, 5]))  # two duplicates of 0 and 1
+    (tmp_path / "s.toml").write_text('[[cloth]]\nname = "panel"\nmesh = "a.usda"\nprim = "/Set/Cloth"\npins = [0, 12]\n')
+    assert main(["validate", str(tmp_path / "s.toml")]) == 0
+    out = capsys.readouterr().out
+    assert "12 particles" in out
+    assert f"cloth panel: {tmp_path / 'a.usda'} prim /Set/Cloth, 7 faces, 14 vertices welded into 12 particles" in out
+    assert "1 pinned" in out  # vertex 12 is a duplicate of vertex 0: one particle

@@ -108,6 +108,12 @@ def _validate(args) -> int:
     print(f"{args.scene}: valid scene, {len(scene.cloths)} cloth(s), {scene.particle_count} particles, "
           f"{sim.frames} frames at {sim.fps:g} fps, {sim.substeps} substeps x {sim.iterations} iterations, "
           f"solver {sim.solver}")
+    for spec in scene.cloths:
+        if spec.mesh is not None:
+            mesh = spec.mesh.mesh
+            print(f"cloth {spec.name}: {mesh.source.description}, {len(mesh.faces)} faces, {mesh.vertex_count} "
+                  f"vertices welded into {mesh.particle_count} particles (weld_distance {mesh.weld_distance:.3g} m), "
+                  f"{len(spec.mesh.pins)} pinned")
     from .memory import estimate  # counts only: no warp
 
     need = estimate(scene)
