@@ -127,7 +127,10 @@ def test_divergence_stops_names_the_frame_and_keeps_frames_done(scene_file, caps
     assert main(["run", str(scene_file), "--device", "cpu", "-q"]) == 1
     err = capsys.readouterr().err
     assert "diverged at frame 3: cloth 'sheet'" in err and "position_bound = 3.0 m" in err
-    cache = scene_file.parent / "small.usdc"
+    # The frames done go to the partial file, never to the output, and the message says where they are.
+    assert "frames 0 to 2 are in small.partial.usdc; small.usdc was not written" in err
+    assert not (scene_file.parent / "small.usdc").exists()
+    cache = scene_file.parent / "small.partial.usdc"
     assert validate_cache(cache) == []
     stage, samples = read_points(cache, "/World/sheet")
     assert sorted(samples) == [0, 1, 2] and stage.GetEndTimeCode() == 2
@@ -153,7 +156,7 @@ def test_module_and_console_script_behave_the_same(scene_file):
     assert "cloth[0].mass" in module.stderr and "Traceback" not in module.stderr
 
 
-def test_ctrl_c_leaves_a_valid_cache_of_the_frames_done(scene_file, monkeypatch):
+def test_ctrl_c_leaves_a_valid_cache_of_the_frames_done(scene_file, monkeypatch, capsys):
     # Interrupt after frame 3, as a KeyboardInterrupt from the terminal would arrive between frames.
     from warp_verlet import runner
 
@@ -168,7 +171,8 @@ def test_ctrl_c_leaves_a_valid_cache_of_the_frames_done(scene_file, monkeypatch)
 
     monkeypatch.setattr(runner, "run_scene", interrupted)
     assert main(["run", str(scene_file), "--device", "cpu", "-q"]) == 130
-    cache = scene_file.parent / "small.usdc"
+    assert "interrupted: frames 0 to 3 are in small.partial.usdc; small.usdc was not written" in capsys.readouterr().err
+    cache = scene_file.parent / "small.partial.usdc"
     assert validate_cache(cache) == []
     _, samples = read_points(cache, "/World/sheet")
     assert sorted(samples) == [0, 1, 2, 3]

@@ -21,6 +21,7 @@ import warp as wp
 
 from .colliders import ColliderModel
 from .colouring import Colouring, check_partition, graph_colouring, grid_colouring
+from .errors import ArgumentError
 from .multilevel import grid_hierarchy, merge_levels
 from .tethers import TetherTable, build_tethers
 from .scene import Scene
@@ -84,7 +85,7 @@ class Model:
     def __init__(self, scene: Scene, device, colouring: str = "auto"):
         """``colouring``: "auto" (analytic for grids), "grid" or "graph" (Warp's graph colouring)."""
         if colouring not in ("auto", "grid", "graph"):
-            raise ValueError(f"colouring must be 'auto', 'grid' or 'graph', got {colouring!r}")
+            raise ArgumentError(f"colouring must be 'auto', 'grid' or 'graph', got {colouring!r}")
         self.device = device
         self.solver = scene.simulation.solver
         self.precision = Need.of(scene).precision
