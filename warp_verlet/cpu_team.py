@@ -24,7 +24,7 @@ import threading
 import weakref
 from typing import Callable, Sequence
 
-from .errors import WarpVerletError
+from .errors import ArgumentError, WarpVerletError
 
 LAUNCH_COST_S = 13e-6
 """Fixed cost per thread and phase. With it, a 128^2 colour (51 us of one-thread work) stays on one thread
@@ -85,7 +85,7 @@ class PhaseTeam:
     def __init__(self, phases: Sequence[Sequence[Callable[[], None] | None]], repeats: int):
         self.threads = len(phases[0]) if phases else 1
         if any(len(phase) != self.threads for phase in phases):
-            raise ValueError("every phase needs one entry per thread")
+            raise ArgumentError("every phase needs one entry per thread")
         self._phases = [list(phase) for phase in phases]
         self._repeats = int(repeats)
         self._barrier = threading.Barrier(self.threads)

@@ -121,7 +121,7 @@ class OutputReport:
     def describe(self) -> str:
         kept = f"{self.output} is as it was before this run" if self.previous else f"{self.output} was not written"
         if self.partial is None or self.frames is None:
-            return f"no frame was saved; {kept}"
+            return f"nothing was written; {kept}"
         first, last = self.frames
         frames = f"frame {first} is" if first == last else f"frames {first} to {last} are"
         return f"{frames} in {self.partial}; {kept}"

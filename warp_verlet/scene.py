@@ -692,16 +692,24 @@ def _check_float32(file: str, simulation: SimulationSettings, cloths: tuple, col
     fits("simulation.wind", simulation.wind)
     for k, (g, w) in enumerate(zip(simulation.gravity, simulation.wind)):
         if not _float32_fits(g + w):  # one acceleration on the device
-            raise SceneError(file, f"simulation.wind[{k}]", f"gravity + wind = {g + w:g} m/s^2, which float32 cannot "
-                             f"hold ({limit})")
+            larger = "gravity" if abs(g) >= abs(w) else "wind"
+            raise SceneError(file, f"simulation.{larger}[{k}]", f"gravity + wind = {g + w:g} m/s^2, which float32 "
+                             f"cannot hold ({limit})")
+    dt = 1.0 / (simulation.fps * simulation.substeps)
+    if not FLOAT32_TINY <= dt <= FLOAT32_MAX:
+        raise SceneError(file, "simulation.fps", f"the step 1 / (fps x substeps) = {dt:g} s is beyond what float32 "
+                         f"can hold (a normal float32 lies in [{FLOAT32_TINY:.3g}, {FLOAT32_MAX:.3g}])")
     for i, c in enumerate(cloths):
         key = f"cloth[{i}]"
         fits(f"{key}.origin", c.origin)
         if c.size is not None and c.resolution is not None:  # a grid (a mesh's positions are checked at run time)
             fits(f"{key}.size", c.size)
-            reach = max(abs(v) for v in c.origin) + max(c.size)  # the far corner, whichever way the cloth lies
+            far = max(abs(v) for v in c.origin)
+            reach = far + max(c.size)  # the far corner, whichever way the cloth lies
             if not _float32_fits(reach):
-                raise SceneError(file, f"{key}.size", f"the cloth reaches {reach:g} m from the origin, beyond what "
+                where = (f"{key}.origin[{[abs(v) for v in c.origin].index(far)}]" if far >= max(c.size)
+                         else f"{key}.size[{list(c.size).index(max(c.size))}]")
+                raise SceneError(file, where, f"the cloth reaches {reach:g} m from the world's origin, beyond what "
                                  f"float32 can hold ({limit})")
             for axis, (n, length) in enumerate(zip(c.resolution, c.size)):
                 if n > 1 and length / (n - 1) < FLOAT32_TINY:
@@ -726,14 +734,17 @@ def _check_float32(file: str, simulation: SimulationSettings, cloths: tuple, col
         if isinstance(c, PlaneCollider):
             fits(f"{key}.point", c.point)
             fits(f"{key}.display_size", [c.display_size])
-            if not _float32_fits(max(abs(v) for v in c.point) + c.display_size):
-                raise SceneError(file, f"{key}.display_size", f"the drawn square reaches beyond what float32 can "
-                                 f"hold ({limit})")
+            far = max(abs(v) for v in c.point)
+            if not _float32_fits(far + c.display_size):
+                where = (f"{key}.point[{[abs(v) for v in c.point].index(far)}]" if far >= c.display_size
+                         else f"{key}.display_size")
+                raise SceneError(file, where, f"the drawn square reaches beyond what float32 can hold ({limit})")
         else:
             fits(f"{key}.radius", [c.radius])
             if not _float32_fits(c.radius + c.thickness):
-                raise SceneError(file, f"{key}.thickness", f"radius + thickness = {c.radius + c.thickness:g} m, "
-                                 f"which float32 cannot hold ({limit})")
+                where = f"{key}.radius" if c.radius >= c.thickness else f"{key}.thickness"
+                raise SceneError(file, where, f"radius + thickness = {c.radius + c.thickness:g} m, which float32 "
+                                 f"cannot hold ({limit})")
             for k, (_, centre) in enumerate(c.keyframes):
                 for axis, v in enumerate(centre):
                     if not _float32_fits(v):
