@@ -468,3 +468,16 @@ def test_a_writer_that_usd_cannot_save_raises_one_line(tmp_path, monkeypatch):
         PointCacheWriter(tmp_path / "c.usdc", [shape], fps=30)
     assert str(caught.value).startswith(f"cannot save USD cache {tmp_path / 'c.usdc'}: ")
     assert ".cpp" not in str(caught.value) and "\n" not in str(caught.value)
+
+
+def test_a_run_refused_at_its_first_save_can_be_run_again_in_the_same_process(work, monkeypatch):
+    # The refused writer must not keep its layer open: the retry would be told the file is open in this process.
+    full = [True]
+    fake_free(monkeypatch, lambda call: 1000 if call == 2 and full[0] else 10**9)  # no room at the first save
+    with pytest.raises(DiskFullError, match="the cache's first save needs about") as caught:
+        run_scene(load_scene("small.toml"), device="cpu")
+    assert not (work / "small.partial.usdc").exists() and not (work / "small.usdc").exists()
+    full[0] = False  # the disk was cleared; the caller still holds the exception (and its traceback)
+    run_scene(load_scene("small.toml"), device="cpu")
+    assert caught.value is not None
+    assert sheet_frames(work / "small.usdc") == list(range(7))

@@ -221,7 +221,14 @@ class PointCacheWriter:
                 plane.CreateDoubleSidedAttr(True)
         # Curves pad their extent by half the width; keep the width array to compute it per frame.
         self._rope_widths = Vt.FloatArray([rope_width])
-        self._save()  # the topology is on disk before the first frame, and write errors surface here
+        try:
+            self._save()  # the topology is on disk before the first frame, and write errors surface here
+        except BaseException:
+            # Release the layer, even while the caller holds this exception (and this frame): a later writer
+            # may open the same path in this process.
+            self._stage = stage = None
+            self._prims, self._moving = [], []
+            raise
 
     @staticmethod
     def _define_mesh(stage: Usd.Stage, prim_path: Sdf.Path, shape: CachedShape) -> UsdGeom.Mesh:
@@ -344,7 +351,7 @@ class PointCacheWriter:
             self._save()
         finally:
             self._stage = None  # drop the layer, so the file can be reopened or rewritten in this process
-            self._prims = []
+            self._prims, self._moving = [], []
 
     def __enter__(self) -> PointCacheWriter:
         return self
