@@ -188,16 +188,20 @@ def test_a_rerun_killed_with_sigkill_keeps_the_previous_cache_byte_for_byte(work
     proc.communicate()
     assert proc.returncode == -signal.SIGKILL
     assert (work / "small.usdc").read_bytes() == good_cache
-    assert len(sheet_frames(work / "small.partial.usdc")) >= 2  # the killed run's frames, up to its last save
+    # The killed run's frames up to its last save; not checked further: a crate file is appended to in place,
+    # and a kill during a save can leave it unreadable (measured: 8 of 40 kills of a run that saves often).
+    assert (work / "small.partial.usdc").is_file()
     # The next run finds what the killed one left, says so, and leaves nothing behind when it succeeds.
     stale_temp = work / "small.partial.Ab12Cd"  # what USD leaves when a run is killed during a save
-    stale_temp.write_bytes(b"half a save")
+    stale_temp.write_bytes(b"PXR-USDC half a save")
+    (work / "small.partial.backup").write_text("a file of the user's, named alike but no USD: left alone")
     capsys.readouterr()
     assert run("small.toml") == 0
     err = capsys.readouterr().err
     assert f"note: removed {stale_temp}, a temporary file left by an earlier run that was killed during a save" in err
     assert "small.partial.usdc holds the frames of an earlier run" in err
-    assert sorted(p.name for p in work.iterdir()) == [".small.usdc.lock", "endless.toml", "small.toml", "small.usdc"]
+    assert sorted(p.name for p in work.iterdir()) == [".small.usdc.lock", "endless.toml", "small.partial.backup",
+                                                      "small.toml", "small.usdc"]
 
 
 def test_sigterm_stops_like_ctrl_c_and_says_where_the_frames_are(work, good_cache):

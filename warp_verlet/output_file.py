@@ -294,13 +294,15 @@ class CacheOutput:
             self._note(text)
 
     def _usd_temps(self) -> list[Path]:
-        """Temporary files USD writes a save to before renaming it over the partial file: NAME.partial.XXXXXX."""
+        """Temporary files USD writes a save to before renaming it over the partial file: NAME.partial.XXXXXX
+        (mkstemp's six characters), empty or starting as a USD file does; anything else is left alone."""
         pattern = re.compile(re.escape(self.partial.stem) + r"\.[A-Za-z0-9_]{6}")
         try:
             names = os.listdir(self.partial.parent)
         except OSError:
             return []
-        return [self.partial.parent / n for n in names if pattern.fullmatch(n)]
+        temps = [self.partial.parent / n for n in names if pattern.fullmatch(n)]
+        return [t for t in temps if _looks_like_usd(t)]
 
     def _remove_usd_temps(self) -> list[Path]:
         removed = []
@@ -406,6 +408,16 @@ class CacheOutput:
                 pass
         return OutputReport(output=self.given, partial=self.partial_shown if frames else None, frames=frames,
                             previous=self.previous)
+
+
+def _looks_like_usd(path: Path) -> bool:
+    """Empty, or starting with a crate file's or a text layer's signature."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(8)
+    except OSError:
+        return False
+    return head == b"" or head.startswith((b"PXR-USDC", b"#usda"))
 
 
 def _fsync(path: Path) -> None:
