@@ -2,6 +2,7 @@
 
 import subprocess
 import sys
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -127,7 +128,10 @@ def test_divergence_stops_names_the_frame_and_keeps_frames_done(scene_file, caps
     assert main(["run", str(scene_file), "--device", "cpu", "-q"]) == 1
     err = capsys.readouterr().err
     assert "diverged at frame 3: cloth 'sheet'" in err and "position_bound = 3.0 m" in err
-    cache = scene_file.parent / "small.usdc"
+    # The frames done go to the partial file, never to the output, and the message says where they are.
+    assert "frames 0 to 2 are in small.partial.usdc; small.usdc was not written" in err
+    assert not (scene_file.parent / "small.usdc").exists()
+    cache = scene_file.parent / "small.partial.usdc"
     assert validate_cache(cache) == []
     stage, samples = read_points(cache, "/World/sheet")
     assert sorted(samples) == [0, 1, 2] and stage.GetEndTimeCode() == 2
@@ -153,7 +157,7 @@ def test_module_and_console_script_behave_the_same(scene_file):
     assert "cloth[0].mass" in module.stderr and "Traceback" not in module.stderr
 
 
-def test_ctrl_c_leaves_a_valid_cache_of_the_frames_done(scene_file, monkeypatch):
+def test_ctrl_c_leaves_a_valid_cache_of_the_frames_done(scene_file, monkeypatch, capsys):
     # Interrupt after frame 3, as a KeyboardInterrupt from the terminal would arrive between frames.
     from warp_verlet import runner
 
@@ -168,7 +172,8 @@ def test_ctrl_c_leaves_a_valid_cache_of_the_frames_done(scene_file, monkeypatch)
 
     monkeypatch.setattr(runner, "run_scene", interrupted)
     assert main(["run", str(scene_file), "--device", "cpu", "-q"]) == 130
-    cache = scene_file.parent / "small.usdc"
+    assert "interrupted: frames 0 to 3 are in small.partial.usdc; small.usdc was not written" in capsys.readouterr().err
+    cache = scene_file.parent / "small.partial.usdc"
     assert validate_cache(cache) == []
     _, samples = read_points(cache, "/World/sheet")
     assert sorted(samples) == [0, 1, 2, 3]
@@ -192,3 +197,140 @@ def test_preview_without_matplotlib_says_which_extra_to_install(tmp_path):
     assert out.stdout.split()[-2:] == ["rc", "1"]
     assert "pip install 'warp-verlet[preview]'" in out.stderr and "Traceback" not in out.stderr
     assert not (tmp_path / "x.png").exists()
+
+
+# ---------------------------------------------------------------------------------- clean errors (issue 13)
+
+
+def test_threads_are_bounded_with_a_message_about_threads(scene_file, capsys):
+    from warp_verlet.cpu_team import MAX_THREADS
+
+    for bad in ("0", "-3", str(MAX_THREADS + 1), "100000", "two"):
+        with pytest.raises(SystemExit) as caught:
+            main(["run", str(scene_file), "--threads", bad])
+        assert caught.value.code == 2
+        err = capsys.readouterr().err
+        message = err.split("argument --threads:")[1]
+        assert message.startswith(" expected a") and "threads" in message and "frame" not in message
+    assert not (scene_file.parent / "small.usdc").exists()
+
+
+def test_the_api_bounds_threads_too(scene_file):
+    from warp_verlet import Simulator
+    from warp_verlet.errors import ArgumentError
+    from warp_verlet.scene import load_scene
+
+    with pytest.raises(ArgumentError, match=r"threads must be a whole number in 1 \.\. 1024, got 100000"):
+        Simulator(load_scene(scene_file), "cpu", threads=100000)
+
+
+def test_more_threads_than_cores_warns(scene_file, monkeypatch, capsys):
+    from warp_verlet import cli
+
+    monkeypatch.setattr(cli, "usable_cores", lambda: 2)
+    assert main(["run", str(scene_file), "--device", "cpu", "-q", "--threads", "2"]) == 0
+    assert "warning" not in capsys.readouterr().err
+    assert main(["run", str(scene_file), "--device", "cpu", "-q", "--threads", "3"]) == 0
+    err = capsys.readouterr().err
+    assert "warning: --threads 3 is more than the 2 core(s)" in err and "slower, not faster" in err
+
+
+def test_a_cpu_run_does_not_print_warps_cuda_driver_warning(scene_file):
+    done = subprocess.run([sys.executable, "-m", "warp_verlet", "run", "small.toml", "--device", "cpu", "-q"],
+                          cwd=scene_file.parent, capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    assert "CUDA" not in done.stderr and "Traceback" not in done.stderr
+
+
+def test_the_native_stderr_filter_drops_only_the_cuda_warning(capfd):
+    import os
+
+    from warp_verlet.warp_setup import CUDA_DRIVER_WARNING, _native_stderr_without
+
+    with _native_stderr_without(CUDA_DRIVER_WARNING):
+        os.write(2, f"Warp CUDA warning: {CUDA_DRIVER_WARNING}. GPU execution will not be available.\n".encode())
+        os.write(2, b"something else native code said\n")
+    err = capfd.readouterr().err
+    assert CUDA_DRIVER_WARNING not in err and "something else native code said" in err
+
+
+def test_an_unwritable_warp_cache_chosen_by_the_user_is_one_clear_error(scene_file):
+    env = dict(__import__("os").environ, WARP_CACHE_PATH=str(scene_file))  # a file, not a directory
+    done = subprocess.run([sys.executable, "-m", "warp_verlet", "run", "small.toml", "--device", "cpu", "-q"],
+                          cwd=scene_file.parent, capture_output=True, text=True, env=env)
+    assert done.returncode == 1 and "Traceback" not in done.stderr
+    assert "error: Warp's kernel cache directory" in done.stderr and "set WARP_CACHE_PATH" in done.stderr
+
+
+def test_an_unwritable_default_warp_cache_falls_back_with_a_note(tmp_path, monkeypatch):
+    import warp as wp
+
+    from warp_verlet import warp_setup
+
+    blocked = tmp_path / "file"
+    blocked.write_text("HOME's .cache is a file here")
+    monkeypatch.setattr(wp.config, "kernel_cache_dir", None)
+    monkeypatch.delenv("WARP_CACHE_PATH", raising=False)
+    monkeypatch.setattr(warp_setup, "_default_cache_dir", lambda version: blocked / "warp" / version)
+    monkeypatch.setattr(warp_setup, "fallback_cache_dir", lambda: tmp_path / "fallback")
+    notes = []
+    warp_setup.ensure_kernel_cache(notes.append)
+    assert wp.config.kernel_cache_dir == str(tmp_path / "fallback") and (tmp_path / "fallback").is_dir()
+    assert len(notes) == 1 and "is not writable" in notes[0] and "set WARP_CACHE_PATH" in notes[0]
+    monkeypatch.setattr(wp.config, "kernel_cache_dir", None)
+    monkeypatch.setattr(warp_setup, "fallback_cache_dir", lambda: blocked / "fallback")
+    from warp_verlet.errors import WarpVerletError
+
+    with pytest.raises(WarpVerletError, match="nor is .*: set WARP_CACHE_PATH"):
+        warp_setup.ensure_kernel_cache(notes.append)
+
+
+def test_public_api_errors_derive_from_warp_verlet_error(scene_file):
+    from warp_verlet import Simulator
+    from warp_verlet.errors import ArgumentError, StateError, WarpVerletError
+    from warp_verlet.faces import Faces
+    from warp_verlet.scene import load_scene
+    from warp_verlet.usd_writer import CachedPlane, CachedShape, PointCacheWriter
+
+    sim = Simulator(load_scene(scene_file), "cpu")
+    rope = CachedShape("rope", np.zeros((0, 4), np.int32), np.zeros((4, 2), np.float32), 4)
+    calls = [
+        lambda: sim.advance(-1.0),
+        lambda: sim.step(float("nan")),
+        lambda: sim.state.set_velocity([float("nan"), 0.0, 0.0]),
+        lambda: Faces(np.array([2]), np.array([0, 1])).validate(3, "mesh"),
+        lambda: PointCacheWriter(scene_file.parent / "x.usdc", [rope], fps=-1.0),
+        lambda: PointCacheWriter(scene_file.parent / "x.usdc", [replace(rope, name="Colliders")], fps=30.0,
+                                 colliders=[CachedPlane("ground", (0, 0, 0), (0, 1, 0), 1.0)]),
+    ]
+    for call in calls:
+        with pytest.raises(WarpVerletError) as caught:
+            call()
+        assert isinstance(caught.value, ValueError) and isinstance(caught.value, ArgumentError)
+    writer = PointCacheWriter(scene_file.parent / "y.usdc", [rope], fps=30.0)
+    writer.close()
+    with pytest.raises(StateError) as caught:
+        writer.write_frame(0, [np.zeros((4, 3), np.float32)])
+    assert isinstance(caught.value, RuntimeError) and isinstance(caught.value, WarpVerletError)
+
+
+def test_no_builtin_exception_is_raised_on_purpose_anywhere_in_the_package():
+    # Every error the package raises on purpose derives from WarpVerletError (README). AttributeError keeps
+    # Python's meaning (a missing or read-only attribute), AssertionError marks a bug in the package itself.
+    import ast
+    from pathlib import Path
+
+    import warp_verlet
+
+    builtin = {n for n in dir(__import__("builtins")) if n.endswith(("Error", "Exception"))}
+    allowed = {"AttributeError", "AssertionError"}  # a missing attribute; an internal invariant broken (a bug)
+    root = Path(warp_verlet.__file__).parent
+    found = []
+    for path in sorted(list(root.rglob("*.py")) + list((root.parent / "kernels").glob("*.py"))):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Raise) and node.exc is not None:
+                target = node.exc.func if isinstance(node.exc, ast.Call) else node.exc
+                name = target.id if isinstance(target, ast.Name) else None
+                if name in builtin and name not in allowed:
+                    found.append(f"{path.name}:{node.lineno} raises {name}")
+    assert not found, found

@@ -457,3 +457,67 @@ def test_validate_imports_no_matplotlib(tmp_path):
     )
     out = subprocess.run([sys.executable, "-c", probe], cwd=tmp_path, capture_output=True, text=True, check=True)
     assert out.stdout.split()[-4:] == ["0", "False", "False", "False"]
+
+
+# ------------------------------------------------------------------------------ damaged caches, big GIFs
+
+
+def damage_frame(path, frame: int, how: str) -> None:
+    """Overwrite frame ``frame``'s points in a crate file: with NaN ("nan"), or give their array an impossible
+    length ("count"), as a bad sector or a torn copy would."""
+    cache = preview.open_cache(path)
+    points = np.asarray(cache.cloths[0].prim.GetPointsAttr().Get(frame), np.float32).tobytes()
+    del cache
+    data = bytearray(path.read_bytes())
+    at = data.find(points)
+    assert at > 0 and data.find(points, at + 1) < 0  # the frame's points, stored once
+    if how == "nan":
+        data[at:at + 24] = b"\xff" * 24
+    else:
+        data[at - 8:at] = (10**6).to_bytes(8, "little")  # the array's element count
+    path.write_bytes(bytes(data))
+
+
+@pytest.mark.parametrize("how, words", [("nan", "holds non-finite values"), ("count", "USD cannot read")])
+def test_a_damaged_frame_is_one_clear_error(tmp_path, how, words):
+    path = write_cache(tmp_path / "damaged.usdc", rows=5, cols=5)
+    damage_frame(path, 2, how)  # a frame both images draw (a PNG shows 0, 2, 4 and 6)
+    for out in ("d.png", "d.gif"):
+        done = subprocess.run([sys.executable, "-m", "warp_verlet", "preview", str(path), "-o", str(tmp_path / out)],
+                              capture_output=True, text=True)
+        assert done.returncode == 2, done.stderr
+        lines = done.stderr.strip().splitlines()
+        assert len(lines) == 1 and "Traceback" not in done.stderr and ".cpp" not in done.stderr
+        assert lines[0].startswith(f"error: {path}: frame 2 is damaged: ") and words in lines[0]
+        assert not (tmp_path / out).exists()
+    # The frames around it are still fine.
+    assert main(["preview", str(path), "-o", str(tmp_path / "ok.png"), "--frames", "3:7"]) == 0
+
+
+def test_a_gif_is_written_one_frame_at_a_time(cache, monkeypatch):
+    # matplotlib's PillowWriter held every frame until the end (120 frames at 8192 x 8192: 32 GB). Now each
+    # frame is on disk before the next is drawn.
+    sizes = []
+    real = preview._draw_panels
+    out = cache.parent / "s.gif"
+
+    def spy(fig, *args):
+        partials = list(cache.parent.glob(".s.*.partial.gif"))
+        sizes.append(partials[0].stat().st_size if partials else 0)
+        return real(fig, *args)
+
+    monkeypatch.setattr(preview, "_draw_panels", spy)
+    assert main(["preview", str(cache), "-o", str(out), "--size", "64x64"]) == 0
+    assert len(sizes) == FRAMES + 1
+    assert sizes[0] == 0 and all(b > a for a, b in zip(sizes, sizes[1:]))
+    image = Image.open(out)
+    assert image.n_frames == FRAMES + 1 and image.info.get("loop") == 0 and image.info.get("duration") == 30  # 1/30 s, in whole 1/100 s
+
+
+def test_a_size_that_cannot_be_held_is_refused_before_drawing(cache, monkeypatch, capsys):
+    monkeypatch.setattr(preview, "available_host_bytes", lambda: 200 * 10**6)
+    assert main(["preview", str(cache), "-o", str(cache.parent / "big.gif"), "--size", "8192x8192"]) == 2
+    err = capsys.readouterr().err
+    assert "--size 8192x8192: drawing one image of that size needs about 0.81 GB" in err and "0.2 GB" in err
+    assert not (cache.parent / "big.gif").exists()
+    assert main(["preview", str(cache), "-o", str(cache.parent / "small.gif"), "--size", "64x64"]) == 0

@@ -25,7 +25,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from warp_verlet.errors import SceneError
@@ -607,3 +607,61 @@ def test_valid_scenes_load_and_read_back(tmp_path, doc):
     else:
         assert isinstance(collider, SphereCollider) and collider.radius == given_collider["radius"]
         assert collider.keyframes == ((0.0, tuple(given_collider["centre"])),)
+
+
+# ---------------------------------------------------------------------------------------------- float32 and names
+
+FLOAT32_MAX = 3.4028234663852886e38
+beyond_float32 = st.floats(min_value=3.5e38, max_value=1.7e308) | st.floats(min_value=-1.7e308, max_value=-3.5e38)
+# Keys whose value goes to the device as float32: a finite float64 beyond float32 must be refused, naming the key.
+# (A cloth's total mass does not: only each particle's inverse mass does, tested in test_stability.py.)
+FLOAT32_PATHS = [("simulation", "gravity", 1), ("simulation", "wind", 0), ("cloth", 0, "origin", 2),
+                 ("cloth", 0, "size", 1), ("cloth", 0, "compliance", "bend"), ("collider", 0, "point", 1),
+                 ("collider", 0, "display_size"), ("collider", 0, "thickness"), ("collider", 1, "radius"),
+                 ("collider", 1, "centre", 0), ("cloth", 0, "particle_masses", 0, 2)]
+POSITIVE = {"cloth[0].size[1]", "cloth[0].compliance.bend", "collider[0].display_size", "collider[0].thickness",
+            "collider[1].radius", "cloth[0].particle_masses[0][2]"}
+
+
+@pytest.mark.parametrize("path", FLOAT32_PATHS, ids=[dotted(p) for p in FLOAT32_PATHS])
+@settings(max_examples=10, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(number=beyond_float32)
+def test_numbers_beyond_float32_are_refused_naming_the_key(tmp_path, path, number):
+    doc = full_scene()
+    put(doc, path, abs(number) if dotted(path) in POSITIVE else number)  # a negative one is refused anyway
+    err = scene_error(tmp_path, doc)
+    assert names_key(err, dotted(path)), err
+    assert "float32" in err.problem
+
+
+@settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(normal=st.lists(st.floats(allow_nan=False, allow_infinity=False), min_size=3, max_size=3))
+@example(normal=[1e300, 1e300, 0.0])
+@example(normal=[1.7e308, -1.7e308, 1.7e308])
+@example(normal=[5e-324, 0.0, 0.0])
+def test_any_finite_plane_normal_is_refused_as_zero_or_kept_as_its_direction(tmp_path, normal):
+    doc = full_scene()
+    put(doc, ("collider", 0, "normal"), normal)
+    if not any(normal):
+        assert names_key(scene_error(tmp_path, doc), "collider[0].normal")
+        return
+    unit = load_doc(tmp_path, doc).colliders[0].normal
+    assert math.isclose(math.hypot(*unit), 1.0, rel_tol=1e-12)
+    big = max(range(3), key=lambda k: abs(normal[k]))  # the largest component keeps its sign and its share
+    assert unit[big] * normal[big] > 0 and abs(unit[big]) >= 1 / math.sqrt(3) - 1e-12
+    for k in range(3):
+        assert (unit[k] == 0.0) == (normal[k] == 0.0) or abs(normal[k] / normal[big]) < 1e-300
+
+
+@FUZZ
+@given(name=name, clash=st.sampled_from(["Colliders", "collider"]), colliders=st.booleans())
+def test_a_cloth_may_not_take_a_reserved_or_a_collider_prim_name(tmp_path, name, clash, colliders):
+    doc = full_scene()
+    if not colliders:
+        del doc["collider"]
+    taken = "Colliders" if clash == "Colliders" or not colliders else doc["collider"][1]["name"]
+    doc["cloth"].append(dict(doc["cloth"][0], name=taken))
+    err = scene_error(tmp_path, doc)
+    assert err.key == "cloth[1].name" and repr(taken) in err.problem
+    doc["cloth"][1]["name"] = name if name not in ("Colliders", "sheet", "ground", "ball") else "other"
+    assert len(load_doc(tmp_path, doc).cloths) == 2

@@ -175,3 +175,106 @@ def test_the_summary_says_when_the_sticks_are_far_from_satisfied(tmp_path):
     assert loose.stretch_max > UNCONVERGED_STRETCH and "relaxation has not converged" in loose.format()
     tight = run_scene(make_scene({"frames": 20}, resolution=[12, 12], pins=pins), tmp_path / "tight.usdc", device="cpu")
     assert tight.stretch_max < UNCONVERGED_STRETCH and "warning" not in tight.format()
+
+
+# ---------------------------------------------------------------------------------------------- beyond float32
+# Numbers a TOML float (float64) holds but the device's float32 does not. Each used to be accepted and then
+# lost: an overflowing plane normal normalised to (0, 0, 0) and the plane was silently ignored, a cloth beyond
+# float32 was reported as "diverged at frame 1", and mass = 1e50 froze the cloth and exited 0.
+
+
+def _scene(tmp_path, text: str):
+    from warp_verlet.scene import load_scene
+
+    path = tmp_path / "edge.toml"
+    path.write_text(text)
+    return load_scene(path)
+
+
+EDGE = """
+[simulation]
+fps = 30
+frames = 20
+substeps = 4
+iterations = 4
+
+[[cloth]]
+name = "sheet"
+resolution = [5, 5]
+size = [0.4, 0.4]
+origin = [-0.2, 0.3, -0.2]
+orientation = "horizontal"
+"""
+
+
+def test_an_overflowing_plane_normal_keeps_its_direction_and_the_plane_holds(device, tmp_path):
+    """[1e300, 1e300, 0]: its sum of squares is inf, which divided the normal down to (0, 0, 0)."""
+    import numpy as np
+
+    from warp_verlet import Simulator
+    from warp_verlet.usd_writer import _plane_corners, CachedPlane
+
+    scene = _scene(tmp_path, EDGE + '[[collider]]\ntype = "plane"\nnormal = [1e300, 1e300, 0.0]\n')
+    (plane,) = scene.planes
+    assert np.allclose(plane.normal, (2 ** -0.5, 2 ** -0.5, 0.0), rtol=0, atol=1e-15)
+    sim = Simulator(scene, device)
+    for _ in range(20):
+        sim.step_frame()
+    height = sim.positions() @ np.asarray(plane.normal)  # the plane passes through the origin
+    assert np.isfinite(height).all() and height.min() >= -1e-4  # the cloth fell onto the plane, not through it
+    corners = _plane_corners(CachedPlane(plane.name, plane.point, plane.normal, plane.display_size))
+    assert np.isfinite(corners).all()
+
+
+@pytest.mark.parametrize("edit, key", [
+    ('origin = [-0.2, 0.3, -0.2]', None),
+    ('origin = [1e39, 0.3, -0.2]', "cloth[0].origin[0]"),
+    ('size = [0.4, 1e300]', "cloth[0].size[1]"),
+    ('size = [1e-300, 0.4]', "cloth[0].size[0]"),
+    ('name = "sheet"\nmass = 1e50', "cloth[0].mass"),
+    ('name = "sheet"\nmass = 1e-40', "cloth[0].mass"),
+    ('iterations = 4\ngravity = [0.0, -1e39, 0.0]', "simulation.gravity[1]"),
+])
+def test_inputs_beyond_float32_are_refused_naming_the_key(tmp_path, edit, key):
+    from warp_verlet.errors import SceneError
+
+    before = edit.split("\n")[0].split(" = ")[0]
+    line = next(l for l in EDGE.splitlines() if l.startswith(before + " "))
+    text = EDGE.replace(line, edit)
+    if key is None:
+        assert _scene(tmp_path, text).cloths[0].mass == 1.0
+        return
+    with pytest.raises(SceneError) as caught:
+        _scene(tmp_path, text)
+    assert caught.value.key == key and "float32" in caught.value.problem
+
+
+def test_mass_1e50_was_a_frozen_cloth(device):
+    """Why mass = 1e50 is refused: 25 / 1e50 rounds to 0 in float32, so every particle had infinite mass and
+    the run 'succeeded' with a cloth hanging in the air. Just inside the bound the cloth falls."""
+    import numpy as np
+
+    from conftest import make_scene
+    from warp_verlet import Simulator
+    from warp_verlet.scene import FLOAT32_TINY
+
+    heaviest = 25 / FLOAT32_TINY  # the largest mass the loader takes for 5 x 5 particles
+    assert np.float32(25 / 1e50) == 0.0
+    sim = Simulator(make_scene({}, resolution=[5, 5], mass=heaviest), device)
+    before = sim.positions()[:, 1].mean()
+    for _ in range(5):
+        sim.step_frame()
+    assert sim.positions()[:, 1].mean() < before - 0.01
+
+
+def test_a_cloth_starting_beyond_position_bound_is_a_bad_input_not_a_divergence(tmp_path):
+    from warp_verlet.errors import SceneError
+    from warp_verlet.runner import run_scene
+
+    scene = _scene(tmp_path, EDGE.replace("iterations = 4", "iterations = 4\nposition_bound = 10.0")
+                   .replace("origin = [-0.2, 0.3, -0.2]", "origin = [20.0, 0.3, -0.2]"))
+    with pytest.raises(SceneError) as caught:
+        run_scene(scene, tmp_path / "edge.usdc", device="cpu")
+    assert caught.value.key == "cloth[0]" and "starts at (20.0, 0.3" in caught.value.problem
+    assert "beyond position_bound = 10.0 m" in caught.value.problem
+    assert not (tmp_path / "edge.usdc").exists() and not (tmp_path / "edge.partial.usdc").exists()

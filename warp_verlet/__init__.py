@@ -5,14 +5,15 @@ Heavy modules (warp, pxr, trimesh) are imported lazily, where they are used, so 
 ``import warp_verlet`` and ``warp-verlet validate`` stay fast.
 """
 
-from .errors import DivergenceError, OutputError, SceneError, WarpVerletError
+from .errors import (ArgumentError, DiskFullError, DivergenceError, OutputBusyError, OutputError, SceneError,
+                     StateError, WarpVerletError)
 from .scene import Scene, load_scene, parse_scene
 
 __version__ = "0.1.0"
 
 __all__ = [
-    "DivergenceError", "OutputError", "Scene", "SceneError", "Simulator", "WarpVerletError",
-    "load_scene", "parse_scene", "__version__",
+    "ArgumentError", "DiskFullError", "DivergenceError", "OutputBusyError", "OutputError", "Scene", "SceneError",
+    "Simulator", "StateError", "WarpVerletError", "load_scene", "parse_scene", "__version__",
 ]
 
 

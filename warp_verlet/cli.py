@@ -1,7 +1,8 @@
 """Command line: ``warp-verlet run|validate|preview`` (also ``python -m warp_verlet``).
 
-Exit codes: 0 success, 1 a run failed (divergence, unwritable output, device), 2 invalid scene, cache or
-arguments, 130 interrupted (the cache holds the frames done).
+Exit codes: 0 success, 1 a run failed (divergence, unwritable, busy or full output, device), 2 invalid scene,
+cache or arguments, 130 interrupted (Ctrl-C), 143 terminated (SIGTERM). A run that does not finish says where
+its frames went (``NAME.partial.EXT``) and that the previous output was left as it was.
 
 Heavy modules are imported by the command that needs them: validate imports none of warp, pxr and
 matplotlib, and preview imports pxr and matplotlib but never warp.
@@ -11,12 +12,16 @@ from __future__ import annotations
 
 import argparse
 import re
+import signal
 import sys
+import threading
 import warnings
 from pathlib import Path
 
 from . import __version__
+from .cpu_team import MAX_THREADS, usable_cores
 from .errors import SceneError, WarpVerletError
+from .output_file import output_report
 from .scene import load_scene
 
 
@@ -27,6 +32,16 @@ def _positive_int(text: str) -> int:
         raise argparse.ArgumentTypeError(f"expected a whole number of frames, got {text!r}") from None
     if value < 1:
         raise argparse.ArgumentTypeError(f"expected at least 1 frame, got {value}")
+    return value
+
+
+def _thread_count(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number of threads, got {text!r}") from None
+    if not 1 <= value <= MAX_THREADS:
+        raise argparse.ArgumentTypeError(f"expected a number of threads in 1 .. {MAX_THREADS}, got {value}")
     return value
 
 
@@ -71,9 +86,10 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("-o", "--output", type=Path, help="output .usd/.usdc/.usda (default: the scene's [output] path)")
     run.add_argument("--device", help="cpu, cuda or cuda:N (default: CUDA when present, else CPU)")
     run.add_argument("--frames", type=_positive_int, help="number of frames (default: the scene's)")
-    run.add_argument("--threads", type=_positive_int,
-                     help="CPU threads for the relaxation (default: the cores, when the grid is large enough to "
-                          "gain; results are bit-identical for any count)")
+    run.add_argument("--threads", type=_thread_count,
+                     help=f"CPU threads for the relaxation, 1 .. {MAX_THREADS} (default: the cores, when the grid is "
+                          "large enough to gain; more than the cores only slows it down; results are "
+                          "bit-identical for any count)")
     run.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     run.add_argument("-v", "--verbose", action="store_true", help="show Warp's device and kernel-compilation messages")
     run.add_argument("--preview", action="store_true",
@@ -123,14 +139,23 @@ def _validate(args) -> int:
     return 0
 
 
+def _note(text: str) -> None:
+    print(f"note: {text}", file=sys.stderr)
+
+
 def _run(args) -> int:
     scene = load_scene(args.scene)
-    import warp as wp
+    from .warp_setup import start_warp
 
-    if not args.verbose:  # Warp's start-up banner and its per-module load timings
-        wp.config.quiet = True
-        wp.config.log_level = wp.LOG_WARNING
+    # Quiet unless -v (Warp's banner, per-module load timings and, on a CPU run, its CUDA-driver warning),
+    # and a kernel cache it can write.
+    start_warp(verbose=args.verbose, cpu=args.device in (None, "cpu"), note=_note)
     from .runner import run_scene
+
+    cores = usable_cores()
+    if args.threads is not None and args.threads > cores and not (args.device or "").startswith("cuda"):
+        print(f"warning: --threads {args.threads} is more than the {cores} core(s) this process can use: the "
+              "relaxation will run slower, not faster (its result is the same for any count)", file=sys.stderr)
 
     frames = args.frames or scene.simulation.frames
     bar = None
@@ -141,7 +166,7 @@ def _run(args) -> int:
                    file=sys.stderr, dynamic_ncols=True)
     try:
         summary = run_scene(scene, output=args.output, device=args.device, frames=args.frames, threads=args.threads,
-                            progress=(lambda frame: bar.update(1)) if bar else None)
+                            progress=(lambda frame: bar.update(1)) if bar else None, note=_note)
     finally:
         if bar is not None:
             bar.close()
@@ -181,10 +206,25 @@ def _show_warning(message, category, filename, lineno, file=None, line=None) -> 
     print(f"warning: {message}", file=sys.stderr if file is None else file)
 
 
+class Terminated(BaseException):
+    """SIGTERM arrived: stop as Ctrl-C does (the frames so far are saved), exit 143."""
+
+
+def _terminate(signum, frame):
+    raise Terminated
+
+
+def _where_the_frames_went(exc: BaseException) -> str:
+    report = output_report(exc)
+    return report.describe() if report is not None else "nothing was written"
+
+
 def main(argv: list[str] | None = None) -> int:
     warnings.showwarning = _show_warning
     args = build_parser().parse_args(argv)
     command = {"run": _run, "validate": _validate, "preview": _preview}[args.command]
+    in_main_thread = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGTERM, _terminate) if in_main_thread else None
     try:
         return command(args)
     except SceneError as exc:
@@ -192,10 +232,24 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except WarpVerletError as exc:
         print(f"error: {exc}", file=sys.stderr)
+        report = output_report(exc)
+        if report is not None and report.partial is not None:
+            print(report.describe(), file=sys.stderr)
         return 1
-    except KeyboardInterrupt:
-        print("interrupted: the cache holds the frames simulated so far", file=sys.stderr)
+    except KeyboardInterrupt as exc:
+        print(f"interrupted: {_where_the_frames_went(exc)}", file=sys.stderr)
         return 130
+    except Terminated as exc:
+        print(f"terminated: {_where_the_frames_went(exc)}", file=sys.stderr)
+        return 143
+    except Exception as exc:  # a bug: its traceback follows, and where the frames went before it
+        report = output_report(exc)
+        if report is not None:
+            print(f"error: {report.describe()}", file=sys.stderr)
+        raise
+    finally:
+        if in_main_thread and previous is not None:
+            signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -24,7 +24,7 @@ import threading
 import weakref
 from typing import Callable, Sequence
 
-from .errors import WarpVerletError
+from .errors import ArgumentError, WarpVerletError
 
 LAUNCH_COST_S = 13e-6
 """Fixed cost per thread and phase. With it, a 128^2 colour (51 us of one-thread work) stays on one thread
@@ -34,6 +34,11 @@ on the Xeon (1.96x; 4 were best there, 2.06x)."""
 MAX_AUTO_THREADS = 8
 """The barrier's cost grows with the thread count. At 1024^2 on the Xeon two runs agreed up to 8 threads
 (5.4x, 5.5x) and disagreed beyond (12: 5.4x and 6.4x; 16: 4.4x and 6.3x), so automatic stops at 8."""
+
+MAX_THREADS = 1024
+"""The most relaxation threads anyone may ask for. Each is an OS thread that meets the others at a barrier
+after every colour, so more threads than cores only waits (1000 threads on 2 cores ran 7,000x slower), and
+some 10^4 to 10^5 threads exhaust what a process may start."""
 
 COLOURED_SECONDS_PER_STICK = 6.3e-9
 """One thread's time per coloured stick projection (6.2-6.4 ns on both machines above)."""
@@ -80,7 +85,7 @@ class PhaseTeam:
     def __init__(self, phases: Sequence[Sequence[Callable[[], None] | None]], repeats: int):
         self.threads = len(phases[0]) if phases else 1
         if any(len(phase) != self.threads for phase in phases):
-            raise ValueError("every phase needs one entry per thread")
+            raise ArgumentError("every phase needs one entry per thread")
         self._phases = [list(phase) for phase in phases]
         self._repeats = int(repeats)
         self._barrier = threading.Barrier(self.threads)
@@ -90,8 +95,13 @@ class PhaseTeam:
                              name=f"warp-verlet-relax-{t}", daemon=True)
             for t in range(1, self.threads)
         ]
-        for worker in self._workers:
-            worker.start()
+        for started, worker in enumerate(self._workers):
+            try:
+                worker.start()
+            except RuntimeError as exc:  # the process may start no more threads
+                PhaseTeam._release(self._barrier, self._state)
+                raise WarpVerletError(f"cannot start {self.threads} relaxation threads ({exc}; {started + 1} "
+                                      "were running): ask for fewer") from None
         self._own_work = self._work_of(0)
         # The workers hold only the barrier, the state and their work, not the team, so the team can be
         # collected; collecting it (or interpreter exit) releases them.

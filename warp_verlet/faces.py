@@ -16,6 +16,8 @@ from functools import cached_property
 
 import numpy as np
 
+from .errors import ArgumentError
+
 _INT32 = np.iinfo(np.int32)
 
 
@@ -24,11 +26,11 @@ def _int32_vector(values: np.ndarray, what: str) -> np.ndarray:
     (fractions, values out of range). An empty array of any dtype is fine: it changes nothing."""
     a = np.asarray(values)
     if a.ndim != 1:
-        raise ValueError(f"{what} must be a 1-D array, got shape {a.shape}")
+        raise ArgumentError(f"{what} must be a 1-D array, got shape {a.shape}")
     if a.size and a.dtype.kind not in "iu":
-        raise ValueError(f"{what} must be integers, got dtype {a.dtype}")
+        raise ArgumentError(f"{what} must be integers, got dtype {a.dtype}")
     if a.size and (a.min() < _INT32.min or a.max() > _INT32.max):
-        raise ValueError(f"{what} must fit in int32, got values in [{a.min()}, {a.max()}]")
+        raise ArgumentError(f"{what} must fit in int32, got values in [{a.min()}, {a.max()}]")
     out = a.astype(np.int32, copy=True)
     out.flags.writeable = False  # a frozen Faces must not change under the arrays built from it
     return out
@@ -66,7 +68,7 @@ class Faces:
         """Faces from an (F, k) array of vertex indices, every face with k corners (a grid's quads)."""
         a = np.asarray(array2d)
         if a.ndim != 2:
-            raise ValueError(f"expected an (F, k) array of vertex indices, k corners per face, got shape {a.shape}")
+            raise ArgumentError(f"expected an (F, k) array of vertex indices, k corners per face, got shape {a.shape}")
         return cls(np.full(len(a), a.shape[1], np.int32), a.reshape(-1))
 
     @classmethod
@@ -105,19 +107,19 @@ class Faces:
         f = len(self.counts)
         total = int(self.counts.sum(dtype=np.int64))
         if total != len(self.indices):
-            raise ValueError(f"{name}: {f} faces with {total} corners in all need {total} vertex indices, "
+            raise ArgumentError(f"{name}: {f} faces with {total} corners in all need {total} vertex indices, "
                              f"got {len(self.indices)}")
         small = np.flatnonzero(self.counts < 3)
         if len(small):
             i = int(small[0])
-            raise ValueError(f"{name}: every face needs at least 3 corners, but face {i} of {f} has "
+            raise ArgumentError(f"{name}: every face needs at least 3 corners, but face {i} of {f} has "
                              f"{self.counts[i]} ({len(small)} such faces)")
         upper = _INT32.max if point_count is None else point_count
         bad = np.flatnonzero((self.indices < 0) | (self.indices >= upper))
         if len(bad):
             face = int(np.searchsorted(self.offsets, bad[0], side="right")) - 1
             expected = "not negative" if point_count is None else f"in [0, {point_count})"
-            raise ValueError(f"{name}: face {face} of {f} uses vertex {self.indices[bad[0]]}; vertex indices "
+            raise ArgumentError(f"{name}: face {face} of {f} uses vertex {self.indices[bad[0]]}; vertex indices "
                              f"must be {expected} ({len(bad)} bad indices)")
 
     def sides(self) -> tuple[np.ndarray, np.ndarray]:
@@ -181,12 +183,12 @@ def edge_faces(faces: Faces, edges: np.ndarray) -> np.ndarray:
     """
     edges = np.asarray(edges)
     if edges.ndim != 2 or edges.shape[1] != 2:
-        raise ValueError(f"edges must be an (M, 2) array of vertex index pairs, got shape {edges.shape}")
+        raise ArgumentError(f"edges must be an (M, 2) array of vertex index pairs, got shape {edges.shape}")
     if edges.size and edges.dtype.kind not in "iu":
-        raise ValueError(f"edges must be integer vertex indices, got dtype {edges.dtype}")
+        raise ArgumentError(f"edges must be integer vertex indices, got dtype {edges.dtype}")
     if edges.size and edges.min() < 0:
         row = int(np.flatnonzero((edges < 0).any(axis=1))[0])
-        raise ValueError(f"edge {row} {tuple(edges[row].tolist())} has a negative vertex index")
+        raise ArgumentError(f"edge {row} {tuple(edges[row].tolist())} has a negative vertex index")
     faces.validate(None, "edge_faces: faces")
     out = np.full((len(edges), 2), -1, np.int32)
     if len(edges) == 0 or len(faces) == 0:
@@ -202,7 +204,7 @@ def edge_faces(faces: Faces, edges: np.ndarray) -> np.ndarray:
     if len(crowded):
         row = int(crowded[0])
         s, n = start[at[row]], count[at[row]]
-        raise ValueError(f"edge {row} {tuple(edges[row].tolist())} is a side of {n} faces "
+        raise ArgumentError(f"edge {row} {tuple(edges[row].tolist())} is a side of {n} faces "
                          f"{face_of_side[s:s + n].tolist()}; expected at most 2 (a non-manifold mesh)")
     s = start[at]
     out[:, 0] = np.where(found, face_of_side[s], -1)

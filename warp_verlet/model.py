@@ -21,6 +21,7 @@ import warp as wp
 
 from .colliders import ColliderModel
 from .colouring import Colouring, check_partition, graph_colouring, grid_colouring
+from .errors import ArgumentError
 from .multilevel import grid_hierarchy, merge_levels
 from .tethers import TetherTable, build_tethers
 from .scene import Scene
@@ -86,7 +87,7 @@ class Model:
         """``colouring``: "auto" (analytic when every cloth is a grid, else Warp's graph colouring), "grid"
         (grids only) or "graph"."""
         if colouring not in ("auto", "grid", "graph"):
-            raise ValueError(f"colouring must be 'auto', 'grid' or 'graph', got {colouring!r}")
+            raise ArgumentError(f"colouring must be 'auto', 'grid' or 'graph', got {colouring!r}")
         self.device = device
         self.solver = scene.simulation.solver
         self.precision = Need.of(scene).precision
@@ -110,7 +111,7 @@ class Model:
         family = np.concatenate([s.topology.family for s in slots])
         all_grids = all(s.topology.is_grid for s in slots)
         if colouring == "grid" and not all_grids:
-            raise ValueError("colouring='grid' needs every cloth to be a grid; a mesh cloth takes 'graph' or 'auto'")
+            raise ArgumentError("colouring='grid' needs every cloth to be a grid; a mesh cloth takes 'graph' or 'auto'")
         owner = np.repeat(np.arange(len(slots), dtype=np.int32), [len(s.topology.sticks) for s in slots])
         # A stick of a cloth that cannot tear gets an infinite tear length: one kernel serves every cloth.
         tear_length = np.concatenate([

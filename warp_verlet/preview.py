@@ -13,20 +13,22 @@ This module never imports warp: previewing a cache must not need the simulator.
 
 from __future__ import annotations
 
+import contextlib
+import io
 import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
 
 import numpy as np
-from matplotlib.animation import PillowWriter
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.ticker import FuncFormatter, MaxNLocator
 from mpl_toolkits.mplot3d.art3d import Line3DCollection, Poly3DCollection
 from pxr import Tf, Usd, UsdGeom
 
-from .errors import OutputError, WarpVerletError
+from .errors import OutputError, WarpVerletError, usd_cause
+from .memory import available_host_bytes
 from .faces import Faces, as_faces, grid_faces, next_corner
 from .usd_writer import COLLIDERS_PATH
 
@@ -45,6 +47,10 @@ VIEW_ELEVATION, VIEW_AZIMUTH = 20.0, -60.0
 DPI = 128
 TITLE_ROOM_PX, CAPTION_ROOM_PX = 26, 12  # room above each panel for its title, below them for the file name
 SPHERE_FACETS = (24, 48)  # latitude x longitude quads: small, so that depth sorting against the cloth works
+# Memory per pixel while one image is drawn and written: Agg's RGBA canvas (4), its RGB copy (3), the
+# palette image of a GIF frame (1) and Pillow's and the encoder's working copies (about 4). GIF frames are
+# written one at a time, so this does not grow with the frame count.
+BYTES_PER_PIXEL = 12
 
 CLOTH_COLOURS = ((0.80, 0.33, 0.24), (0.23, 0.47, 0.72), (0.36, 0.62, 0.33), (0.85, 0.62, 0.20))
 ROPE_COLOUR = (0.15, 0.15, 0.15)
@@ -208,9 +214,31 @@ def _cloth_prim(path: Path, mesh: UsdGeom.Mesh) -> ClothPrim:
         raise PreviewError(f"{path}: {e}") from e
     points = mesh.GetPointsAttr()
     times = points.GetTimeSamples()
-    first = points.Get(times[0]) if times else points.Get()
+    first = _read(path, mesh, "points", lambda: points.Get(times[0]) if times else points.Get(),
+                  f"frame {times[0]:g}" if times else "its points")
     return ClothPrim(prim=mesh, faces=faces, grid=grid_shape(faces, len(first) if first is not None else 0),
                      points_needed=int(faces.indices.max()) + 1 if len(faces.indices) else 0)
+
+
+def _read(path: Path, prim, what: str, get, where: str):
+    """``get()``, a read of one attribute of ``prim``; a damaged cache (USD cannot read the value) becomes one
+    PreviewError naming the file, the frame and the prim, rather than USD's traceback."""
+    noise = io.StringIO()  # a damaged value also makes USD's Python binding print a TypeError of its own
+    try:
+        with contextlib.redirect_stderr(noise):
+            return get()
+    except (Tf.ErrorException, TypeError, RuntimeError) as e:  # TypeError: a value USD decoded as the wrong type
+        cause = usd_cause(e) if isinstance(e, Tf.ErrorException) else str(e)
+        raise PreviewError(f"{path}: {where} is damaged: USD cannot read {prim.GetPath()}.{what} ({cause})") from None
+
+
+def _finite(path: Path, prim, values, frame: int) -> np.ndarray:
+    """``values`` as float64, or a PreviewError when the frame holds NaN or inf (a damaged or diverged cache)."""
+    array = np.asarray(values, dtype=np.float64)
+    if not np.isfinite(array).all():
+        raise PreviewError(f"{path}: frame {frame} is damaged: {prim.GetPath()} holds non-finite values "
+                           "(NaN or inf), which cannot be drawn")
+    return array
 
 
 def _to_world(prim: UsdGeom.Xformable, time: Usd.TimeCode, points: np.ndarray) -> np.ndarray:
@@ -224,9 +252,10 @@ def _to_world(prim: UsdGeom.Xformable, time: Usd.TimeCode, points: np.ndarray) -
 def read_frame(cache: PointCache, frame: int) -> FrameGeometry:
     """One frame of the cache as numpy, with holeIndices applied (held between their samples)."""
     time = Usd.TimeCode(frame)
+    where = f"frame {frame}"
     cloths = []
     for cloth in cache.cloths:
-        points = cloth.prim.GetPointsAttr().Get(time)
+        points = _read(cache.path, cloth.prim, "points", lambda: cloth.prim.GetPointsAttr().Get(time), where)
         if points is None or len(cloth.faces) == 0:
             continue
         if len(points) < cloth.points_needed:
@@ -234,26 +263,31 @@ def read_frame(cache: PointCache, frame: int) -> FrameGeometry:
                                f"but its faces use {cloth.points_needed}")
         # The grid was recognised on the first sample; a mesh whose point count changes is drawn face by face.
         grid = cloth.grid if cloth.grid and len(points) == cloth.grid[0] * cloth.grid[1] else None
-        hidden = cloth.prim.GetHoleIndicesAttr().Get(time)  # None or empty when the mesh never tears
-        world = _to_world(cloth.prim, time, np.asarray(points, dtype=np.float64))
+        hidden = _read(cache.path, cloth.prim, "holeIndices", lambda: cloth.prim.GetHoleIndicesAttr().Get(time),
+                       where)  # None or empty when the mesh never tears
+        world = _to_world(cloth.prim, time, _finite(cache.path, cloth.prim, points, frame))
         cloths.append(visible_polygons(world, cloth.faces, hidden if hidden is not None else (), grid))
     ropes = []
     for curves in cache.ropes:
-        points = curves.GetPointsAttr().Get(time)
+        points = _read(cache.path, curves, "points", lambda: curves.GetPointsAttr().Get(time), where)
         if points is None:
             continue
-        points = _to_world(curves, time, np.asarray(points, dtype=np.float64))
+        points = _to_world(curves, time, _finite(cache.path, curves, points, frame))
         counts = curves.GetCurveVertexCountsAttr().Get(time) or [len(points)]
         ropes += np.split(points, np.cumsum(counts)[:-1])
     spheres = []
     for sphere in cache.spheres:
-        centre = np.array(sphere.ComputeLocalToWorldTransform(time).ExtractTranslation())
-        spheres.append((centre, float(sphere.GetRadiusAttr().Get(time))))
+        centre = _read(cache.path, sphere, "xformOp:translate",
+                       lambda: np.array(sphere.ComputeLocalToWorldTransform(time).ExtractTranslation()), where)
+        radius = _read(cache.path, sphere, "radius", lambda: sphere.GetRadiusAttr().Get(time), where)
+        spheres.append((_finite(cache.path, sphere, centre, frame), float(_finite(cache.path, sphere, radius, frame))))
     planes = []
     for plane in cache.planes:
-        points = plane.GetPointsAttr().Get(time)
+        points = _read(cache.path, plane, "points", lambda: plane.GetPointsAttr().Get(time), where)
         if points is not None and len(points) >= 3:
-            planes.append(_to_world(plane, time, np.asarray(points, dtype=np.float64)))
+            corners = np.asarray(points, dtype=np.float64)
+            if np.isfinite(corners).all():  # older caches of an overflowing normal hold NaN corners
+                planes.append(_to_world(plane, time, corners))
     return FrameGeometry(frame=frame, seconds=frame / cache.fps, cloths=tuple(cloths), ropes=tuple(ropes),
                          spheres=tuple(spheres), planes=tuple(planes))
 
@@ -491,16 +525,64 @@ def _check_output(output: Path) -> str:
     return suffix
 
 
+def _check_memory(size: tuple[int, int], available: int | None) -> None:
+    """Refuse an image size whose one frame would not fit in the memory available now."""
+    need = size[0] * size[1] * BYTES_PER_PIXEL
+    if available is not None and need > available:
+        raise PreviewError(f"--size {size[0]}x{size[1]}: drawing one image of that size needs about "
+                           f"{need / 1e9:.2g} GB of memory and {available / 1e9:.2g} GB are available; "
+                           "choose a smaller --size")
+
+
+class GifStream:
+    """An animated GIF written one frame at a time, so that memory holds one frame and not the animation
+    (matplotlib's PillowWriter keeps every frame until the end: 120 frames at 8192 x 8192 are 32 GB). Each
+    frame is quantised to its own 256-colour palette (the first frame's is the global colour table, later
+    frames carry a local one); the animation loops forever."""
+
+    def __init__(self, path: Path, fps: float):
+        self._file = open(path, "wb")
+        self._duration = int(1000 / fps)  # ms, as PillowWriter wrote it; GIF keeps 1/100 s
+        self.frames = 0
+
+    def add(self, fig: Figure) -> None:
+        from PIL import GifImagePlugin, Image
+
+        fig.canvas.draw()
+        rgb = Image.fromarray(np.asarray(fig.canvas.buffer_rgba())[..., :3])  # opaque: the figure is white
+        frame = rgb.convert("P", palette=Image.Palette.ADAPTIVE)
+        del rgb
+        if self.frames == 0:
+            header, _ = GifImagePlugin.getheader(frame, info={"loop": 0, "duration": self._duration})
+            chunks = header + GifImagePlugin.getdata(frame, duration=self._duration)
+        else:
+            chunks = GifImagePlugin.getdata(frame, duration=self._duration, include_color_table=True)
+        self._file.write(b"".join(chunks))
+        self._file.flush()
+        self.frames += 1
+
+    def close(self) -> None:
+        """End the file (the GIF trailer) and close it."""
+        if not self._file.closed:
+            self._file.write(b";")
+            self._file.close()
+
+    def abandon(self) -> None:
+        self._file.close()
+
+
 def render_preview(cache_path: str | os.PathLike[str], output: str | os.PathLike[str],
                    frames: slice | None = None, size: tuple[int, int] | None = None) -> Path:
     """Render ``cache_path`` to ``output`` (.png: up to 4 evenly spaced frames of the selection as panels;
-    .gif: every selected frame, at most 120 evenly spaced ones). Returns the output path.
+    .gif: every selected frame, at most 120 evenly spaced ones, written one at a time). Returns the output path.
 
     The image is written to a hidden file in the output's directory and renamed into place, so an error
-    never leaves a partial preview behind.
+    never leaves a partial preview behind. A size whose one frame would not fit in the memory available is
+    refused before anything is read.
     """
     output = Path(output)
     suffix = _check_output(output)
+    _check_memory(size or DEFAULT_SIZE[suffix], available_host_bytes())
     cache = open_cache(cache_path)
     selected = select_frames(frames, cache.frames, cache.path)
     shown = evenly_spaced(selected, MAX_GIF_FRAMES if suffix == ".gif" else MAX_PNG_PANELS)
@@ -517,14 +599,15 @@ def render_preview(cache_path: str | os.PathLike[str], output: str | os.PathLike
             _draw_panels(fig, cache, geometries, planes, view)
             fig.savefig(partial, format="png", dpi=DPI)
         else:
-            # setup/finish rather than writer.saving(): its finish() runs even after an error, and would hide
-            # that error behind its own when no frame was grabbed yet.
-            writer = PillowWriter(fps=_gif_fps(shown, cache.fps))
-            writer.setup(fig, str(partial), dpi=DPI)
-            for geometry, frame_planes in zip(geometries, planes):
-                _draw_panels(fig, cache, [geometry], [frame_planes], view)
-                writer.grab_frame()
-            writer.finish()
+            gif = GifStream(partial, _gif_fps(shown, cache.fps))
+            try:
+                for geometry, frame_planes in zip(geometries, planes):
+                    _draw_panels(fig, cache, [geometry], [frame_planes], view)
+                    gif.add(fig)
+            except BaseException:
+                gif.abandon()
+                raise
+            gif.close()
         os.replace(partial, output)
     except OSError as e:
         raise OutputError(f"cannot write preview {output}: {e.strerror or e}") from e

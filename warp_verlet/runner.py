@@ -1,9 +1,12 @@
 """Batch runs: scene -> simulator -> USD point cache, one frame at a time, with a divergence guard.
 
-The writer is opened before the first substep, so an unwritable output path fails before any simulation
-time is spent. Frames are written on a background thread (``background_writer.py``) while the next frame
-is simulated. The cache is closed (saved) on every exit path: an error, a divergence or Ctrl-C leaves a
-valid file holding the frames simulated before it.
+The output is checked and locked, and the writer opened, before the first substep, so an unwritable,
+busy or too small output fails before any simulation time is spent. Frames are written on a background
+thread (``background_writer.py``) while the next frame is simulated, to ``NAME.partial.EXT`` beside the
+output, which is renamed over the output only when the run succeeds (``output_file.py``). The cache is
+closed (saved) on every exit path: an error, a divergence or Ctrl-C leaves a valid partial file holding the
+frames simulated before it, and the previous output untouched; the exception carries an ``output_report``
+saying where each went.
 """
 
 from __future__ import annotations
@@ -17,7 +20,8 @@ import numpy as np
 
 from . import __version__
 from .background_writer import BackgroundWriter
-from .errors import DivergenceError
+from .errors import DivergenceError, SceneError
+from .output_file import CacheOutput, estimate_cache, input_files
 from .scene import Scene
 
 
@@ -43,6 +47,7 @@ class RunSummary:
     torn: int | None = None  # sticks torn by the end; None when no cloth can tear
     threads: int = 1  # CPU threads the relaxation ran on
     budget: str | None = None  # what a target_stretch budget chose (warp_verlet/budget.py)
+    notes: tuple[str, ...] = ()  # what the run noticed about its output (leftovers of an earlier run removed)
 
     def format(self) -> str:
         rate = self.frames / self.wall_seconds if self.wall_seconds > 0 else float("inf")
@@ -84,17 +89,29 @@ def run_scene(
     progress: Callable[[int], None] | None = None,
     overlap: bool = True,
     threads: int | None = None,
+    note: Callable[[str], None] | None = None,
 ) -> RunSummary:
     """Simulate ``scene`` and write its point cache. ``progress(frame)`` is called after each frame.
     ``overlap=False`` writes each frame before simulating the next (for measuring what overlap saves).
-    ``threads`` is the CPU relaxation's thread count (None: chosen from the cores and the grid size)."""
+    ``threads`` is the CPU relaxation's thread count (None: chosen from the cores and the grid size).
+    ``note(text)`` hears what an earlier run to this output left behind (also in ``RunSummary.notes``).
+
+    A run that does not finish raises, and ``warp_verlet.output_file.output_report(exc)`` says which frames
+    are in the partial file and that the previous output was left as it was."""
+    if frames is not None:
+        scene = replace(scene, simulation=replace(scene.simulation, frames=frames))
+    output = Path(output) if output is not None else scene.output.path
+    target = CacheOutput(output, inputs=input_files(scene), note=note)  # checks the path; opens nothing
+    with target:  # the lock: a second run to this output is refused until the cache is in place
+        return _simulate(scene, output, target, device, progress, overlap, threads)
+
+
+def _simulate(scene: Scene, output: Path, target: CacheOutput, device: str | None,
+              progress: Callable[[int], None] | None, overlap: bool, threads: int | None) -> RunSummary:
     from .simulator import Simulator  # imports warp
     from .usd_writer import CachedPlane, CachedSphere, PointCacheWriter  # imports pxr
 
-    if frames is not None:
-        scene = replace(scene, simulation=replace(scene.simulation, frames=frames))
     settings = scene.simulation
-    output = Path(output) if output is not None else scene.output.path
     sim = Simulator(scene, device, threads=threads)
     model = sim.model
     override = scene.output.kind == "override"
@@ -102,11 +119,14 @@ def run_scene(
     colliders = [] if override else (
         [CachedSphere(s.name, s.radius, s.keyframes[0][1], s.moving, s.purpose) for s in scene.spheres]
         + [CachedPlane(p.name, p.point, p.normal, p.display_size, p.purpose) for p in scene.planes])
+    check_initial_state(scene, sim)
+    target.check_space(estimate_cache(shapes, colliders, text=target.partial.suffix == ".usda"),
+                       settings.frames + 1, scene.output.save_every)
     writer = PointCacheWriter(
-        output, shapes, fps=settings.fps, up_axis=scene.output.up_axis,
+        target.partial, shapes, fps=settings.fps, up_axis=scene.output.up_axis,
         meters_per_unit=scene.output.meters_per_unit, save_every=scene.output.save_every,
         metadata={"generator": f"warp-verlet {__version__}", "scene": scene.source, "device": str(sim.device)},
-        colliders=colliders, torn_faces=scene.output.torn_faces,
+        colliders=colliders, torn_faces=scene.output.torn_faces, before_save=target.before_save,
         override_asset=scene.cloths[0].mesh.mesh.source.file if override else None,
     )
     to_cache = CacheVertices(model, scene, override)
@@ -121,6 +141,7 @@ def run_scene(
         finally:
             if background is not None:
                 background.close()  # the frames already handed over are written before the cache is saved
+    target.commit()
     wall = time.perf_counter() - start
     points = sim.positions()
     stretch = sim.stretch(points)
@@ -131,6 +152,7 @@ def run_scene(
         colours=model.colour_count, colour_balance=colouring.balance if colouring else 0.0,
         stretch_max=stretch.max, stretch_rms=stretch.rms, torn=sim.torn_count() if model.tears else None,
         threads=sim.threads, budget=sim.budget.report() if sim.budget is not None else None,
+        notes=tuple(target.notes),
     )
 
 
@@ -142,6 +164,20 @@ def cached_shape(topology, spec, override: bool):
                        tears=spec.tear_threshold is not None, uv_interpolation=topology.uv_interpolation,
                        left_handed=topology.left_handed,
                        prim_path=spec.mesh.mesh.source.prim_path if override else None)
+
+
+def check_initial_state(scene: Scene, sim) -> None:
+    """Refuse, as a bad input, a scene whose rest pose is already not finite or beyond ``position_bound``,
+    rather than report it as a divergence at frame 1. One integer comes back from the device."""
+    particle = sim.diverged_particle()
+    if particle is None:
+        return
+    index, slot = next((i, s) for i, s in enumerate(sim.model.cloths) if s.first <= particle < s.first + s.count)
+    point = sim.positions()[particle]
+    reason = divergence_reason(point, scene.simulation.position_bound)
+    raise SceneError(scene.source, f"cloth[{index}]", f"particle {particle - slot.first} of cloth '{slot.name}' "
+                     f"starts at {tuple(float(v) for v in point)} ({reason}): its origin, size or mesh "
+                     "positions must put every particle within simulation.position_bound")
 
 
 class CacheVertices:

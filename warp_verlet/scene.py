@@ -593,13 +593,12 @@ def _read_collider(file: str, index: int, data: Any) -> PlaneCollider | SphereCo
     friction = t.take("friction", real(0.0, 1.0), 0.0)
     purpose = t.take("purpose", choice(COLLIDER_PURPOSES), "guide")
     if kind == "plane":
-        normal = t.take("normal", vector(3, _any_real), (0.0, 1.0, 0.0))
-        length = math.sqrt(sum(v * v for v in normal))
-        if length < 1e-12:
+        normal = _unit_vector(t.take("normal", vector(3, _any_real), (0.0, 1.0, 0.0)))
+        if normal is None:
             raise t.error("normal", "expected a non-zero vector")
         collider: PlaneCollider | SphereCollider = PlaneCollider(
             name=name, point=t.take("point", vector(3, _any_real), (0.0, 0.0, 0.0)),
-            normal=tuple(v / length for v in normal), thickness=thickness, friction=friction,
+            normal=normal, thickness=thickness, friction=friction,
             display_size=t.take("display_size", real(0.0, lo_open=True), 10.0), purpose=purpose,
         )
     else:
@@ -676,6 +675,8 @@ def parse_scene(data: dict, file: str = "<scene>", scene_path: Path | None = Non
         for i, n in enumerate(names):
             if n in names[:i]:
                 raise SceneError(file, f"{section}[{i}].name", f"expected a unique name, but {n!r} is used twice")
+    _check_prim_names(file, cloth_specs, collider_specs)
+    _check_float32(file, simulation, cloth_specs, collider_specs)
     return Scene(source=file, simulation=simulation, output=output, cloths=cloth_specs, colliders=collider_specs)
 
 
@@ -698,3 +699,116 @@ def load_scene(path: str | Path) -> Scene:
     except RecursionError:  # tomllib recurses once per level of nested arrays / inline tables
         raise SceneError(file, None, "not valid TOML: arrays or inline tables nested too deeply") from None
     return parse_scene(data, file, path)
+
+
+# ------------------------------------------------------------------------------------------------------------
+# Checks across keys: prim names in the cache, and numbers as the device will hold them (float32).
+
+RESERVED_PRIM_NAMES = ("Colliders",)  # /World/Colliders holds the colliders (usd_writer.COLLIDERS_PATH)
+FLOAT32_MAX = 3.4028234663852886e38
+FLOAT32_TINY = 1.1754943508222875e-38  # the smallest normal float32: below it precision is lost, then 0
+
+
+def _check_prim_names(file: str, cloths: tuple, colliders: tuple) -> None:
+    """Every prim of the cache gets its own name: a cloth may not take a reserved name or a collider's."""
+    collider_names = {c.name: j for j, c in enumerate(colliders)}
+    for i, cloth in enumerate(cloths):
+        if cloth.name in RESERVED_PRIM_NAMES:
+            raise SceneError(file, f"cloth[{i}].name", f"{cloth.name!r} is reserved: the cache keeps the colliders "
+                             f"under /World/{cloth.name}; give the cloth another name")
+        if cloth.name in collider_names:
+            raise SceneError(file, f"cloth[{i}].name", f"expected a name different from every collider's, but "
+                             f"collider[{collider_names[cloth.name]}] is also named {cloth.name!r}")
+
+
+def _unit_vector(v: tuple[float, ...]) -> tuple[float, ...] | None:
+    """``v`` / |v|, or None for the zero vector. Scaled by its largest component first, so that neither a
+    huge vector ([1e300, 1e300, 0]: the sum of squares is inf) nor a tiny one (squares underflow to 0) loses
+    its direction."""
+    scale = max(abs(x) for x in v)
+    if scale == 0.0:
+        return None
+    scaled = [x / scale for x in v]
+    length = math.hypot(*scaled)  # in [1, sqrt(3)]
+    return tuple(x / length for x in scaled)
+
+
+def _float32_fits(x: float) -> bool:
+    return math.isfinite(x) and abs(x) <= FLOAT32_MAX
+
+
+def _check_float32(file: str, simulation: SimulationSettings, cloths: tuple, colliders: tuple) -> None:
+    """Refuse numbers that are valid as TOML floats (float64) but not as the float32 the device computes with:
+    past about 3.4e38 they become inf, and an inverse mass below about 1.2e-38 becomes 0 (the particle would
+    never move) or, for a tiny mass, inf. Each error names the key, as the reader's own checks do."""
+    limit = f"float32 holds magnitudes up to {FLOAT32_MAX:.3g}"
+
+    def fits(key: str, values) -> None:
+        for k, v in enumerate(values):
+            if not _float32_fits(v):
+                where = key if len(values) == 1 else f"{key}[{k}]"
+                raise SceneError(file, where, f"expected a number that float32 can hold ({limit}), got {v:g}")
+
+    fits("simulation.gravity", simulation.gravity)
+    fits("simulation.wind", simulation.wind)
+    for k, (g, w) in enumerate(zip(simulation.gravity, simulation.wind)):
+        if not _float32_fits(g + w):  # one acceleration on the device
+            larger = "gravity" if abs(g) >= abs(w) else "wind"
+            raise SceneError(file, f"simulation.{larger}[{k}]", f"gravity + wind = {g + w:g} m/s^2, which float32 "
+                             f"cannot hold ({limit})")
+    dt = 1.0 / (simulation.fps * simulation.substeps)
+    if not FLOAT32_TINY <= dt <= FLOAT32_MAX:
+        raise SceneError(file, "simulation.fps", f"the step 1 / (fps x substeps) = {dt:g} s is beyond what float32 "
+                         f"can hold (a normal float32 lies in [{FLOAT32_TINY:.3g}, {FLOAT32_MAX:.3g}])")
+    for i, c in enumerate(cloths):
+        key = f"cloth[{i}]"
+        fits(f"{key}.origin", c.origin)
+        if c.size is not None and c.resolution is not None:  # a grid (a mesh's positions are checked at run time)
+            fits(f"{key}.size", c.size)
+            far = max(abs(v) for v in c.origin)
+            reach = far + max(c.size)  # the far corner, whichever way the cloth lies
+            if not _float32_fits(reach):
+                where = (f"{key}.origin[{[abs(v) for v in c.origin].index(far)}]" if far >= max(c.size)
+                         else f"{key}.size[{list(c.size).index(max(c.size))}]")
+                raise SceneError(file, where, f"the cloth reaches {reach:g} m from the world's origin, beyond what "
+                                 f"float32 can hold ({limit})")
+            for axis, (n, length) in enumerate(zip(c.resolution, c.size)):
+                if n > 1 and length / (n - 1) < FLOAT32_TINY:
+                    raise SceneError(file, f"{key}.size[{axis}]", f"expected a spacing float32 can hold: {length:g} "
+                                     f"m over {n - 1} gaps is below {FLOAT32_TINY:.3g} m")
+        n = c.particle_count
+        lo, hi = n / FLOAT32_MAX, n / FLOAT32_TINY  # each particle's inverse mass, n / mass, a normal float32
+        if not lo <= c.mass <= hi:
+            what = "rounds to 0, and the cloth would never move" if c.mass > hi else "overflows to inf"
+            raise SceneError(file, f"{key}.mass", f"expected a number in [{lo:.3g}, {hi:.3g}] kg for {n} particles, "
+                             f"got {c.mass:g}: each particle's inverse mass in float32 ({n} / mass) {what}")
+        for j, (_, _, kg) in enumerate(c.particle_masses):
+            if not 1 / FLOAT32_MAX <= kg <= 1 / FLOAT32_TINY:
+                raise SceneError(file, f"{key}.particle_masses[{j}][2]", f"expected a number in "
+                                 f"[{1 / FLOAT32_MAX:.3g}, {1 / FLOAT32_TINY:.3g}] kg, got {kg:g}: its inverse "
+                                 "must be a normal float32")
+        for family, alpha in c.compliance.items():
+            fits(f"{key}.compliance.{family}", [alpha])
+    for j, c in enumerate(colliders):
+        key = f"collider[{j}]"
+        fits(f"{key}.thickness", [c.thickness])
+        if isinstance(c, PlaneCollider):
+            fits(f"{key}.point", c.point)
+            fits(f"{key}.display_size", [c.display_size])
+            far = max(abs(v) for v in c.point)
+            if not _float32_fits(far + c.display_size):
+                where = (f"{key}.point[{[abs(v) for v in c.point].index(far)}]" if far >= c.display_size
+                         else f"{key}.display_size")
+                raise SceneError(file, where, f"the drawn square reaches beyond what float32 can hold ({limit})")
+        else:
+            fits(f"{key}.radius", [c.radius])
+            if not _float32_fits(c.radius + c.thickness):
+                where = f"{key}.radius" if c.radius >= c.thickness else f"{key}.thickness"
+                raise SceneError(file, where, f"radius + thickness = {c.radius + c.thickness:g} m, which float32 "
+                                 f"cannot hold ({limit})")
+            for k, (_, centre) in enumerate(c.keyframes):
+                for axis, v in enumerate(centre):
+                    if not _float32_fits(v):
+                        where = f"{key}.path[{k}][{axis + 1}]" if len(c.keyframes) > 1 else f"{key}.centre[{axis}]"
+                        raise SceneError(file, where, f"expected a number that float32 can hold ({limit}), "
+                                         f"got {v:g}")

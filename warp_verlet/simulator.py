@@ -18,6 +18,7 @@ cut every colour over several threads (warp_verlet/cpu_team.py); the result is b
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from typing import Callable
 
@@ -26,7 +27,7 @@ import warp as wp
 
 from warp_verlet.kernels.guard import find_diverged
 
-from .errors import WarpVerletError
+from .errors import ArgumentError, WarpVerletError
 from .memory import available_host_bytes, check_fits
 from .model import Model
 from .scene import Scene
@@ -34,10 +35,12 @@ from .solver import VerletSolver
 from .budget import Budget
 from .stages import CONSTRAINT_SETS, Need
 from .state import State
+from .warp_setup import ensure_kernel_cache
 
 
 def resolve_device(name: str | None = None):
     """``None`` picks CUDA when present, else the CPU. Accepts "cpu", "cuda" and "cuda:N"."""
+    ensure_kernel_cache(note=warnings.warn)  # a clear error, not Warp's PermissionError, when it cannot compile
     if name is None:
         return wp.get_device("cuda" if wp.is_cuda_available() else "cpu")
     if name != "cpu" and not (name == "cuda" or (name.startswith("cuda:") and name[5:].isdigit())):
@@ -187,7 +190,7 @@ class Simulator:
         The bank is clamped to ``max_frame_time`` so that a stall (a debugger pause, a slow frame) cannot
         queue more substeps than the next frame can afford: the spiral of death."""
         if not (frame_time >= 0.0 and np.isfinite(frame_time)):
-            raise ValueError(f"frame_time must be a finite number of seconds >= 0, got {frame_time}")
+            raise ArgumentError(f"frame_time must be a finite number of seconds >= 0, got {frame_time}")
         dt = self.dt
         self._accumulator = min(self._accumulator + frame_time, self.settings.max_frame_time)
         # The tiny epsilon keeps 1/60 s from paying for 3.9999999 substeps of 1/240 s instead of 4.

@@ -16,8 +16,8 @@ import warp as wp
 
 from warp_verlet.kernels.integrate import verlet_start
 
-from .cpu_team import COLOURED_SECONDS_PER_STICK, JACOBI_SECONDS_PER_ENTRY, PhaseTeam, auto_threads
-from .errors import WarpVerletError
+from .cpu_team import COLOURED_SECONDS_PER_STICK, JACOBI_SECONDS_PER_ENTRY, MAX_THREADS, PhaseTeam, auto_threads
+from .errors import ArgumentError, WarpVerletError
 from .model import Model
 from .precision import acceleration, smallest_dt
 from .scene import SimulationSettings
@@ -35,7 +35,7 @@ class VerletSolver:
     def __init__(self, model: Model, settings: SimulationSettings, need: Need, threads: int | None = None):
         self.model, self.settings, self.need = model, settings, need
         if need.precision != model.precision:
-            raise ValueError(f"need.precision = {need.precision!r} but the model's positions are {model.precision}")
+            raise ArgumentError(f"need.precision = {need.precision!r} but the model's positions are {model.precision}")
         self.precision = model.precision
         accel = np.add(settings.gravity, settings.wind)
         self.accel = model.position_dtype(*accel)  # in the positions' type, as every factor of the step
@@ -51,8 +51,9 @@ class VerletSolver:
 
     # ------------------------------------------------------------------ set-up
     def _thread_count(self, threads: int | None) -> int:
-        if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or threads < 1):
-            raise WarpVerletError(f"threads must be a whole number >= 1, got {threads!r}")
+        if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int)
+                                    or not 1 <= threads <= MAX_THREADS):
+            raise ArgumentError(f"threads must be a whole number in 1 .. {MAX_THREADS}, got {threads!r}")
         device = self.model.device
         if device.is_cuda:
             if threads not in (None, 1):
@@ -87,7 +88,7 @@ class VerletSolver:
         """The stages of one substep against ``state``'s arrays, as (name, run(state, dt)), recorded once per
         state."""
         if state.model is not self.model:
-            raise ValueError("this solver steps states of its own model only")
+            raise ArgumentError("this solver steps states of its own model only")
         if state not in self._bound:
             with wp.ScopedDevice(self.model.device):
                 self._bound[state] = [(s.name, s.bind(self.model, state, self)) for s in STAGES if s.needed(self.need)]
@@ -107,7 +108,7 @@ class VerletSolver:
     def check_step(self, state: State, dt: float) -> None:
         """Raise one clear error for a dt this solver cannot take from ``state``."""
         if not (dt > 0.0 and np.isfinite(dt)):
-            raise ValueError(f"dt must be a positive finite number of seconds, got {dt}")
+            raise ArgumentError(f"dt must be a positive finite number of seconds, got {dt}")
         if dt < self.min_dt:
             raise WarpVerletError(self.too_small(dt))
         if "relax" in self.stage_names and state.dt_prev is not None and dt * self.settings.max_dt_ratio < state.dt_prev:

@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
+from .errors import ArgumentError
 from .model import Model
 
 
@@ -78,7 +79,7 @@ class State:
         """Copy ``other`` into this state in place (its arrays keep their addresses, so launches recorded
         against this state, and a captured frame, stay valid)."""
         if other.model is not self.model:
-            raise ValueError("a state can only be assigned from a state of the same model")
+            raise ArgumentError("a state can only be assigned from a state of the same model")
         for name in self._ARRAYS:
             mine = getattr(self, name)
             if mine is not None:
@@ -92,7 +93,7 @@ class State:
         n, dtype = self.model.particle_count, self.model.host_position_dtype
         v = np.broadcast_to(np.asarray(velocity, dtype=dtype), (n, 3))
         if not np.isfinite(v).all():
-            raise ValueError("velocity must be finite")
+            raise ArgumentError("velocity must be finite")
         v = np.where(self.model.host_inv_mass[:, None] > 0, v, 0.0).astype(dtype)
         self.particle_dq.assign(v)
         self.dt_prev = None

@@ -36,12 +36,12 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 from pxr import Sdf, Tf, Usd, UsdGeom, UsdValidation, Vt
 
-from .errors import OutputError
+from .errors import ArgumentError, OutputError, StateError, usd_cause
 from .faces import Faces, as_faces
 
 WORLD_PATH = Sdf.Path("/World")
@@ -114,26 +114,26 @@ def _plane_corners(plane: CachedPlane) -> np.ndarray:
 
 def _check_shapes(shapes: Sequence[CachedShape]) -> None:
     if not shapes:
-        raise ValueError("a point cache needs at least one shape")
+        raise ArgumentError("a point cache needs at least one shape")
     names = [s.name for s in shapes]
     if len(set(names)) != len(names):
-        raise ValueError(f"shape names must be unique, got {names}")
+        raise ArgumentError(f"shape names must be unique, got {names}")
     for s in shapes:
         if not Sdf.Path.IsValidIdentifier(s.name):
-            raise ValueError(f"shape name {s.name!r} is not a valid USD prim name")
+            raise ArgumentError(f"shape name {s.name!r} is not a valid USD prim name")
         if s.is_rope:
             if s.point_count < 2:  # a linear curve needs two vertices
-                raise ValueError(f"rope {s.name!r} needs at least 2 points, got {s.point_count}")
+                raise ArgumentError(f"rope {s.name!r} needs at least 2 points, got {s.point_count}")
             continue
         s.faces.validate(s.point_count, f"shape {s.name!r}")
         if s.uvs is None:
             continue
         rows = {"vertex": s.point_count, "faceVarying": len(s.faces.indices)}.get(s.uv_interpolation)
         if rows is None:
-            raise ValueError(f"shape {s.name!r}: uv_interpolation must be 'vertex' or 'faceVarying', "
+            raise ArgumentError(f"shape {s.name!r}: uv_interpolation must be 'vertex' or 'faceVarying', "
                              f"got {s.uv_interpolation!r}")
         if np.shape(s.uvs) != (rows, 2):
-            raise ValueError(f"shape {s.name!r}: {s.uv_interpolation} uvs must be ({rows}, 2), got {np.shape(s.uvs)}")
+            raise ArgumentError(f"shape {s.name!r}: {s.uv_interpolation} uvs must be ({rows}, 2), got {np.shape(s.uvs)}")
 
 
 def _create_stage(path: Path) -> Usd.Stage:
@@ -152,7 +152,7 @@ def _create_stage(path: Path) -> Usd.Stage:
     try:
         return Usd.Stage.CreateNew(str(path))  # truncates an existing file
     except Tf.ErrorException as e:
-        raise OutputError(f"cannot write USD cache {path}: {str(e).strip()}") from e
+        raise OutputError(f"cannot write USD cache {path}: {usd_cause(e)}") from e
 
 
 class PointCacheWriter:
@@ -162,31 +162,43 @@ class PointCacheWriter:
     the file on disk a valid cache of the frames saved so far (endTimeCode is updated before each save).
     If the process dies, at most ``save_every - 1`` frames are lost. Use it as a context manager, so that
     an exception still saves the frames written before it.
+
+    ``before_save(writer)``, when given, is called before every save and may raise to prevent it (the run's
+    free-space check, output_file.py); after such a refusal the writer saves nothing more, so that ``close``
+    leaves the file as the last successful save wrote it. ``saved_frames`` / ``saved_frame`` say what is on
+    disk: how many frames, and the last one (None before the first).
     """
 
     def __init__(self, path: str | os.PathLike[str], shapes: Sequence[CachedShape], fps: float, *,
                  up_axis: str = "Y", meters_per_unit: float = 1.0, save_every: int = 10, start_frame: int = 0,
                  metadata: dict[str, str] | None = None, colliders: Sequence[CachedSphere | CachedPlane] = (),
-                 torn_faces: str = "holes", override_asset: str | os.PathLike[str] | None = None):
+                 torn_faces: str = "holes", override_asset: str | os.PathLike[str] | None = None,
+                 before_save: Callable[[PointCacheWriter], None] | None = None):
         _check_shapes(shapes)
+        if colliders and any(s.name == COLLIDERS_PATH.name for s in shapes):
+            raise ArgumentError(f"shape name {COLLIDERS_PATH.name!r} is where the colliders go; rename the shape")
         if torn_faces not in ("holes", "remove"):
-            raise ValueError(f"torn_faces must be 'holes' or 'remove', got {torn_faces!r}")
+            raise ArgumentError(f"torn_faces must be 'holes' or 'remove', got {torn_faces!r}")
         if override_asset is not None and colliders:
-            raise ValueError("an override layer has no colliders: they stand in for the asset's own geometry")
+            raise ArgumentError("an override layer has no colliders: they stand in for the asset's own geometry")
         if not (np.isfinite(fps) and fps > 0):
-            raise ValueError(f"fps must be a positive number, got {fps}")
+            raise ArgumentError(f"fps must be a positive number, got {fps}")
         if up_axis not in ("Y", "Z"):
-            raise ValueError(f"up_axis must be 'Y' or 'Z', got {up_axis!r}")
+            raise ArgumentError(f"up_axis must be 'Y' or 'Z', got {up_axis!r}")
         if not (np.isfinite(meters_per_unit) and meters_per_unit > 0):
-            raise ValueError(f"meters_per_unit must be a positive number, got {meters_per_unit}")
+            raise ArgumentError(f"meters_per_unit must be a positive number, got {meters_per_unit}")
         if save_every < 1:
-            raise ValueError(f"save_every must be at least 1, got {save_every}")
+            raise ArgumentError(f"save_every must be at least 1, got {save_every}")
 
         self.path = Path(path).absolute()
         self.shapes = tuple(shapes)
         self.save_every = int(save_every)
         self.start_frame = int(start_frame)
         self.frames_written = 0
+        self.saved_frames = 0  # frames on disk
+        self.saved_frame: int | None = None  # the last frame on disk
+        self._before_save = before_save
+        self._refused = False  # a before_save refused a save: write nothing more to disk
         self._last_frame: int | None = None
         self.torn_faces = torn_faces
         self._holes: dict[int, np.ndarray] = {}  # per tearing shape: the hidden faces last authored
@@ -241,7 +253,14 @@ class PointCacheWriter:
                 plane.CreatePurposeAttr(collider.purpose)
         # Curves pad their extent by half the width; keep the width array to compute it per frame.
         self._rope_widths = Vt.FloatArray([rope_width])
-        self._save()  # the topology is on disk before the first frame, and write errors surface here
+        try:
+            self._save()  # the topology is on disk before the first frame, and write errors surface here
+        except BaseException:
+            # Release the layer, even while the caller holds this exception (and this frame): a later writer
+            # may open the same path in this process.
+            self._stage = stage = None
+            self._prims, self._moving = [], []
+            raise
 
     def _define_mesh(self, stage: Usd.Stage, prim_path: Sdf.Path, shape: CachedShape) -> UsdGeom.Mesh:
         mesh = UsdGeom.Mesh.Define(stage, prim_path)
@@ -303,23 +322,23 @@ class PointCacheWriter:
         tear, ``hidden_faces`` (one array of face indices per shape, or None where unchanged or not tearing;
         holeIndices is sampled only when the set differs from the last one written)."""
         if self._stage is None:
-            raise RuntimeError(f"the point cache {self.path} is closed")
+            raise StateError(f"the point cache {self.path} is closed")
         if frame < self.start_frame:
-            raise ValueError(f"frame {frame} is before the start frame {self.start_frame}")
+            raise ArgumentError(f"frame {frame} is before the start frame {self.start_frame}")
         if self._last_frame is not None and frame <= self._last_frame:
-            raise ValueError(f"frames must increase: got frame {frame} after frame {self._last_frame}")
+            raise ArgumentError(f"frames must increase: got frame {frame} after frame {self._last_frame}")
         if len(points) != len(self.shapes):
-            raise ValueError(f"expected {len(self.shapes)} point arrays, one per shape, got {len(points)}")
+            raise ArgumentError(f"expected {len(self.shapes)} point arrays, one per shape, got {len(points)}")
         # Check every array before authoring any, so that a bad call leaves no half-written frame.
         arrays = []
         for shape, p in zip(self.shapes, points):
             a = np.ascontiguousarray(p, dtype=np.float32)  # no copy when it already is float32 C-order
             if a.shape != (shape.point_count, 3):
-                raise ValueError(f"shape {shape.name!r}: points must be ({shape.point_count}, 3), got {a.shape}")
+                raise ArgumentError(f"shape {shape.name!r}: points must be ({shape.point_count}, 3), got {a.shape}")
             arrays.append(a)
         centres = np.zeros((0, 3)) if moving_centres is None else np.asarray(moving_centres, np.float64)
         if centres.shape != (len(self._moving), 3):
-            raise ValueError(f"expected ({len(self._moving)}, 3) moving sphere centres, got {centres.shape}")
+            raise ArgumentError(f"expected ({len(self._moving)}, 3) moving sphere centres, got {centres.shape}")
         holes = self._changed_holes(hidden_faces)
 
         time = Usd.TimeCode(frame)
@@ -346,12 +365,12 @@ class PointCacheWriter:
         frame (an empty set until something tears), afterwards only the sets that changed."""
         given = [None] * len(self.shapes) if hidden_faces is None else list(hidden_faces)
         if len(given) != len(self.shapes):
-            raise ValueError(f"expected {len(self.shapes)} hidden-face arrays (or None), one per shape, got {len(given)}")
+            raise ArgumentError(f"expected {len(self.shapes)} hidden-face arrays (or None), one per shape, got {len(given)}")
         out = {}
         for k, (shape, faces) in enumerate(zip(self.shapes, given)):
             if not shape.tears or shape.is_rope:
                 if faces is not None and len(faces):
-                    raise ValueError(f"shape {shape.name!r} does not tear, so it has no faces to hide")
+                    raise ArgumentError(f"shape {shape.name!r} does not tear, so it has no faces to hide")
                 continue
             if faces is None:
                 if k in self._holes:
@@ -359,7 +378,7 @@ class PointCacheWriter:
                 faces = np.zeros(0, np.int32)
             faces = np.unique(np.asarray(faces, dtype=np.int32))
             if len(faces) and (faces[0] < 0 or faces[-1] >= len(shape.faces)):
-                raise ValueError(f"shape {shape.name!r}: hidden face indices must lie in [0, {len(shape.faces)})")
+                raise ArgumentError(f"shape {shape.name!r}: hidden face indices must lie in [0, {len(shape.faces)})")
             if k not in self._holes or not np.array_equal(faces, self._holes[k]):
                 out[k] = faces
         return out
@@ -384,15 +403,24 @@ class PointCacheWriter:
 
     def _save(self) -> None:
         assert self._stage is not None
+        if self._refused:
+            return
+        if self._before_save is not None:
+            try:
+                self._before_save(self)
+            except BaseException:
+                self._refused = True
+                raise
         # The range must cover only what is on disk, so it is moved just before each save.
         end = self._last_frame if self._last_frame is not None else self.start_frame
         self._stage.SetEndTimeCode(end)
         try:
             saved = self._stage.GetRootLayer().Save()
         except Tf.ErrorException as e:
-            raise OutputError(f"cannot save USD cache {self.path}: {str(e).strip()}") from e
+            raise OutputError(f"cannot save USD cache {self.path}: {usd_cause(e)}") from e
         if not saved:
             raise OutputError(f"cannot save USD cache {self.path}")
+        self.saved_frames, self.saved_frame = self.frames_written, self._last_frame
 
     def close(self) -> None:
         """Save the frames not yet saved and release the stage. Calling it again does nothing."""
@@ -402,14 +430,19 @@ class PointCacheWriter:
             self._save()
         finally:
             self._stage = None  # drop the layer, so the file can be reopened or rewritten in this process
-            self._prims = []
+            self._prims, self._moving = [], []
 
     def __enter__(self) -> PointCacheWriter:
         return self
 
     def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
                  tb: TracebackType | None) -> None:
-        self.close()
+        try:
+            self.close()
+        except OutputError:
+            if exc is None:
+                raise
+            # The error in flight says why the run stopped; what is on disk is in saved_frames / saved_frame.
 
 
 def validate_cache(path: str | os.PathLike[str]) -> list[str]:
@@ -420,7 +453,7 @@ def validate_cache(path: str | os.PathLike[str]) -> list[str]:
     try:
         stage = Usd.Stage.Open(str(path))
     except Tf.ErrorException as e:
-        return [f"{path}: cannot be opened as USD: {str(e).strip()}"]
+        return [f"{path}: cannot be opened as USD: {usd_cause(e)}"]
 
     # USD's own validators: stage metadata, composition, attribute types. Warnings are advice; keep errors.
     context = UsdValidation.ValidationContext(UsdValidation.ValidationRegistry().GetOrLoadAllValidators())

@@ -15,7 +15,8 @@ def divergence(device: str = "cpu", size: str = "test", out_dir: Path | None = N
     """A cloth with no relaxation (iterations = 0) under 1000 m/s^2 with position_bound = 20 m: its free
     particles fall exactly (x0 + a t^2 / 2), so the frame where one first passes 20 m and the lowest such
     particle index are known in advance. run_scene must stop there with DivergenceError naming the frame,
-    the cloth and the particle, and leave a valid cache holding frames 0 .. frame - 1."""
+    the cloth and the particle, leave a valid partial cache (diverges.partial.usdc) holding frames
+    0 .. frame - 1, and write nothing at the output path."""
     import tempfile
 
     from pxr import Usd, UsdGeom
@@ -43,11 +44,12 @@ def divergence(device: str = "cpu", size: str = "test", out_dir: Path | None = N
             err = None
         except DivergenceError as exc:
             err = exc
-        samples, problems = [], ["no cache"]
-        if out.exists():
-            stage = Usd.Stage.Open(str(out))
+        partial = out.with_name(f"{out.stem}.partial{out.suffix}")  # a failed run's frames (output_file.py)
+        samples, problems, written = [], ["no cache"], out.exists()
+        if partial.exists():
+            stage = Usd.Stage.Open(str(partial))
             samples = list(UsdGeom.Mesh.Get(stage, "/World/net").GetPointsAttr().GetTimeSamples())
-            problems = validate_cache(out)
+            problems = validate_cache(partial)
             del stage
     message = str(err) if err else "no DivergenceError"
     named = (err is not None and err.frame == frame and err.cloth == "net" and err.particle == particle
@@ -58,4 +60,5 @@ def divergence(device: str = "cpu", size: str = "test", out_dir: Path | None = N
         count_check(case, "cache time samples other than frames 0 .. frame - 1",
                     len(set(samples) ^ set(range(frame))), f"{len(samples)} samples"),
         count_check(case, "validate_cache problems", len(problems), "; ".join(problems)[:200]),
+        count_check(case, "a file at the output path after the failed run", int(written), str(out.name)),
     ]
