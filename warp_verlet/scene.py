@@ -9,7 +9,6 @@ the file, the key and what was expected. ``docs/scenes.md`` documents every key 
 from __future__ import annotations
 
 import math
-import re
 import sys
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -21,9 +20,14 @@ else:  # pragma: no cover - exercised on Python 3.10 only
     import tomli as tomllib
 
 from .errors import SceneError
+from .scene_keys import (  # the table reader and value parsers, under the names this module has always used
+    Invalid as _Invalid, Table as _Table, any_real as _any_real, boolean as _boolean, choice,
+    describe as _describe, int_text as _int_text, integer, non_negative as _non_negative,
+    per_element as _per_element, prim_name as _prim_name, real, text, toml_list as _toml_list, vector,
+)
 
 if TYPE_CHECKING:  # the mesh modules (numpy) are imported only by a scene that has a mesh cloth
-    from .mesh_cloth import ClothMesh
+    from .mesh_scene import MeshSpec
 
 SOLVERS = ("coloured", "jacobi")
 PRECISIONS = ("auto", "float32", "float64")  # positions' float type; "auto" is resolved in precision.py
@@ -33,7 +37,6 @@ UP_AXES = ("Y", "Z")
 OUTPUT_KINDS = ("cache", "override")  # a standalone point cache, or a layer over the USD asset the cloths came from
 TORN_FACES = ("remove", "holes")  # how a cache shows torn faces: left out of the topology, or holeIndices
 COLLIDER_PURPOSES = ("guide", "default")  # USD purpose: a helper hidden in renders, or rendered geometry
-MASS_DISTRIBUTIONS = ("area", "even")  # a mesh cloth's mass: by the area around each particle, or the same for all
 # Named pin groups; each maps (rows, cols) to a list of (row, col). Row 0 is the top edge (the origin's
 # edge), column 0 the left edge.
 NAMED_PINS: dict[str, Callable[[int, int], list[tuple[int, int]]]] = {
@@ -46,7 +49,6 @@ NAMED_PINS: dict[str, Callable[[int, int], list[tuple[int, int]]]] = {
     "left-edge": lambda r, c: [(i, 0) for i in range(r)],
     "right-edge": lambda r, c: [(i, c - 1) for i in range(r)],
 }
-_PRIM_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
 
 TARGET_ITERATIONS = 2  # sweeps per substep when target_stretch chooses the substeps (warp_verlet/budget.py)
@@ -87,17 +89,6 @@ class OutputSettings:
     torn_faces: str = "remove"  # "remove" (the default of a cache) or "holes" (of an override layer)
 
 
-@dataclass(frozen=True, eq=False)
-class MeshSpec:
-    """A cloth's mesh, read, welded and checked when the scene is loaded (warp_verlet/mesh_cloth.py), and
-    what the scene says about its particles, already resolved to particle indices."""
-
-    mesh: "ClothMesh"
-    pins: tuple[int, ...] = ()  # particle indices, sorted
-    particle_masses: tuple[tuple[int, float], ...] = ()  # (particle, kg): overrides of the distributed mass
-    mass_distribution: str = "area"
-
-
 @dataclass(frozen=True)
 class ClothSpec:
     """One cloth: a grid (``resolution`` and ``size``) or a mesh (``mesh``; resolution and size are None)."""
@@ -115,7 +106,7 @@ class ClothSpec:
     particle_masses: tuple[tuple[int, int, float], ...] = ()  # (row, col, kg): overrides of the even share
     tethers: bool | None = None  # None: on when the cloth has pins and cannot tear
     tether_scale: float = 1.0  # tether length / rest-pose distance to the pin (> 1: slack for a soft cloth)
-    mesh: MeshSpec | None = None  # a mesh cloth (then pins and particle_masses above are empty)
+    mesh: "MeshSpec | None" = None  # a mesh cloth (then pins and particle_masses above are empty)
 
     @property
     def uses_tethers(self) -> bool:
@@ -223,153 +214,6 @@ class Scene:
         return any(c.compliance for c in self.cloths)
 
 
-_REQUIRED = object()
-
-
-class _Table:
-    """One TOML table being read: remembers the file and the dotted key path for error messages, and
-    which keys were consumed so that unknown keys are reported."""
-
-    def __init__(self, file: str, path: str, data: Any):
-        self.file, self.path = file, path
-        if not isinstance(data, dict):
-            raise SceneError(file, path, f"expected a table, got {_describe(data)}")
-        self.data = data
-        self.seen: set[str] = set()
-
-    def key(self, name: str) -> str:
-        return f"{self.path}.{name}" if self.path else name
-
-    def error(self, name: str | None, problem: str) -> SceneError:
-        return SceneError(self.file, self.key(name) if name else self.path or None, problem)
-
-    def take(self, name: str, parse: Callable[[Any, str], Any], default: Any = _REQUIRED) -> Any:
-        self.seen.add(name)
-        if name not in self.data:
-            if default is _REQUIRED:
-                raise self.error(name, "is required but missing")
-            return default
-        try:
-            return parse(self.data[name], self.key(name))
-        except _Invalid as bad:
-            raise SceneError(self.file, bad.key or self.key(name), bad.problem) from None
-
-    def finish(self) -> None:
-        unknown = sorted(set(self.data) - self.seen)
-        if unknown:
-            known = ", ".join(sorted(self.seen))
-            raise self.error(unknown[0], f"unknown key (known keys here: {known})")
-
-
-class _Invalid(Exception):
-    def __init__(self, problem: str, key: str | None = None):
-        self.problem, self.key = problem, key
-
-
-def _int_text(n: int) -> str:
-    """An integer for a message. Huge ones (TOML hex/octal/binary literals have no length limit) are
-    summarised: printing them in full is unreadable and, past sys.get_int_max_str_digits(), raises."""
-    if n.bit_length() > 128:
-        return f"{'-' if n < 0 else ''}an integer of {n.bit_length()} bits"
-    return str(n)
-
-
-def _describe(value: Any) -> str:
-    if isinstance(value, bool):
-        return f"boolean {str(value).lower()}"
-    if isinstance(value, int):
-        return f"int {_int_text(value)}"
-    if isinstance(value, dict):
-        return "a table"
-    if isinstance(value, list):
-        return f"an array of {len(value)}"
-    return f"{type(value).__name__} {value!r}"
-
-
-def _number(value: Any, integer: bool = False) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or (integer and not isinstance(value, int)):
-        raise _Invalid(f"expected {'an integer' if integer else 'a number'}, got {_describe(value)}")
-    if isinstance(value, float) and not math.isfinite(value):
-        raise _Invalid(f"expected a finite number, got {value}")
-    if not integer and isinstance(value, int):
-        try:
-            float(value)
-        except OverflowError:  # an integer literal beyond the float range (about 1.8e308)
-            raise _Invalid(f"expected a finite number, got {_int_text(value)}") from None
-    return value
-
-
-def real(lo: float | None = None, hi: float | None = None, lo_open: bool = False, hi_open: bool = False):
-    """A finite float within [lo, hi] (ends open where asked)."""
-
-    def parse(value: Any, key: str) -> float:
-        x = float(_number(value))
-        bad_lo = lo is not None and (x <= lo if lo_open else x < lo)
-        bad_hi = hi is not None and (x >= hi if hi_open else x > hi)
-        if bad_lo or bad_hi:
-            left = "(" if lo_open or lo is None else "["  # an infinite end is never included
-            right = ")" if hi_open or hi is None else "]"
-            span = f"{left}{'-inf' if lo is None else lo}, {'inf' if hi is None else hi}{right}"
-            raise _Invalid(f"expected a number in {span}, got {x}")
-        return x
-
-    return parse
-
-
-def integer(lo: int, hi: int | None = None):
-    def parse(value: Any, key: str) -> int:
-        n = int(_number(value, integer=True))
-        if n < lo or (hi is not None and n > hi):
-            raise _Invalid(f"expected an integer {'>= ' + str(lo) if hi is None else f'in [{lo}, {hi}]'}, got {_int_text(n)}")
-        return n
-
-    return parse
-
-
-def vector(length: int, element: Callable[[Any, str], Any]):
-    def parse(value: Any, key: str) -> tuple:
-        if not isinstance(value, list) or len(value) != length:
-            raise _Invalid(f"expected an array of {length} numbers, got {_describe(value)}")
-        return tuple(element(v, f"{key}[{i}]") for i, v in enumerate(value))
-
-    return parse
-
-
-def choice(options: tuple[str, ...]):
-    def parse(value: Any, key: str) -> str:
-        if not isinstance(value, str) or value not in options:
-            raise _Invalid(f"expected one of {', '.join(repr(o) for o in options)}, got {_describe(value)}")
-        return value
-
-    return parse
-
-
-def _boolean(value: Any, key: str) -> bool:
-    if not isinstance(value, bool):
-        raise _Invalid(f"expected true or false, got {_describe(value)}")
-    return value
-
-
-def text(value: Any, key: str) -> str:
-    if not isinstance(value, str) or not value:
-        raise _Invalid(f"expected a non-empty string, got {_describe(value)}")
-    return value
-
-
-def _per_element(parse_one):
-    """Wrap a scalar parser so that an error inside a vector names the element, e.g. ``size[1]``."""
-
-    def parse(value: Any, key: str):
-        try:
-            return parse_one(value, key)
-        except _Invalid as bad:
-            raise _Invalid(bad.problem, bad.key or key) from None
-
-    return parse
-
-
-_any_real = _per_element(real())
-_non_negative = _per_element(real(0.0))
 
 
 def _read_simulation(file: str, data: Any) -> SimulationSettings:
@@ -474,10 +318,6 @@ def _read_sticks(value: Any, key: str) -> tuple[str, ...]:
     return tuple(f for f in STICK_FAMILIES if f in value)
 
 
-def _toml_list(items) -> str:
-    return "[" + ", ".join(f'"{i}"' for i in items) + "]"
-
-
 def _read_compliance(value: Any, key: str) -> dict[str, float]:
     if not isinstance(value, dict):
         raise _Invalid(f"expected a table like {{ bend = 1e-3 }} (m/N per stick family), got {_describe(value)}")
@@ -532,20 +372,10 @@ def _read_particle_masses(value: Any, key: str, rows: int, cols: int) -> tuple[t
     return tuple((r, c, kg) for (r, c), kg in out.items())
 
 
-def _prim_name(value: Any, key: str) -> str:
-    """A USD prim name: the cloth or collider appears under that name in the cache."""
-    name = text(value, key)
-    if not _PRIM_NAME.fullmatch(name):  # not .match: "$" would accept a trailing newline
-        raise _Invalid(f"expected a name of letters, digits and '_' not starting with a digit, got {name!r}")
-    return name
-
-
 def _read_cloth(file: str, index: int, data: Any, scene_dir: Path) -> ClothSpec:
     t = _Table(file, f"cloth[{index}]", data)
     if isinstance(data, dict) and "mesh" in data:
-        from .mesh_scene import read_mesh_cloth  # numpy, and trimesh or pxr: only for a mesh cloth
-
-        return read_mesh_cloth(t, index, scene_dir)
+        return _read_mesh_cloth(t, index, scene_dir)
 
     name = t.take("name", _prim_name, f"cloth{index}")
     rows, cols = t.take("resolution", vector(2, _per_element(integer(1, 1 << 15))))
@@ -571,6 +401,30 @@ def _read_cloth(file: str, index: int, data: Any, scene_dir: Path) -> ClothSpec:
         tether_scale=t.take("tether_scale", real(1.0), 1.0),
     )
     t.finish()
+    check_cloth(t, spec)
+    return spec
+
+
+def _read_mesh_cloth(t: _Table, index: int, scene_dir: Path) -> ClothSpec:
+    """A cloth from a mesh file: the mesh keys are read by warp_verlet/mesh_scene.py (imported only here: numpy,
+    and trimesh or pxr), the keys every cloth has here; the file is read once every key has been checked."""
+    from . import mesh_scene
+
+    request = mesh_scene.read_mesh_keys(t, scene_dir)
+    spec = ClothSpec(
+        name=t.take("name", _prim_name, f"cloth{index}"), resolution=None, size=None,
+        mass=t.take("mass", real(0.0, lo_open=True), 1.0),
+        sticks=t.take("sticks", _read_sticks, ("structural",)),
+        compliance=t.take("compliance", _read_compliance, {}),
+        tear_threshold=t.take("tear_threshold", real(1.0, lo_open=True), None),
+        tethers=t.take("tethers", _boolean, None),
+        tether_scale=t.take("tether_scale", real(1.0), 1.0),
+    )
+    t.finish()
+    spec = replace(spec, mesh=mesh_scene.load_mesh(t, request))
+    if spec.tear_threshold is not None and spec.mesh.mesh.non_manifold_edges:
+        raise t.error("tear_threshold", f"tearing needs a manifold mesh (each edge beside at most two faces, to "
+                      f"know which faces a torn edge opens), and {spec.mesh.mesh.non_manifold_edges} edges have more")
     check_cloth(t, spec)
     return spec
 
@@ -667,9 +521,7 @@ def parse_scene(data: dict, file: str = "<scene>", scene_path: Path | None = Non
                                  "sticks, and the coarse levels limit stretch to the rest pose: set "
                                  "multilevel = false or make its structural sticks rigid")
     if output.kind == "override":
-        from .mesh_scene import check_override  # every cloth from one USD asset
-
-        check_override(file, cloth_specs)
+        _check_override(file, cloth_specs)
     for section, items in (("cloth", cloth_specs), ("collider", collider_specs)):
         names = [c.name for c in items]
         for i, n in enumerate(names):
@@ -678,6 +530,20 @@ def parse_scene(data: dict, file: str = "<scene>", scene_path: Path | None = Non
     _check_prim_names(file, cloth_specs, collider_specs)
     _check_float32(file, simulation, cloth_specs, collider_specs)
     return Scene(source=file, simulation=simulation, output=output, cloths=cloth_specs, colliders=collider_specs)
+
+
+def _check_override(file: str, cloths: tuple[ClothSpec, ...]) -> None:
+    """An override layer overrides USD prims: every cloth must come from a prim, all of one USD file."""
+    assets = set()
+    for i, spec in enumerate(cloths):
+        source = spec.mesh.mesh.source if spec.mesh is not None else None
+        if source is None or source.prim_path is None:
+            raise SceneError(file, "output.kind", f"an override layer overrides the USD prims the cloths came from, "
+                             f"and cloth[{i}] ({spec.name!r}) is not from a USD prim: write kind = \"cache\"")
+        assets.add(source.file.resolve())
+    if len(assets) > 1:
+        raise SceneError(file, "output.kind", f"an override layer goes over one asset, and the cloths come from "
+                         f"{len(assets)} files ({', '.join(sorted(map(str, assets)))}): write kind = \"cache\"")
 
 
 def load_scene(path: str | Path) -> Scene:

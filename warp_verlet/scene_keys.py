@@ -1,0 +1,176 @@
+"""Reading TOML tables key by key, for scene files and for the files that build on them (mesh keys, sweeps).
+
+Every failure is one :class:`SceneError` naming the file, the dotted key and what was expected: a parser
+raises :class:`Invalid` with the problem (and, inside an array, the element's own key), and
+:meth:`Table.take` adds the file and the key. Nothing here knows what a scene holds.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from typing import Any, Callable
+
+from .errors import SceneError
+
+PRIM_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")  # a USD prim name
+
+REQUIRED = object()
+
+
+class Table:
+    """One TOML table being read: remembers the file and the dotted key path for error messages, and
+    which keys were consumed so that unknown keys are reported."""
+
+    def __init__(self, file: str, path: str, data: Any):
+        self.file, self.path = file, path
+        if not isinstance(data, dict):
+            raise SceneError(file, path, f"expected a table, got {describe(data)}")
+        self.data = data
+        self.seen: set[str] = set()
+
+    def key(self, name: str) -> str:
+        return f"{self.path}.{name}" if self.path else name
+
+    def error(self, name: str | None, problem: str) -> SceneError:
+        return SceneError(self.file, self.key(name) if name else self.path or None, problem)
+
+    def take(self, name: str, parse: Callable[[Any, str], Any], default: Any = REQUIRED) -> Any:
+        self.seen.add(name)
+        if name not in self.data:
+            if default is REQUIRED:
+                raise self.error(name, "is required but missing")
+            return default
+        try:
+            return parse(self.data[name], self.key(name))
+        except Invalid as bad:
+            raise SceneError(self.file, bad.key or self.key(name), bad.problem) from None
+
+    def finish(self) -> None:
+        unknown = sorted(set(self.data) - self.seen)
+        if unknown:
+            known = ", ".join(sorted(self.seen))
+            raise self.error(unknown[0], f"unknown key (known keys here: {known})")
+
+
+class Invalid(Exception):
+    def __init__(self, problem: str, key: str | None = None):
+        self.problem, self.key = problem, key
+
+
+def int_text(n: int) -> str:
+    """An integer for a message. Huge ones (TOML hex/octal/binary literals have no length limit) are
+    summarised: printing them in full is unreadable and, past sys.get_int_max_str_digits(), raises."""
+    if n.bit_length() > 128:
+        return f"{'-' if n < 0 else ''}an integer of {n.bit_length()} bits"
+    return str(n)
+
+
+def describe(value: Any) -> str:
+    if isinstance(value, bool):
+        return f"boolean {str(value).lower()}"
+    if isinstance(value, int):
+        return f"int {int_text(value)}"
+    if isinstance(value, dict):
+        return "a table"
+    if isinstance(value, list):
+        return f"an array of {len(value)}"
+    return f"{type(value).__name__} {value!r}"
+
+
+def number(value: Any, integer: bool = False) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or (integer and not isinstance(value, int)):
+        raise Invalid(f"expected {'an integer' if integer else 'a number'}, got {describe(value)}")
+    if isinstance(value, float) and not math.isfinite(value):
+        raise Invalid(f"expected a finite number, got {value}")
+    if not integer and isinstance(value, int):
+        try:
+            float(value)
+        except OverflowError:  # an integer literal beyond the float range (about 1.8e308)
+            raise Invalid(f"expected a finite number, got {int_text(value)}") from None
+    return value
+
+
+def real(lo: float | None = None, hi: float | None = None, lo_open: bool = False, hi_open: bool = False):
+    """A finite float within [lo, hi] (ends open where asked)."""
+
+    def parse(value: Any, key: str) -> float:
+        x = float(number(value))
+        bad_lo = lo is not None and (x <= lo if lo_open else x < lo)
+        bad_hi = hi is not None and (x >= hi if hi_open else x > hi)
+        if bad_lo or bad_hi:
+            left = "(" if lo_open or lo is None else "["  # an infinite end is never included
+            right = ")" if hi_open or hi is None else "]"
+            span = f"{left}{'-inf' if lo is None else lo}, {'inf' if hi is None else hi}{right}"
+            raise Invalid(f"expected a number in {span}, got {x}")
+        return x
+
+    return parse
+
+
+def integer(lo: int, hi: int | None = None):
+    def parse(value: Any, key: str) -> int:
+        n = int(number(value, integer=True))
+        if n < lo or (hi is not None and n > hi):
+            raise Invalid(f"expected an integer {'>= ' + str(lo) if hi is None else f'in [{lo}, {hi}]'}, got {int_text(n)}")
+        return n
+
+    return parse
+
+
+def vector(length: int, element: Callable[[Any, str], Any]):
+    def parse(value: Any, key: str) -> tuple:
+        if not isinstance(value, list) or len(value) != length:
+            raise Invalid(f"expected an array of {length} numbers, got {describe(value)}")
+        return tuple(element(v, f"{key}[{i}]") for i, v in enumerate(value))
+
+    return parse
+
+
+def choice(options: tuple[str, ...]):
+    def parse(value: Any, key: str) -> str:
+        if not isinstance(value, str) or value not in options:
+            raise Invalid(f"expected one of {', '.join(repr(o) for o in options)}, got {describe(value)}")
+        return value
+
+    return parse
+
+
+def boolean(value: Any, key: str) -> bool:
+    if not isinstance(value, bool):
+        raise Invalid(f"expected true or false, got {describe(value)}")
+    return value
+
+
+def text(value: Any, key: str) -> str:
+    if not isinstance(value, str) or not value:
+        raise Invalid(f"expected a non-empty string, got {describe(value)}")
+    return value
+
+
+def per_element(parse_one):
+    """Wrap a scalar parser so that an error inside a vector names the element, e.g. ``size[1]``."""
+
+    def parse(value: Any, key: str):
+        try:
+            return parse_one(value, key)
+        except Invalid as bad:
+            raise Invalid(bad.problem, bad.key or key) from None
+
+    return parse
+
+
+any_real = per_element(real())
+non_negative = per_element(real(0.0))
+
+
+def toml_list(items) -> str:
+    return "[" + ", ".join(f'"{i}"' for i in items) + "]"
+
+
+def prim_name(value: Any, key: str) -> str:
+    """A USD prim name: the cloth or collider appears under that name in the cache."""
+    name = text(value, key)
+    if not PRIM_NAME.fullmatch(name):  # not .match: "$" would accept a trailing newline
+        raise Invalid(f"expected a name of letters, digits and '_' not starting with a digit, got {name!r}")
+    return name
