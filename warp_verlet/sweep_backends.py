@@ -294,6 +294,23 @@ def import_ray():
     return ray
 
 
+def _pickle_by_value(ray, fn: Callable) -> None:
+    """Send ``fn``'s package to the workers with the task, unless it is warp_verlet's (installed on every node):
+    a script's or a benchmark's module (``bench.work_precision``) need not be importable where the task runs."""
+    import sys
+
+    top = (getattr(fn, "__module__", None) or "").split(".")[0]
+    if top and top != "warp_verlet" and top != "__main__" and top in sys.modules:
+        ray.cloudpickle.register_pickle_by_value(sys.modules[top])
+
+
+def _driver_node() -> str:
+    """The Ray node this driver runs on: a task on another node does not see the driver's disk."""
+    import ray
+
+    return ray.get_runtime_context().get_node_id()
+
+
 def _ray_call(fn: Callable, payload: Any, device: str, threads: int | None, driver_node: str) -> Any:
     import ray
 
@@ -363,8 +380,9 @@ class RayBackend:
             from ray.exceptions import OutOfMemoryError
         except ImportError:  # pragma: no cover - older Ray
             OutOfMemoryError = WorkerCrashedError  # noqa: N806
+        _pickle_by_value(ray, fn)
         task = ray.remote(_ray_call).options(max_retries=1, **self.resources)
-        driver_node = ray.get_runtime_context().get_node_id()
+        driver_node = _driver_node()
         pending: dict = {}
         for key, payload in items:
             pending[task.remote(fn, payload, self.device, self.threads, driver_node)] = (key, time.perf_counter())
