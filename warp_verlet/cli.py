@@ -169,12 +169,12 @@ def _run(args) -> int:
 
 
 def _sweep(args) -> int:
-    from .sweep import load_sweep
+    from .sweep import load_sweep, show
 
     sweep = load_sweep(args.sweep, args.output)
     if args.dry_run:
         for v in sweep.variants:
-            params = ", ".join(f"{k} = {val!r}" for k, val in v.params.items())
+            params = ", ".join(f"{k} = {show(val)}" for k, val in v.params.items())
             print(f"{v.index:5d}  {v.name}  {params}  [{v.hash}]")
         print(f"{args.sweep}: valid sweep, {len(sweep.variants)} variants of {sweep.base}, output {sweep.output}")
         return 0

@@ -222,7 +222,7 @@ def _flatten(file: str, section: str, data: Any, leaf: Callable[[Any], bool]) ->
 
 
 def _is_range(value: dict) -> bool:
-    return bool(value) and set(value) <= set(RANGE_KEYS) and ("start" in value or "stop" in value)
+    return "start" in value or "stop" in value  # no scene key has these names
 
 
 def _is_distribution(value: dict) -> bool:
@@ -333,7 +333,10 @@ def _distribution(spec: Any) -> tuple[str, Any]:
     if not isinstance(args, list) or len(args) != 2:
         raise _Invalid(f"expected [lo, hi], got {_describe(args)}", key)
     if kind == "integers":
-        lo, hi = (integer(-(2**62), 2**62)(a, "") for a in args)
+        try:
+            lo, hi = (integer(-(2**62), 2**62)(a, "") for a in args)
+        except _Invalid as bad:
+            raise _Invalid(bad.problem, key) from None
         if lo > hi:
             raise _Invalid(f"expected lo <= hi, got [{lo}, {hi}]", key)
         return kind, (lo, hi)
@@ -434,6 +437,21 @@ def _fmt_value(value: Any, digits: int = 4) -> str:
     return str(value)
 
 
+def show(value: Any) -> str:
+    """A value as TOML would write it, numbers to 8 digits: for messages and listings."""
+    if isinstance(value, bool):
+        return str(value).lower()
+    if isinstance(value, float):
+        return f"{value:.8g}"
+    if isinstance(value, str):
+        return json.dumps(value)
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(show(v) for v in value) + "]"
+    if isinstance(value, dict):
+        return "{ " + ", ".join(f"{k} = {show(v)}" for k, v in value.items()) + " }" if value else "{}"
+    return str(value)
+
+
 def short_names(axes: list[Axis]) -> list[str]:
     """The fewest trailing segments of each axis path that tell the axes apart (``bend`` for
     ``cloth.0.compliance.bend``), joined with '.'."""
@@ -500,11 +518,11 @@ def _variant_error(sweep: Sweep, axes: list[Axis], values: list, index: int, par
                    exc: SceneError) -> SceneError:
     """The scene's complaint about one variant, put on the axis whose value it names (or on the variant)."""
     bad = _scene_key_path(exc.key)
-    described = ", ".join(f"{k} = {_fmt_value(v, 6)}" for k, v in params.items())
+    described = ", ".join(f"{k} = {show(v)}" for k, v in params.items())
     for axis, value in zip(axes, values):
         n = min(len(bad), len(axis.path))
         if n and bad[:n] == axis.path[:n]:
-            return SceneError(sweep.file, axis.key, f"the value {_fmt_value(value, 8)} gives an invalid scene "
+            return SceneError(sweep.file, axis.key, f"the value {show(value)} gives an invalid scene "
                               f"(variant {index}: {described}): {exc.key}: {exc.problem}")
     return SceneError(sweep.file, "axes" if sweep.axes else "random.axes",
                       f"variant {index} ({described}) gives an invalid scene: {exc.key or exc.file}: {exc.problem}")
