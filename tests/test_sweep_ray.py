@@ -96,3 +96,21 @@ def test_ray_ships_the_cache_back_from_a_node_without_the_drivers_disk(tmp_path,
         a, b = tmp_path / "local" / f"{r['name']}.usdc", tmp_path / "shipped" / f"{r['name']}.usdc"
         assert filecmp.cmp(a, b, shallow=False), r["name"]
     assert json.loads((tmp_path / "shipped" / f"{local.rows[0]['name']}.json").read_text())["status"] == "ok"
+
+
+def test_work_precision_grid_on_ray(tmp_path, ray_instance):
+    # bench.work_precision's grid as Ray tasks (its package travels by value): the same points as in this process.
+    import bench_package  # noqa: F401
+    from bench import work_precision as wpb
+
+    tiny = ["--resolution", "6", "--iterations", "1", "4", "--substeps", "1", "2", "--solvers", "coloured",
+            "--seconds", "0.05", "--repeats", "1", "--ref-substeps", "8", "--ref-iterations", "8",
+            "--newton-points", "--no-plot"]
+    assert wpb.main([*tiny, "--out", str(tmp_path / "inline")]) == 0
+    assert wpb.main([*tiny, "--ray", "--out", str(tmp_path / "ray")]) == 0
+    timing = {"wall_per_sim_s", "wall_min", "wall_max", "Mproj_per_s", "pareto"}
+    a, b = read_rows(tmp_path / "inline" / "work_precision.csv"), read_rows(tmp_path / "ray" / "work_precision.csv")
+    assert len(a) == 4 and [{k: v for k, v in r.items() if k not in timing} for r in b] == \
+        [{k: v for k, v in r.items() if k not in timing} for r in a]
+    assert "Timings: in parallel: up to 2 variants at once across the cluster's 1 node(s)" in \
+        (tmp_path / "ray" / "work_precision.md").read_text()

@@ -546,12 +546,10 @@ def run_variant(task: dict, slot) -> dict:
 
     from .errors import DivergenceError
 
-    started = time.perf_counter()
-    import warp as wp
+    from .sweep_backends import quiet_warp
 
-    wp.config.quiet = True
-    if hasattr(wp, "LOG_WARNING"):
-        wp.config.log_level = wp.LOG_WARNING
+    started = time.perf_counter()
+    quiet_warp()
     from .runner import run_scene
 
     output = Path(task["output"])

@@ -61,6 +61,15 @@ def cpu_count() -> int:
         return os.cpu_count() or 1
 
 
+def quiet_warp() -> None:
+    """Warp without its banner and module-load lines, in a worker (tasks call it first)."""
+    import warp as wp
+
+    wp.config.quiet = True
+    if hasattr(wp, "LOG_WARNING"):
+        wp.config.log_level = wp.LOG_WARNING
+
+
 def cuda_devices() -> int:
     import warp as wp
 
@@ -155,6 +164,7 @@ class LocalBackend:
     ("killed", with the signal) while the others finish normally."""
 
     def __init__(self, slots: list[Slot]):
+        self._packages: tuple = ()
         if not slots:
             raise WarpVerletError("a local sweep needs at least one worker")
         self.slots = list(slots)
@@ -183,12 +193,14 @@ class LocalBackend:
         import multiprocessing as mp
         from concurrent.futures import ProcessPoolExecutor
 
-        return ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"))
+        return ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"),
+                                   initializer=_worker_init, initargs=(self._packages,))
 
     def run(self, fn: Callable, items: Iterable[tuple[Any, Any]]) -> Iterator[Outcome]:
         from concurrent.futures import FIRST_COMPLETED, wait
         from concurrent.futures.process import BrokenProcessPool
 
+        self._packages = _package_of(fn)
         queue = deque(items)
         suspects: deque = deque()  # (key, payload, slot) that were running when a worker died
         while queue or suspects:
@@ -257,6 +269,34 @@ class LocalBackend:
         finally:
             _stop(pool, {future: None} if not future.done() else {})
         yield outcome
+
+
+def _package_of(fn: Callable) -> tuple:
+    """Where this process loaded ``fn``'s top-level package from, unless it is warp_verlet (installed): (name,
+    its __init__ file, its search locations). A package this process loaded from a file (the tests load the
+    repository's bench/ so) is loaded from the same file in each worker."""
+    import sys
+
+    top = (getattr(fn, "__module__", None) or "").split(".")[0]
+    module = sys.modules.get(top)
+    spec = getattr(module, "__spec__", None)
+    if not top or top in ("warp_verlet", "__main__") or spec is None or not spec.origin or not os.path.isfile(spec.origin):
+        return ()
+    return ((top, spec.origin, list(spec.submodule_search_locations or [])),)
+
+
+def _worker_init(packages: tuple) -> None:
+    """In a new worker: load each of the driver's packages from the file it came from, unless already there."""
+    import importlib.util
+    import sys
+
+    for name, origin, locations in packages:
+        if name in sys.modules:
+            continue
+        spec = importlib.util.spec_from_file_location(name, origin, submodule_search_locations=locations or None)
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[name] = module
+        spec.loader.exec_module(module)
 
 
 def _stop(pool, running: dict) -> None:
