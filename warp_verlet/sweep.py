@@ -614,7 +614,7 @@ def _atomic_write(path: Path, data: str | bytes) -> None:
 @dataclass
 class SweepResult:
     rows: list[dict]
-    ran: list[int] = field(default_factory=list)  # variant indices run this time
+    ran: list[int] = field(default_factory=list)  # variant indices run this time, sorted
     resumed: list[int] = field(default_factory=list)  # skipped: done by an earlier run
     interrupted: bool = False
     elapsed: float = 0.0
@@ -791,5 +791,6 @@ def run_sweep(sweep: Sweep, backend, out: Path | None = None, resume: bool = Tru
         if bar is not None:
             bar.close()
         result.elapsed = time.perf_counter() - started
+        result.ran.sort()
         summary.update(force=True)
     return result
