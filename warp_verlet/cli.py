@@ -29,6 +29,19 @@ def _positive_int(text: str) -> int:
     return value
 
 
+def _at_least_one(what: str):
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a whole number of {what}, got {text!r}") from None
+        if value < 1:
+            raise argparse.ArgumentTypeError(f"expected at least 1 ({what}), got {value}")
+        return value
+
+    return parse
+
+
 _SLICE_PART = re.compile(r"\s*(-?\d+)?\s*")  # a whole number, or nothing
 
 
@@ -88,9 +101,9 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_argument("sweep", type=Path, help="sweep file (TOML)")
     sweep.add_argument("-o", "--output", type=Path, help="output directory (default: the sweep's [sweep] output)")
     sweep.add_argument("--device", help="cpu, cuda or cuda:N (default: CUDA when present, else CPU)")
-    sweep.add_argument("--workers", type=_positive_int,
+    sweep.add_argument("--workers", type=_at_least_one("workers"),
                        help="local pool size (default: one per GPU on CUDA, one per core on the CPU)")
-    sweep.add_argument("--threads", type=_positive_int,
+    sweep.add_argument("--threads", type=_at_least_one("threads"),
                        help="CPU relaxation threads per variant (default: the cores shared among the workers)")
     sweep.add_argument("--ray", nargs="?", const="local", metavar="ADDRESS",
                        help="run each variant as a Ray task: --ray alone starts a local Ray instance, --ray auto "

@@ -424,8 +424,18 @@ class RayBackend:
         task = ray.remote(_ray_call).options(max_retries=1, **self.resources)
         driver_node = _driver_node()
         pending: dict = {}
-        for key, payload in items:
-            pending[task.remote(fn, payload, self.device, self.threads, driver_node)] = (key, time.perf_counter())
+        queue = iter(items)
+        # Enough tasks in flight to keep every slot busy and show an autoscaler the demand, not the whole sweep
+        # at once (a sweep of 100 000 variants would otherwise pickle every scene up front).
+        window = max(4 * self.parallel, 256)
+
+        def submit() -> None:
+            for key, payload in queue:
+                pending[task.remote(fn, payload, self.device, self.threads, driver_node)] = (key, time.perf_counter())
+                if len(pending) >= window:
+                    return
+
+        submit()
         try:
             while pending:
                 ready, _ = ray.wait(list(pending), num_returns=1)
@@ -446,6 +456,7 @@ class RayBackend:
                         yield Outcome(key, "interrupted", error="cancelled", latency=time.perf_counter() - t0)
                     else:
                         yield Outcome(key, "done", value, latency=time.perf_counter() - t0)
+                submit()
         finally:
             for ref in pending:  # closed early (Ctrl-C): stop what is queued and running
                 try:
