@@ -92,7 +92,7 @@ def measure(name: str, make, sweep_file: Path, root: Path) -> dict:
     recording = Recording(backend)
     try:
         result = run_sweep(load_sweep(sweep_file, root / name.replace(" ", "_")), recording, resume=False,
-                           progress=False, summary_interval=0.0)
+                           progress=False)  # the summary rewritten at most once a second, as for the command
     finally:
         backend.close()
     total = time.perf_counter() - t0

@@ -219,7 +219,7 @@ class LocalBackend:
                         slot = free.pop()
                         running[pool.submit(_call, fn, payload, slot)] = (key, payload, slot, time.perf_counter())
                     done, _ = wait(list(running), return_when=FIRST_COMPLETED)
-                    broken = False
+                    broken, ready = False, []
                     for future in done:
                         key, payload, slot, t0 = running.pop(future)
                         free.append(slot)
@@ -229,15 +229,22 @@ class LocalBackend:
                             broken = True
                             suspects.append((key, payload, slot))
                         elif isinstance(exc, KeyboardInterrupt):
-                            yield Outcome(key, "interrupted", error="interrupted in its worker", latency=latency)
+                            ready.append(Outcome(key, "interrupted", error="interrupted in its worker", latency=latency))
                         elif exc is not None:
-                            yield Outcome(key, "error", error=_error_text(exc), latency=latency)
+                            ready.append(Outcome(key, "error", error=_error_text(exc), latency=latency))
                         else:
-                            yield Outcome(key, "done", future.result(), latency=latency)
+                            ready.append(Outcome(key, "done", future.result(), latency=latency))
                     if broken:
                         for future, (key, payload, slot, t0) in running.items():
                             suspects.append((key, payload, slot))
                         running.clear()
+                    else:  # hand the free workers their next variants before the driver handles these results
+                        while queue and free:
+                            key, payload = queue.popleft()
+                            slot = free.pop()
+                            running[pool.submit(_call, fn, payload, slot)] = (key, payload, slot, time.perf_counter())
+                    yield from ready
+                    if broken:
                         break
                 finished = True
             finally:
