@@ -166,6 +166,7 @@ def main(argv=None) -> int:
     p.add_argument("--stem", default="cpu-2core")
     args = p.parse_args(argv)
     quiet_warp()
+    load_start = " / ".join(f"{v:.2f}" for v in os.getloadavg())
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     tables, csv_rows = [], []
     ray = None
@@ -211,7 +212,8 @@ def main(argv=None) -> int:
             ray.shutdown()
     m = machine("cpu")
     command = ["bench.sweep_throughput", *argv]
-    lines = [f"# Sweep throughput: {m}", "", *m.lines(command), "",
+    lines = [f"# Sweep throughput: {m}", "", *m.lines(command), f"- load average at the start: {load_start} (on "
+             f"{cores} cores: above {cores} means other work competed for them, and parallel rows gain less)", "",
              f"Every backend runs the whole sweep from scratch on this {cores}-core machine; the local pool and Ray "
              "each run at most one variant per core. Columns: `python -m bench.sweep_throughput --help`."
              + (f" Ray: a local instance (`ray.init(num_cpus={args.ray_cpus or cores})`, {init_s:.1f} s, not in "
