@@ -101,15 +101,16 @@ ACCEPTS = {"number": {"int", "float"}, "integer": {"int"}, "string": {"string"},
 SIM_KEYS = {"fps": "number", "frames": "integer", "substeps": "integer", "iterations": "integer",
             "gravity": "array", "wind": "array", "damping": "number", "solver": "string", "max_dt_ratio": "number",
             "max_frame_time": "number", "position_bound": "number", "precision": "string"}
-OUT_KEYS = {"path": "string", "save_every": "integer", "up_axis": "string", "meters_per_unit": "number"}
+OUT_KEYS = {"path": "string", "save_every": "integer", "up_axis": "string", "meters_per_unit": "number",
+            "kind": "string", "torn_faces": "string"}
 CLOTH_KEYS = {"name": "string", "resolution": "array", "size": "array", "origin": "array", "orientation": "string",
               "mass": "number", "sticks": "array", "compliance": "table", "pins": "array", "tear_threshold": "number",
               "particle_masses": "array", "tethers": "boolean", "tether_scale": "number"}
 COMPLIANCE_KEYS = {"structural": "number", "shear": "number", "bend": "number"}  # m/N per stick family
 PLANE_KEYS = {"type": "string", "name": "string", "thickness": "number", "friction": "number", "normal": "array",
-              "point": "array", "display_size": "number"}
+              "point": "array", "display_size": "number", "purpose": "string"}
 SPHERE_KEYS = {"type": "string", "name": "string", "thickness": "number", "friction": "number", "radius": "number",
-               "centre": "array"}
+               "centre": "array", "purpose": "string"}
 
 
 def full_scene() -> dict:
@@ -119,16 +120,17 @@ def full_scene() -> dict:
         "simulation": {"fps": 60.0, "frames": 10, "substeps": 2, "iterations": 4, "gravity": [0.0, -9.81, 0.0],
                        "wind": [1.0, 0.0, 0.5], "damping": 0.5, "solver": "coloured", "max_dt_ratio": 2.0,
                        "max_frame_time": 0.1, "position_bound": 100.0, "precision": "float64"},
-        "output": {"path": "fuzz.usdc", "save_every": 5, "up_axis": "Y", "meters_per_unit": 1.0},
+        "output": {"path": "fuzz.usdc", "save_every": 5, "up_axis": "Y", "meters_per_unit": 1.0, "kind": "cache",
+                   "torn_faces": "holes"},
         "cloth": [{"name": "sheet", "resolution": [3, 4], "size": [0.5, 0.6], "origin": [0.0, 1.0, 0.0],
                    "orientation": "vertical", "mass": 0.2, "sticks": ["structural", "shear", "bend"],
                    "compliance": {"structural": 1e-4, "shear": 1e-3, "bend": 1e-2},
                    "pins": ["top-left", 3, [0, 2]], "tear_threshold": 1.5, "particle_masses": [[0, 1, 0.05]],
                    "tethers": True, "tether_scale": 2.0}],
         "collider": [{"type": "plane", "name": "ground", "thickness": 0.01, "friction": 0.2, "normal": [0.0, 1.0, 0.0],
-                      "point": [0.0, -1.0, 0.0], "display_size": 4.0},
+                      "point": [0.0, -1.0, 0.0], "display_size": 4.0, "purpose": "default"},
                      {"type": "sphere", "name": "ball", "thickness": 0.0, "friction": 0.0, "radius": 0.2,
-                      "centre": [0.0, 0.5, 0.3]}],
+                      "centre": [0.0, 0.5, 0.3], "purpose": "guide"}],
     }
 
 
@@ -342,7 +344,8 @@ def test_unknown_unicode_keys_are_named(tmp_path, where, key, value):
     table = doc
     for p in path:
         table = table[p]
-    if key in table or key in {"path", "collider", "cloth", "simulation", "output"} or (
+    # "mesh" turns a grid cloth into a mesh cloth (tests/test_mesh_cloth.py checks its keys)
+    if key in table or key in {"path", "collider", "cloth", "simulation", "output", "mesh"} or (
             path == ("collider", 1) and key == "path"):
         return  # a known key: other tests' business
     table[key] = value
@@ -417,7 +420,8 @@ def default_of(scene: Scene, path: tuple):
         return getattr(scene.simulation, path[1]), getattr(SimulationSettings(), path[1])
     if path[0] == "output":
         return getattr(scene.output, path[1]), {"path": Path("fuzz.usdc"), "save_every": 10, "up_axis": "Y",
-                                                 "meters_per_unit": 1.0}[path[1]]
+                                                 "meters_per_unit": 1.0, "kind": "cache",
+                                                 "torn_faces": "remove"}[path[1]]
     if path[0] == "cloth":
         spec = scene.cloths[0]
         if len(path) == 4:  # one family left out of the compliance table: that family is rigid
@@ -431,7 +435,7 @@ def default_of(scene: Scene, path: tuple):
     if path[2] == "centre":
         return collider.keyframes, ((0.0, (0.0, 0.0, 0.0)),)
     defaults = {"name": f"{'plane' if path[1] == 0 else 'sphere'}{path[1]}", "thickness": 0.0, "friction": 0.0,
-                "normal": (0.0, 1.0, 0.0), "point": (0.0, 0.0, 0.0), "display_size": 10.0}
+                "normal": (0.0, 1.0, 0.0), "point": (0.0, 0.0, 0.0), "display_size": 10.0, "purpose": "guide"}
     return getattr(collider, path[2]), defaults[path[2]]
 
 
@@ -497,6 +501,7 @@ def test_missing_sections_and_keys(tmp_path, dropped):
 
 @pytest.mark.parametrize("scene_file", sorted(SCENES.glob("*.toml")), ids=lambda p: p.name)
 def test_shipped_scene_truncated_at_every_byte(tmp_path, scene_file):
+    (tmp_path / "assets").symlink_to(SCENES / "assets")  # the mesh scenes' files, where their paths lead
     data = scene_file.read_bytes()
     errors = loaded = 0
     for cut in range(len(data) + 1):

@@ -13,7 +13,9 @@ from pxr import Usd, UsdGeom
 
 from conftest import make_scene
 from warp_verlet.colouring import check_partition
+from warp_verlet.faces import grid_faces
 from warp_verlet.runner import run_scene
+from warp_verlet.usd_writer import validate_cache
 from warp_verlet.scene import parse_scene
 from warp_verlet.simulator import Simulator
 
@@ -192,14 +194,16 @@ def torn_edge_faces(rows: int, cols: int, sticks: np.ndarray, torn: np.ndarray) 
     return hidden
 
 
-@pytest.mark.parametrize("solver", ["coloured", "jacobi"])
-def test_cache_hides_exactly_the_faces_beside_torn_sticks(tmp_path, solver):
+@pytest.mark.parametrize("solver,torn_faces", [("coloured", "holes"), ("jacobi", "holes"), ("coloured", "remove"),
+                                               ("jacobi", "remove")])
+def test_cache_hides_exactly_the_faces_beside_torn_sticks(tmp_path, solver, torn_faces):
     rows, cols = 16, 24
     # Soft shear sticks (as in gale()) where the solver has them; Jacobi's rigid sticks tear all the same.
     soft = {"compliance": {"shear": 0.03}} if solver == "coloured" else {}
     data = {
         "simulation": {"fps": 60, "frames": 30, "substeps": 4, "iterations": 8, "wind": [60.0, 0.0, 40.0],
                        "solver": solver},
+        "output": {"torn_faces": torn_faces},
         "cloth": [
             {"name": "flag", "resolution": [rows, cols], "size": [0.6, 0.9], "pins": ["left-edge"], "mass": 0.1,
              "sticks": ["structural", "shear"], "tear_threshold": 1.3, **soft},
@@ -226,14 +230,29 @@ def test_cache_hides_exactly_the_faces_beside_torn_sticks(tmp_path, solver):
             last = hidden
 
     stage = Usd.Stage.Open(str(out))
-    holes = UsdGeom.Mesh.Get(stage, "/World/flag").GetHoleIndicesAttr()
-    assert list(holes.GetTimeSamples()) == changes  # frame 0 (empty) and then only where the set changed
+    flag_mesh = UsdGeom.Mesh.Get(stage, "/World/flag")
+    holes = flag_mesh.GetHoleIndicesAttr()
+    counts, indices = flag_mesh.GetFaceVertexCountsAttr(), flag_mesh.GetFaceVertexIndicesAttr()
     assert 2 <= len(changes) < 31  # something tore, and some frames changed nothing (so had no sample)
-    for frame in range(1, 31):
-        assert set(np.asarray(holes.Get(frame)).tolist()) == expected[frame]
-    # The cloth that cannot tear carries no holeIndices at all, and its points count never changes.
+    all_faces = grid_faces(rows, cols).as_uniform()
+    if torn_faces == "holes":
+        assert list(holes.GetTimeSamples()) == changes  # frame 0 (empty) and then only where the set changed
+        assert not counts.GetTimeSamples() and not indices.GetTimeSamples()  # the topology never changes
+        for frame in range(1, 31):
+            assert set(np.asarray(holes.Get(frame)).tolist()) == expected[frame]
+    else:  # the torn faces are left out of a time-sampled topology: exactly those, and only where it changed
+        assert not holes.HasAuthoredValue()
+        assert list(counts.GetTimeSamples()) == list(indices.GetTimeSamples()) == changes
+        for frame in range(0, 31):
+            kept = [f for f in range(len(all_faces)) if f not in expected.get(frame, set())]
+            np.testing.assert_array_equal(np.asarray(counts.Get(frame)), np.full(len(kept), 4))
+            np.testing.assert_array_equal(np.asarray(indices.Get(frame)), all_faces[kept].ravel())
+        # The full grid stays the default value, for readers that ask for no time.
+        np.testing.assert_array_equal(np.asarray(indices.Get()), all_faces.ravel())
+    assert validate_cache(out) == []  # UsdValidation, and ValidateTopology at every topology sample
+    # The cloth that cannot tear carries nothing about tearing, and its points count never changes.
     calm = UsdGeom.Mesh.Get(stage, "/World/calm")
-    assert not calm.GetHoleIndicesAttr().HasAuthoredValue()
+    assert not calm.GetHoleIndicesAttr().HasAuthoredValue() and not calm.GetFaceVertexIndicesAttr().GetTimeSamples()
     flag_points = UsdGeom.Mesh.Get(stage, "/World/flag").GetPointsAttr()
     assert {len(flag_points.Get(t)) for t in flag_points.GetTimeSamples()} == {rows * cols}
 

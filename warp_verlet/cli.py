@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import re
 import sys
+import warnings
 from pathlib import Path
 
 from . import __version__
@@ -143,6 +144,12 @@ def _validate(args) -> int:
     print(f"{args.scene}: valid scene, {len(scene.cloths)} cloth(s), {scene.particle_count} particles, "
           f"{sim.frames} frames at {sim.fps:g} fps, {sim.substeps} substeps x {sim.iterations} iterations, "
           f"solver {sim.solver}")
+    for spec in scene.cloths:
+        if spec.mesh is not None:
+            mesh = spec.mesh.mesh
+            print(f"cloth {spec.name}: {mesh.source.description}, {len(mesh.faces)} faces, {mesh.vertex_count} "
+                  f"vertices welded into {mesh.particle_count} particles (weld_distance {mesh.weld_distance:.3g} m), "
+                  f"{len(spec.mesh.pins)} pinned")
     from .memory import estimate  # counts only: no warp
 
     need = estimate(scene)
@@ -242,7 +249,13 @@ def _preview(args) -> int:
     return 0
 
 
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """A warning as one plain line (a non-manifold mesh, say), not Python's file:line: Category: format."""
+    print(f"warning: {message}", file=sys.stderr if file is None else file)
+
+
 def main(argv: list[str] | None = None) -> int:
+    warnings.showwarning = _show_warning
     args = build_parser().parse_args(argv)
     command = {"run": _run, "validate": _validate, "preview": _preview, "sweep": _sweep}[args.command]
     try:

@@ -71,7 +71,10 @@ def stick_conflict_edges(sticks: np.ndarray) -> np.ndarray:
         pairs.append(np.stack([members[:, a].ravel(), members[:, b].ravel()], axis=1))
     if not pairs:
         return np.zeros((0, 2), np.int32)
-    return np.unique(np.sort(np.concatenate(pairs), axis=1), axis=0).astype(np.int32)
+    # Two distinct sticks share at most one particle, so no pair comes out twice: a lexicographic sort gives
+    # what np.unique(axis=0) gave (it took 16 s at 512^2, the sort under one).
+    edges = np.sort(np.concatenate(pairs), axis=1)
+    return edges[np.lexsort((edges[:, 1], edges[:, 0]))].astype(np.int32)
 
 
 def graph_colouring(sticks: np.ndarray, balance: bool = True) -> Colouring:

@@ -144,17 +144,17 @@ def grid_faces(rows: int, cols: int) -> Faces:
     return Faces.uniform(np.stack([a, a + cols, a + cols + 1, a + 1], axis=1))
 
 
-def _edge_keys(pairs: np.ndarray, base: int) -> np.ndarray:
+def edge_keys(pairs: np.ndarray, base: int) -> np.ndarray:
     """One int64 key per undirected vertex pair, the same for (a, b) and (b, a)."""
     lo, hi = np.minimum(pairs[:, 0], pairs[:, 1]), np.maximum(pairs[:, 0], pairs[:, 1])
     return lo.astype(np.int64) * base + hi
 
 
 def _side_table(faces: Faces, base: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Every distinct side as a key (see ``_edge_keys``), sorted: (keys (K,), where each key's faces start
+    """Every distinct side as a key (see ``edge_keys``), sorted: (keys (K,), where each key's faces start
     in the last array (K,), how many faces (K,), the faces of all sides grouped by key, in index order)."""
     pairs, face_of_side = faces.sides()
-    keys = _edge_keys(pairs, base)
+    keys = edge_keys(pairs, base)
     order = np.argsort(keys, kind="stable")  # stable: faces stay in index order within a key
     keys, face_of_side = keys[order], face_of_side[order]
     # A degenerate face that lists the same side twice is still one face beside it.
@@ -195,7 +195,7 @@ def edge_faces(faces: Faces, edges: np.ndarray) -> np.ndarray:
     base = int(faces.indices.max()) + 1
     unique, start, count, face_of_side = _side_table(faces, base)
     inside = (edges < base).all(axis=1)  # an edge to a vertex no face uses is no side (and would not fit a key)
-    wanted = _edge_keys(np.where(inside[:, None], edges, 0), base)
+    wanted = edge_keys(np.where(inside[:, None], edges, 0), base)
     at = np.minimum(np.searchsorted(unique, wanted), len(unique) - 1)
     found = inside & (unique[at] == wanted)
     crowded = np.flatnonzero(found & (count[at] > 2))

@@ -26,7 +26,8 @@ from .tethers import TetherTable, build_tethers
 from .scene import Scene
 from .stages import Need
 from .faces import edge_faces
-from .topology import STRUCT_H, STRUCT_V, ClothTopology, build_cloth
+from .mesh_cloth import STRUCTURAL
+from .topology import ClothTopology, build_cloth
 
 
 @dataclass(frozen=True)
@@ -82,7 +83,8 @@ class Model:
     """
 
     def __init__(self, scene: Scene, device, colouring: str = "auto"):
-        """``colouring``: "auto" (analytic for grids), "grid" or "graph" (Warp's graph colouring)."""
+        """``colouring``: "auto" (analytic when every cloth is a grid, else Warp's graph colouring), "grid"
+        (grids only) or "graph"."""
         if colouring not in ("auto", "grid", "graph"):
             raise ValueError(f"colouring must be 'auto', 'grid' or 'graph', got {colouring!r}")
         self.device = device
@@ -105,8 +107,10 @@ class Model:
         sticks = np.concatenate([s.topology.sticks + s.first for s in slots]).astype(np.int32)
         rest = np.concatenate([s.topology.rest_length for s in slots])
         compliance = np.concatenate([s.topology.compliance for s in slots])
-        grid_class = np.concatenate([s.topology.grid_class for s in slots])
-        anchor = np.concatenate([s.topology.anchor for s in slots])
+        family = np.concatenate([s.topology.family for s in slots])
+        all_grids = all(s.topology.is_grid for s in slots)
+        if colouring == "grid" and not all_grids:
+            raise ValueError("colouring='grid' needs every cloth to be a grid; a mesh cloth takes 'graph' or 'auto'")
         owner = np.repeat(np.arange(len(slots), dtype=np.int32), [len(s.topology.sticks) for s in slots])
         # A stick of a cloth that cannot tear gets an infinite tear length: one kernel serves every cloth.
         tear_length = np.concatenate([
@@ -123,14 +127,15 @@ class Model:
 
         csr_stick = csr_ends = None  # Jacobi only
         if self.solver == "coloured":
-            if colouring == "graph":
+            if colouring == "graph" or not all_grids:  # cloths own disjoint particles: one graph serves all
                 self.colouring: Colouring | None = graph_colouring(sticks)
             else:
-                self.colouring = grid_colouring(grid_class, anchor)
+                self.colouring = grid_colouring(np.concatenate([s.topology.grid_class for s in slots]),
+                                                np.concatenate([s.topology.anchor for s in slots]))
             check_partition(sticks, self.colouring.colour)  # cheap, and a wrong colouring is a silent race
             order = np.argsort(self.colouring.colour, kind="stable")
             sticks, rest, compliance = sticks[order], rest[order], compliance[order]
-            grid_class, anchor, owner, tear_length = grid_class[order], anchor[order], owner[order], tear_length[order]
+            family, owner, tear_length = family[order], owner[order], tear_length[order]
             sizes = self.colouring.sizes
             self.colour_ranges = [(int(a), int(n)) for a, n in zip(np.r_[0, np.cumsum(sizes)[:-1]], sizes) if n > 0]
             self.stick_ends = wp.array(sticks, dtype=wp.vec2i, device=device)
@@ -146,10 +151,10 @@ class Model:
         # Kept on the host for metrics (stretch over structural sticks) in the device order.
         self.host_sticks = sticks
         self.host_rest = rest
-        self.structural = np.isin(grid_class, (STRUCT_H, STRUCT_V))
+        self.structural = family == STRUCTURAL
         self.tears = scene.tears
         if self.tears:
-            self._build_tearing(tear_length, grid_class, anchor, owner, device, csr_stick, csr_ends)
+            self._build_tearing(tear_length, owner, device, csr_stick, csr_ends)
         self.colliders = ColliderModel(scene, device)
         self.levels = self._build_levels(scene, device) if scene.simulation.multilevel else []
         self.tether_table: TetherTable | None = build_tethers(self.cloths, scene.cloths, scene.tethers_per_particle)
@@ -175,7 +180,7 @@ class Model:
                                  "time-varying data belongs in the State")
         super().__setattr__(name, value)
 
-    def _build_tearing(self, tear_length, grid_class, anchor, owner, device, csr_stick=None, csr_ends=None) -> None:
+    def _build_tearing(self, tear_length, owner, device, csr_stick=None, csr_ends=None) -> None:
         """What ``tear_sticks`` reads (its sticks and their tear lengths), the intact weights a State's live
         copy starts from, and, on the host, which faces each structural stick borders, to hide them when it
         tears.

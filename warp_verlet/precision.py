@@ -46,10 +46,13 @@ def smallest_dt(precision: str, accel: float, scale: float) -> float:
 
 def coordinate_scale(scene: "Scene") -> float:
     """The largest |coordinate| of the scene's rest positions, m, from the cloth specs without building them:
-    a grid spans its origin to origin + its size along its axes, and rounding to float32 keeps the largest
+    a mesh's from its particles; a grid spans its origin to origin + its size along its axes, and rounding to float32 keeps the largest
     magnitude at a corner (equal to ``np.abs(model.rest_positions).max()``, which tests/test_precision.py checks)."""
     corners = []
     for spec in scene.cloths:
+        if spec.mesh is not None:  # a mesh's particles are known once the scene is loaded
+            corners.extend(spec.mesh.mesh.particle_points)
+            continue
         height, width = spec.size
         down = 1 if spec.orientation == "vertical" else 2
         sign = -1.0 if spec.orientation == "vertical" else 1.0

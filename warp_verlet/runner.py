@@ -89,7 +89,7 @@ def run_scene(
     ``overlap=False`` writes each frame before simulating the next (for measuring what overlap saves).
     ``threads`` is the CPU relaxation's thread count (None: chosen from the cores and the grid size)."""
     from .simulator import Simulator  # imports warp
-    from .usd_writer import CachedPlane, CachedShape, CachedSphere, PointCacheWriter  # imports pxr
+    from .usd_writer import CachedPlane, CachedSphere, PointCacheWriter  # imports pxr
 
     if frames is not None:
         scene = replace(scene, simulation=replace(scene.simulation, frames=frames))
@@ -97,24 +97,27 @@ def run_scene(
     output = Path(output) if output is not None else scene.output.path
     sim = Simulator(scene, device, threads=threads)
     model = sim.model
-    shapes = [CachedShape(s.name, s.topology.faces, s.topology.uvs, s.count, tears=spec.tear_threshold is not None)
-              for s, spec in zip(model.cloths, scene.cloths)]
-    colliders = [CachedSphere(s.name, s.radius, s.keyframes[0][1], s.moving) for s in scene.spheres]
-    colliders += [CachedPlane(p.name, p.point, p.normal, p.display_size) for p in scene.planes]
+    override = scene.output.kind == "override"
+    shapes = [cached_shape(s.topology, spec, override) for s, spec in zip(model.cloths, scene.cloths)]
+    colliders = [] if override else (
+        [CachedSphere(s.name, s.radius, s.keyframes[0][1], s.moving, s.purpose) for s in scene.spheres]
+        + [CachedPlane(p.name, p.point, p.normal, p.display_size, p.purpose) for p in scene.planes])
     writer = PointCacheWriter(
         output, shapes, fps=settings.fps, up_axis=scene.output.up_axis,
         meters_per_unit=scene.output.meters_per_unit, save_every=scene.output.save_every,
         metadata={"generator": f"warp-verlet {__version__}", "scene": scene.source, "device": str(sim.device)},
-        colliders=colliders,
+        colliders=colliders, torn_faces=scene.output.torn_faces,
+        override_asset=scene.cloths[0].mesh.mesh.source.file if override else None,
     )
+    to_cache = CacheVertices(model, scene, override)
     start = time.perf_counter()
     points = sim.positions()
     with writer:
-        writer.write_frame(0, model.split(cache_points(points)), model.colliders.moving_centres(sim.state))
+        writer.write_frame(0, to_cache(points), model.colliders.moving_centres(sim.state))
         background = BackgroundWriter(writer.write_frame) if overlap else None
         write = background.submit if background else writer.write_frame
         try:
-            _step_loop(sim, settings, write, progress)
+            _step_loop(sim, settings, write, progress, to_cache)
         finally:
             if background is not None:
                 background.close()  # the frames already handed over are written before the cache is saved
@@ -131,13 +134,39 @@ def run_scene(
     )
 
 
-def cache_points(points: np.ndarray) -> np.ndarray:
-    """The points as the cache stores them, float32: converted here, once per frame, when the simulation runs
-    in float64 (no copy in float32). Divergence and stretch checks use the simulation's own precision."""
-    return np.asarray(points, dtype=np.float32)
+def cached_shape(topology, spec, override: bool):
+    """What the cache writes of one cloth, from its topology: the vertices, faces and UVs of its source."""
+    from .usd_writer import CachedShape
+
+    return CachedShape(topology.name, topology.cache_faces, topology.uvs, topology.vertex_count,
+                       tears=spec.tear_threshold is not None, uv_interpolation=topology.uv_interpolation,
+                       left_handed=topology.left_handed,
+                       prim_path=spec.mesh.mesh.source.prim_path if override else None)
 
 
-def _step_loop(sim, settings, write: Callable[..., None], progress: Callable[[int], None] | None) -> None:
+class CacheVertices:
+    """All particles' positions -> each cloth's cache vertices, float32: a mesh's welded particles gathered
+    to its vertices and, for an override layer, moved back into its prim's own space. A grid in float32
+    costs nothing: views of the one array."""
+
+    def __init__(self, model, scene, override: bool):
+        self.model = model
+        self.to_local = [spec.mesh.mesh.source.to_local if override else None for spec in scene.cloths]
+
+    def __call__(self, points: np.ndarray) -> list[np.ndarray]:
+        out = []
+        for slot, to_local, particles in zip(self.model.cloths, self.to_local, self.model.split(points)):
+            vertices = slot.topology.cache_points(particles)
+            if to_local is not None:
+                vertices = vertices.astype(np.float64) @ to_local[:3, :3].T + to_local[:3, 3]
+            # Converted here, once per frame, when the simulation runs in float64 (no copy in float32).
+            # Divergence and stretch checks use the simulation's own precision.
+            out.append(np.asarray(vertices, dtype=np.float32))
+        return out
+
+
+def _step_loop(sim, settings, write: Callable[..., None], progress: Callable[[int], None] | None,
+               to_cache: Callable[[np.ndarray], list[np.ndarray]]) -> None:
     """Simulate frames 1 .. frames, handing each one to ``write`` (frame, points per cloth, moving sphere
     centres, hidden faces or None)."""
     model = sim.model
@@ -156,6 +185,6 @@ def _step_loop(sim, settings, write: Callable[..., None], progress: Callable[[in
             if count != torn:
                 torn = count
                 hidden = model.hidden_faces(sim.sync_tears())
-        write(frame, model.split(cache_points(points)), model.colliders.moving_centres(sim.state), hidden)
+        write(frame, to_cache(points), model.colliders.moving_centres(sim.state), hidden)
         if progress is not None:
             progress(frame)

@@ -13,7 +13,7 @@ import re
 import sys
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Any, Callable
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -22,11 +22,18 @@ else:  # pragma: no cover - exercised on Python 3.10 only
 
 from .errors import SceneError
 
+if TYPE_CHECKING:  # the mesh modules (numpy) are imported only by a scene that has a mesh cloth
+    from .mesh_cloth import ClothMesh
+
 SOLVERS = ("coloured", "jacobi")
 PRECISIONS = ("auto", "float32", "float64")  # positions' float type; "auto" is resolved in precision.py
 ORIENTATIONS = ("vertical", "horizontal")
 STICK_FAMILIES = ("structural", "shear", "bend")
 UP_AXES = ("Y", "Z")
+OUTPUT_KINDS = ("cache", "override")  # a standalone point cache, or a layer over the USD asset the cloths came from
+TORN_FACES = ("remove", "holes")  # how a cache shows torn faces: left out of the topology, or holeIndices
+COLLIDER_PURPOSES = ("guide", "default")  # USD purpose: a helper hidden in renders, or rendered geometry
+MASS_DISTRIBUTIONS = ("area", "even")  # a mesh cloth's mass: by the area around each particle, or the same for all
 # Named pin groups; each maps (rows, cols) to a list of (row, col). Row 0 is the top edge (the origin's
 # edge), column 0 the left edge.
 NAMED_PINS: dict[str, Callable[[int, int], list[tuple[int, int]]]] = {
@@ -76,13 +83,28 @@ class OutputSettings:
     save_every: int = 10
     up_axis: str = "Y"
     meters_per_unit: float = 1.0
+    kind: str = "cache"  # "cache" or "override" (a layer over the cloths' USD asset)
+    torn_faces: str = "remove"  # "remove" (the default of a cache) or "holes" (of an override layer)
+
+
+@dataclass(frozen=True, eq=False)
+class MeshSpec:
+    """A cloth's mesh, read, welded and checked when the scene is loaded (warp_verlet/mesh_cloth.py), and
+    what the scene says about its particles, already resolved to particle indices."""
+
+    mesh: "ClothMesh"
+    pins: tuple[int, ...] = ()  # particle indices, sorted
+    particle_masses: tuple[tuple[int, float], ...] = ()  # (particle, kg): overrides of the distributed mass
+    mass_distribution: str = "area"
 
 
 @dataclass(frozen=True)
 class ClothSpec:
+    """One cloth: a grid (``resolution`` and ``size``) or a mesh (``mesh``; resolution and size are None)."""
+
     name: str
-    resolution: tuple[int, int]
-    size: tuple[float, float]
+    resolution: tuple[int, int] | None
+    size: tuple[float, float] | None
     origin: tuple[float, float, float] = (0.0, 0.0, 0.0)
     orientation: str = "vertical"
     mass: float = 1.0
@@ -93,23 +115,32 @@ class ClothSpec:
     particle_masses: tuple[tuple[int, int, float], ...] = ()  # (row, col, kg): overrides of the even share
     tethers: bool | None = None  # None: on when the cloth has pins and cannot tear
     tether_scale: float = 1.0  # tether length / rest-pose distance to the pin (> 1: slack for a soft cloth)
+    mesh: MeshSpec | None = None  # a mesh cloth (then pins and particle_masses above are empty)
 
     @property
     def uses_tethers(self) -> bool:
-        """Tethers are on by default for a pinned cloth that cannot tear. A tether holds a particle within its
+        """Tethers are on by default for a pinned grid that cannot tear. A tether holds a particle within its
         rest distance of a pin, so the sticks it guards could never reach a stretch threshold: a tearing cloth
-        gets them only when asked (with a tether_scale above its tear_threshold, to tear at all)."""
+        gets them only when asked (with a tether_scale above its tear_threshold, to tear at all). A mesh cloth
+        gets them only when asked too: a tether's length is the straight rest distance, which is the distance
+        along the cloth only for a flat panel whose straight lines stay on it."""
         if self.tethers is not None:
             return self.tethers
-        return bool(self.pins) and self.tear_threshold is None
+        return self.mesh is None and self.pin_count > 0 and self.tear_threshold is None
 
     @property
     def tethers_per_particle(self) -> int:
         """Each tethered particle is tied to its nearest one or two pins."""
-        return min(2, len(self.pins)) if self.uses_tethers else 0
+        return min(2, self.pin_count) if self.uses_tethers else 0
+
+    @property
+    def pin_count(self) -> int:
+        return len(self.mesh.pins) if self.mesh is not None else len(set(self.pins))
 
     @property
     def particle_count(self) -> int:
+        if self.mesh is not None:
+            return self.mesh.mesh.particle_count
         return self.resolution[0] * self.resolution[1]
 
 
@@ -123,6 +154,7 @@ class PlaneCollider:
     thickness: float = 0.0
     friction: float = 0.0
     display_size: float = 10.0
+    purpose: str = "guide"  # USD purpose of its prim in a cache
 
 
 @dataclass(frozen=True)
@@ -134,6 +166,7 @@ class SphereCollider:
     keyframes: tuple[tuple[float, tuple[float, float, float]], ...]
     thickness: float = 0.0
     friction: float = 0.0
+    purpose: str = "guide"  # USD purpose of its prim in a cache
 
     @property
     def moving(self) -> bool:
@@ -178,7 +211,7 @@ class Scene:
     @property
     def tethered_particles(self) -> int:
         """Free particles of the cloths that use tethers: one tether thread each."""
-        return sum(c.particle_count - len(set(c.pins)) for c in self.cloths if c.uses_tethers)
+        return sum(c.particle_count - c.pin_count for c in self.cloths if c.uses_tethers)
 
     @property
     def tethers_per_particle(self) -> int:
@@ -391,8 +424,18 @@ def _read_output(file: str, data: Any, scene_path: Path) -> OutputSettings:
         save_every=t.take("save_every", integer(1), 10),
         up_axis=t.take("up_axis", choice(UP_AXES), "Y"),
         meters_per_unit=t.take("meters_per_unit", real(0.0, lo_open=True), 1.0),
+        kind=t.take("kind", choice(OUTPUT_KINDS), "cache"),
     )
+    # A cache leaves torn faces out of the topology, which every DCC shows (Blender ignores holeIndices); an
+    # override layer keeps the asset's faces, whose indices its GeomSubsets and material bindings use.
+    settings = replace(settings, torn_faces=t.take("torn_faces", choice(TORN_FACES),
+                                                   "holes" if settings.kind == "override" else "remove"))
     t.finish()
+    if settings.kind == "override":
+        for key in ("up_axis", "meters_per_unit"):
+            if key in t.data:
+                raise t.error(key, "an override layer takes upAxis and metersPerUnit from the asset it overrides; "
+                              f"remove {key} (or write kind = \"cache\")")
     return settings
 
 
@@ -497,8 +540,12 @@ def _prim_name(value: Any, key: str) -> str:
     return name
 
 
-def _read_cloth(file: str, index: int, data: Any) -> ClothSpec:
+def _read_cloth(file: str, index: int, data: Any, scene_dir: Path) -> ClothSpec:
     t = _Table(file, f"cloth[{index}]", data)
+    if isinstance(data, dict) and "mesh" in data:
+        from .mesh_scene import read_mesh_cloth  # numpy, and trimesh or pxr: only for a mesh cloth
+
+        return read_mesh_cloth(t, index, scene_dir)
 
     name = t.take("name", _prim_name, f"cloth{index}")
     rows, cols = t.take("resolution", vector(2, _per_element(integer(1, 1 << 15))))
@@ -524,13 +571,18 @@ def _read_cloth(file: str, index: int, data: Any) -> ClothSpec:
         tether_scale=t.take("tether_scale", real(1.0), 1.0),
     )
     t.finish()
-    if spec.tethers and not spec.pins:
+    check_cloth(t, spec)
+    return spec
+
+
+def check_cloth(t: _Table, spec: ClothSpec) -> None:
+    """What a grid and a mesh cloth must both satisfy once read."""
+    if spec.tethers and not spec.pin_count:
         raise t.error("tethers", "expected pins: a tether ties a particle to a pin, and this cloth has none")
     missing = sorted(set(spec.compliance) - set(spec.sticks))
     if missing:
         raise t.error(f"compliance.{missing[0]}", f"gives a compliance to the {missing[0]} family, which sticks = "
                       f"{_toml_list(spec.sticks)} does not build")
-    return spec
 
 
 def _read_collider(file: str, index: int, data: Any) -> PlaneCollider | SphereCollider:
@@ -539,6 +591,7 @@ def _read_collider(file: str, index: int, data: Any) -> PlaneCollider | SphereCo
     name = t.take("name", _prim_name, f"{kind}{index}")
     thickness = t.take("thickness", real(0.0), 0.0)
     friction = t.take("friction", real(0.0, 1.0), 0.0)
+    purpose = t.take("purpose", choice(COLLIDER_PURPOSES), "guide")
     if kind == "plane":
         normal = t.take("normal", vector(3, _any_real), (0.0, 1.0, 0.0))
         length = math.sqrt(sum(v * v for v in normal))
@@ -547,7 +600,7 @@ def _read_collider(file: str, index: int, data: Any) -> PlaneCollider | SphereCo
         collider: PlaneCollider | SphereCollider = PlaneCollider(
             name=name, point=t.take("point", vector(3, _any_real), (0.0, 0.0, 0.0)),
             normal=tuple(v / length for v in normal), thickness=thickness, friction=friction,
-            display_size=t.take("display_size", real(0.0, lo_open=True), 10.0),
+            display_size=t.take("display_size", real(0.0, lo_open=True), 10.0), purpose=purpose,
         )
     else:
         radius = t.take("radius", real(0.0, lo_open=True))
@@ -557,7 +610,8 @@ def _read_collider(file: str, index: int, data: Any) -> PlaneCollider | SphereCo
             keys = t.take("path", _read_path)
         else:
             keys = ((0.0, t.take("centre", vector(3, _any_real), (0.0, 0.0, 0.0))),)
-        collider = SphereCollider(name=name, radius=radius, keyframes=keys, thickness=thickness, friction=friction)
+        collider = SphereCollider(name=name, radius=radius, keyframes=keys, thickness=thickness, friction=friction,
+                                  purpose=purpose)
     t.finish()
     return collider
 
@@ -584,7 +638,7 @@ def parse_scene(data: dict, file: str = "<scene>", scene_path: Path | None = Non
     def cloths(value: Any, key: str) -> tuple[ClothSpec, ...]:
         if not isinstance(value, list) or not value:
             raise _Invalid("expected one or more [[cloth]] tables")
-        return tuple(_read_cloth(file, i, c) for i, c in enumerate(value))
+        return tuple(_read_cloth(file, i, c, scene_path.parent) for i, c in enumerate(value))
 
     def colliders(value: Any, key: str) -> tuple:
         if not isinstance(value, list):
@@ -602,6 +656,9 @@ def parse_scene(data: dict, file: str = "<scene>", scene_path: Path | None = Non
                                  'simulation.solver = "coloured"')
     if simulation.multilevel:
         for i, spec in enumerate(cloth_specs):
+            if spec.mesh is not None:
+                raise SceneError(file, "simulation.multilevel", f"cloth[{i}] ({spec.name!r}) is a mesh, and the "
+                                 "multilevel hierarchy is built for grids: set multilevel = false")
             if spec.tear_threshold is not None:
                 raise SceneError(file, "simulation.multilevel", f"cloth[{i}] ({spec.name!r}) can tear, and the "
                                  "coarse levels would hold a torn piece on: set multilevel = false or remove "
@@ -610,6 +667,10 @@ def parse_scene(data: dict, file: str = "<scene>", scene_path: Path | None = Non
                 raise SceneError(file, "simulation.multilevel", f"cloth[{i}] ({spec.name!r}) has soft structural "
                                  "sticks, and the coarse levels limit stretch to the rest pose: set "
                                  "multilevel = false or make its structural sticks rigid")
+    if output.kind == "override":
+        from .mesh_scene import check_override  # every cloth from one USD asset
+
+        check_override(file, cloth_specs)
     for section, items in (("cloth", cloth_specs), ("collider", collider_specs)):
         names = [c.name for c in items]
         for i, n in enumerate(names):

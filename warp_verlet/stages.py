@@ -67,7 +67,7 @@ class Need:
         from .precision import resolve
 
         moving = any(s.moving for s in scene.spheres)
-        free = any(len(set(c.pins)) < c.particle_count for c in scene.cloths)
+        free = any(c.pin_count < c.particle_count for c in scene.cloths)
         counts = [hierarchy_counts(*c.resolution) for c in scene.cloths] if scene.simulation.multilevel else []
         coarse = (sum(n for n, _ in counts), sum(n for _, n in counts))
         need = cls(

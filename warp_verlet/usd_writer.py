@@ -7,11 +7,24 @@ Layout of a cache::
     /World/Colliders/<n>   Sphere (time-sampled translate when it moves) or a large quad Mesh for a plane
 
 ``points`` and ``extent`` are time-sampled every frame; a time code is a frame number
-(timeCodesPerSecond == framesPerSecond == fps). A cloth that can tear also gets a time-sampled
-``holeIndices`` (the faces beside a torn stick): empty on the first frame, then sampled only on frames where
-the set changes, since USD holds an array's value until its next sample. Nothing else is authored: no
-normals (renderers compute smooth ones), no velocities (they double the file size), and no holeIndices on a
-cloth that cannot tear.
+(timeCodesPerSecond == framesPerSecond == fps). A mesh keeps the faces and UVs it was given (triangles,
+quads, n-gons; UVs per vertex or per face corner). A cloth that can tear shows its torn faces (those beside
+a torn stick) one of two ways, sampled only on frames where the torn set changes, since USD holds an
+array's value until its next sample:
+
+- ``torn_faces="remove"``: time-sampled ``faceVertexCounts`` and ``faceVertexIndices`` (and face-corner UVs)
+  without the torn faces. Every DCC shows it, Blender included, which ignores holeIndices;
+- ``torn_faces="holes"``: time-sampled ``holeIndices``; the face indices stay those of the source, which an
+  asset's GeomSubsets and material bindings rely on. usdview, Houdini and Karma hide those faces.
+
+Nothing else is authored: no normals (renderers compute smooth ones), no velocities (they double the file
+size), and nothing about tearing on a cloth that cannot tear. Colliders carry a USD ``purpose``: "guide"
+(hidden in renders, shown by usdview's guide toggle) or "default".
+
+An *override layer* (``override_asset``) instead authors only ``points`` and ``extent`` (and the torn faces)
+as ``over``s at each cloth's own prim path in that asset, which it sublayers: opening the layer plays the
+simulation on the asset with its materials and hierarchy. It has no colliders and takes the asset's upAxis,
+metersPerUnit and defaultPrim.
 
 This module and ``preview.py`` import ``pxr``; neither imports warp: writing, checking and previewing a cache
 must not pull in the simulator.
@@ -47,9 +60,12 @@ class CachedShape:
 
     name: str  # USD prim name (already a valid identifier)
     faces: Faces  # triangles, quads, n-gons, or a mix; no faces means a rope/strand
-    uvs: np.ndarray  # (N, 2) float32
+    uvs: np.ndarray | None  # float32 (N, 2) per vertex or (corners, 2) per face corner; None: no UVs
     point_count: int
-    tears: bool = False  # can faces be hidden by tearing (time-sampled holeIndices)?
+    tears: bool = False  # can faces be hidden by tearing?
+    uv_interpolation: str = "vertex"  # "vertex" or "faceVarying"
+    left_handed: bool = False  # faces wind clockwise seen from the front (USD orientation "leftHanded")
+    prim_path: str | None = None  # an override layer's target prim in the asset
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "faces", as_faces(self.faces))
@@ -67,6 +83,7 @@ class CachedSphere:
     radius: float
     centre: tuple[float, float, float]
     moving: bool = False
+    purpose: str = "guide"
 
 
 @dataclass(frozen=True)
@@ -77,6 +94,7 @@ class CachedPlane:
     point: tuple[float, float, float]
     normal: tuple[float, float, float]
     size: float
+    purpose: str = "guide"
 
 
 COLLIDERS_PATH = WORLD_PATH.AppendChild("Colliders")
@@ -108,8 +126,14 @@ def _check_shapes(shapes: Sequence[CachedShape]) -> None:
                 raise ValueError(f"rope {s.name!r} needs at least 2 points, got {s.point_count}")
             continue
         s.faces.validate(s.point_count, f"shape {s.name!r}")
-        if np.shape(s.uvs) != (s.point_count, 2):
-            raise ValueError(f"shape {s.name!r}: uvs must be ({s.point_count}, 2), got {np.shape(s.uvs)}")
+        if s.uvs is None:
+            continue
+        rows = {"vertex": s.point_count, "faceVarying": len(s.faces.indices)}.get(s.uv_interpolation)
+        if rows is None:
+            raise ValueError(f"shape {s.name!r}: uv_interpolation must be 'vertex' or 'faceVarying', "
+                             f"got {s.uv_interpolation!r}")
+        if np.shape(s.uvs) != (rows, 2):
+            raise ValueError(f"shape {s.name!r}: {s.uv_interpolation} uvs must be ({rows}, 2), got {np.shape(s.uvs)}")
 
 
 def _create_stage(path: Path) -> Usd.Stage:
@@ -142,8 +166,13 @@ class PointCacheWriter:
 
     def __init__(self, path: str | os.PathLike[str], shapes: Sequence[CachedShape], fps: float, *,
                  up_axis: str = "Y", meters_per_unit: float = 1.0, save_every: int = 10, start_frame: int = 0,
-                 metadata: dict[str, str] | None = None, colliders: Sequence[CachedSphere | CachedPlane] = ()):
+                 metadata: dict[str, str] | None = None, colliders: Sequence[CachedSphere | CachedPlane] = (),
+                 torn_faces: str = "holes", override_asset: str | os.PathLike[str] | None = None):
         _check_shapes(shapes)
+        if torn_faces not in ("holes", "remove"):
+            raise ValueError(f"torn_faces must be 'holes' or 'remove', got {torn_faces!r}")
+        if override_asset is not None and colliders:
+            raise ValueError("an override layer has no colliders: they stand in for the asset's own geometry")
         if not (np.isfinite(fps) and fps > 0):
             raise ValueError(f"fps must be a positive number, got {fps}")
         if up_axis not in ("Y", "Z"):
@@ -159,6 +188,7 @@ class PointCacheWriter:
         self.start_frame = int(start_frame)
         self.frames_written = 0
         self._last_frame: int | None = None
+        self.torn_faces = torn_faces
         self._holes: dict[int, np.ndarray] = {}  # per tearing shape: the hidden faces last authored
         self._stage: Usd.Stage | None = _create_stage(self.path)
 
@@ -168,20 +198,20 @@ class PointCacheWriter:
         # Both rates, so that a time code is a frame whichever one a reader consults.
         stage.SetTimeCodesPerSecond(fps)
         stage.SetFramesPerSecond(fps)
-        UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y if up_axis == "Y" else UsdGeom.Tokens.z)
-        UsdGeom.SetStageMetersPerUnit(stage, meters_per_unit)
         if metadata:
             stage.GetRootLayer().customLayerData = {str(k): str(v) for k, v in metadata.items()}
-        stage.SetDefaultPrim(UsdGeom.Xform.Define(stage, WORLD_PATH).GetPrim())
-
+        if override_asset is not None:
+            self._prims: list[UsdGeom.PointBased] = self._bind_overrides(stage, Path(override_asset))
+            meters_per_unit = UsdGeom.GetStageMetersPerUnit(stage)
+        else:
+            UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y if up_axis == "Y" else UsdGeom.Tokens.z)
+            UsdGeom.SetStageMetersPerUnit(stage, meters_per_unit)
+            stage.SetDefaultPrim(UsdGeom.Xform.Define(stage, WORLD_PATH).GetPrim())
         rope_width = ROPE_WIDTH_METRES / meters_per_unit
-        self._prims: list[UsdGeom.PointBased] = []
-        for shape in self.shapes:
-            prim_path = WORLD_PATH.AppendChild(shape.name)
-            if shape.is_rope:
-                self._prims.append(self._define_rope(stage, prim_path, shape, rope_width))
-            else:
-                self._prims.append(self._define_mesh(stage, prim_path, shape))
+        if override_asset is None:
+            self._prims = [self._define_rope(stage, WORLD_PATH.AppendChild(shape.name), shape, rope_width)
+                           if shape.is_rope else self._define_mesh(stage, WORLD_PATH.AppendChild(shape.name), shape)
+                           for shape in self.shapes]
         self.colliders = tuple(colliders)
         self._moving: list[UsdGeom.XformOp] = []  # translate ops of moving spheres, in collider order
         if self.colliders:
@@ -193,6 +223,7 @@ class PointCacheWriter:
                 sphere.CreateRadiusAttr(float(collider.radius))
                 r = float(collider.radius)
                 sphere.CreateExtentAttr(Vt.Vec3fArray([(-r, -r, -r), (r, r, r)]))
+                sphere.CreatePurposeAttr(collider.purpose)
                 op = sphere.AddTranslateOp()
                 if collider.moving:
                     self._moving.append(op)  # sampled per frame in write_frame
@@ -207,22 +238,52 @@ class PointCacheWriter:
                 plane.CreateFaceVertexIndicesAttr(Vt.IntArray([0, 1, 2, 3]))
                 plane.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
                 plane.CreateDoubleSidedAttr(True)
+                plane.CreatePurposeAttr(collider.purpose)
         # Curves pad their extent by half the width; keep the width array to compute it per frame.
         self._rope_widths = Vt.FloatArray([rope_width])
         self._save()  # the topology is on disk before the first frame, and write errors surface here
 
-    @staticmethod
-    def _define_mesh(stage: Usd.Stage, prim_path: Sdf.Path, shape: CachedShape) -> UsdGeom.Mesh:
+    def _define_mesh(self, stage: Usd.Stage, prim_path: Sdf.Path, shape: CachedShape) -> UsdGeom.Mesh:
         mesh = UsdGeom.Mesh.Define(stage, prim_path)
         mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(shape.faces.counts))
         mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(shape.faces.indices))
         mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)  # the fallback, catmullClark, would smooth it
         mesh.CreateDoubleSidedAttr(True)  # cloth is seen from both sides
-        mesh.CreateOrientationAttr(UsdGeom.Tokens.rightHanded)  # faces wind counter-clockwise (faces.py)
-        st = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray,
-                                                     UsdGeom.Tokens.vertex)
-        st.Set(Vt.Vec2fArray.FromNumpy(np.ascontiguousarray(shape.uvs, dtype=np.float32)))
+        # Faces wind counter-clockwise (faces.py) unless the source said otherwise.
+        mesh.CreateOrientationAttr(UsdGeom.Tokens.leftHanded if shape.left_handed else UsdGeom.Tokens.rightHanded)
+        if shape.uvs is not None:
+            interpolation = UsdGeom.Tokens.faceVarying if shape.uv_interpolation == "faceVarying" else UsdGeom.Tokens.vertex
+            st = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray, interpolation)
+            st.Set(Vt.Vec2fArray.FromNumpy(np.ascontiguousarray(shape.uvs, dtype=np.float32)))
         return mesh
+
+    def _bind_overrides(self, stage: Usd.Stage, asset: Path) -> list[UsdGeom.PointBased]:
+        """Sublayer ``asset`` and find each shape's prim in it, whose points the frames override."""
+        if not asset.is_file():
+            raise OutputError(f"cannot write override layer {self.path}: asset {asset} does not exist")
+        try:
+            relative = os.path.relpath(asset.absolute(), self.path.parent)
+        except ValueError:  # another drive (Windows): only an absolute path reaches it
+            relative = str(asset.absolute())
+        layer = stage.GetRootLayer()
+        layer.subLayerPaths.append(Path(relative).as_posix())
+        source = Usd.Stage.Open(str(asset))
+        UsdGeom.SetStageUpAxis(stage, UsdGeom.GetStageUpAxis(source))
+        UsdGeom.SetStageMetersPerUnit(stage, UsdGeom.GetStageMetersPerUnit(source))
+        if source.GetRootLayer().defaultPrim:
+            layer.defaultPrim = source.GetRootLayer().defaultPrim
+        prims = []
+        for shape in self.shapes:
+            prim = stage.GetPrimAtPath(shape.prim_path or "/")
+            if not prim.IsValid() or not prim.IsA(UsdGeom.Mesh):
+                raise OutputError(f"cannot write override layer {self.path}: {asset} has no Mesh at {shape.prim_path}")
+            mesh = UsdGeom.Mesh(prim)
+            known = mesh.GetPointsAttr().Get(Usd.TimeCode.EarliestTime())
+            if known is None or len(known) != shape.point_count:
+                raise OutputError(f"cannot write override layer {self.path}: {shape.prim_path} in {asset} has "
+                                  f"{0 if known is None else len(known)} points, the cloth {shape.point_count}")
+            prims.append(mesh)
+        return prims
 
     @staticmethod
     def _define_rope(stage: Usd.Stage, prim_path: Sdf.Path, shape: CachedShape,
@@ -273,7 +334,7 @@ class PointCacheWriter:
             prim.GetPointsAttr().Set(vt_points, time)
             prim.GetExtentAttr().Set(extent, time)
         for k, faces in holes.items():
-            self._prims[k].GetHoleIndicesAttr().Set(Vt.IntArray.FromNumpy(faces), time)
+            self._author_torn(k, faces, time)
             self._holes[k] = faces
         self._last_frame = int(frame)
         self.frames_written += 1
@@ -302,6 +363,24 @@ class PointCacheWriter:
             if k not in self._holes or not np.array_equal(faces, self._holes[k]):
                 out[k] = faces
         return out
+
+    def _author_torn(self, k: int, hidden: np.ndarray, time: Usd.TimeCode) -> None:
+        """Show shape k with the faces ``hidden`` from ``time`` on: as holeIndices, or as a topology without them."""
+        prim, shape = self._prims[k], self.shapes[k]
+        if self.torn_faces == "holes":
+            prim.GetHoleIndicesAttr().Set(Vt.IntArray.FromNumpy(hidden), time)
+            return
+        keep = np.ones(len(shape.faces), bool)
+        keep[hidden] = False
+        corners = np.repeat(keep, shape.faces.counts)
+        prim.GetFaceVertexCountsAttr().Set(Vt.IntArray.FromNumpy(shape.faces.counts[keep]), time)
+        prim.GetFaceVertexIndicesAttr().Set(Vt.IntArray.FromNumpy(shape.faces.indices[corners]), time)
+        if shape.uvs is not None and shape.uv_interpolation == "faceVarying":  # one UV per face corner
+            st = UsdGeom.PrimvarsAPI(prim).GetPrimvar("st")
+            if st.IsIndexed():  # an asset's indexed UVs: author them flattened, per kept corner
+                st.BlockIndices()
+            uvs = np.ascontiguousarray(shape.uvs[corners], dtype=np.float32)
+            st.Set(Vt.Vec2fArray.FromNumpy(uvs), time)
 
     def _save(self) -> None:
         assert self._stage is not None
@@ -384,34 +463,45 @@ def _check_mesh(mesh: UsdGeom.Mesh, time_range: tuple[float, float]) -> list[str
     points_attr = mesh.GetPointsAttr()
     times = points_attr.GetTimeSamples()
     st = UsdGeom.PrimvarsAPI(mesh).GetPrimvar("st")
-    st_values = st.Get() if st and st.HasAuthoredValue() else None
+    has_st = bool(st) and st.HasAuthoredValue()
+    vertex_st = has_st and st.GetInterpolation() in (UsdGeom.Tokens.vertex, UsdGeom.Tokens.varying)
+    st_values = st.ComputeFlattened() if has_st else None
     # The point count is the first sample's (_check_points checks that every other sample agrees); a
-    # cache with no frame yet has only its UVs to say how many points there will be.
+    # cache with no frame yet has only its per-vertex UVs to say how many points there will be.
     first = points_attr.Get(times[0]) if times else points_attr.Get()
-    n_points = len(first) if first is not None else (len(st_values) if st_values is not None else None)
+    n_points = len(first) if first is not None else (len(st_values) if vertex_st and st_values is not None else None)
     if n_points is None:
-        return [f"{name}: has neither points nor primvars:st, so its point count is unknown"]
+        return [f"{name}: has neither points nor per-vertex primvars:st, so its point count is unknown"]
 
-    indices = mesh.GetFaceVertexIndicesAttr().Get() or Vt.IntArray()
-    counts = mesh.GetFaceVertexCountsAttr().Get() or Vt.IntArray()
-    ok, reason = UsdGeom.Mesh.ValidateTopology(indices, counts, n_points)
-    if not ok:
-        problems.append(f"{name}: invalid topology: {reason}")
-    else:  # USD accepts faces of 0, 1 or 2 corners, which no renderer draws; Faces.validate does not
-        try:
-            Faces(np.asarray(counts), np.asarray(indices)).validate(n_points, str(name))
+    # Torn faces may be left out of a time-sampled topology: check it at the default time and every sample.
+    counts_attr, indices_attr = mesh.GetFaceVertexCountsAttr(), mesh.GetFaceVertexIndicesAttr()
+    topology_times = sorted(set(counts_attr.GetTimeSamples()) | set(indices_attr.GetTimeSamples()))
+    for time in [Usd.TimeCode.Default()] + [Usd.TimeCode(t) for t in topology_times]:
+        when = "" if time.IsDefault() else f" at time {time.GetValue()}"
+        indices = indices_attr.Get(time) or Vt.IntArray()
+        counts = counts_attr.Get(time) or Vt.IntArray()
+        ok, reason = UsdGeom.Mesh.ValidateTopology(indices, counts, n_points)
+        if not ok:
+            problems.append(f"{name}: invalid topology{when}: {reason}")
+            continue
+        try:  # USD accepts faces of 0, 1 or 2 corners, which no renderer draws; Faces.validate does not
+            Faces(np.asarray(counts), np.asarray(indices)).validate(n_points, f"{name}{when}")
         except ValueError as e:
             problems.append(str(e))
+        if has_st:
+            values = st.ComputeFlattened(time)
+            expected = n_points if vertex_st else len(indices)
+            if values is not None and len(values) != expected:
+                what = "points" if vertex_st else "face corners"
+                problems.append(f"{name}: primvars:st has {len(values)} values for {expected} {what}{when}")
+        holes = mesh.GetHoleIndicesAttr()
+        for t in holes.GetTimeSamples() if time.IsDefault() else ():
+            hidden = np.asarray(holes.Get(t), dtype=np.int64)
+            n_faces = len(counts_attr.Get(Usd.TimeCode(t)) or counts)
+            if len(hidden) and (hidden.min() < 0 or hidden.max() >= n_faces):
+                problems.append(f"{name}: holeIndices at time {t} names a face outside [0, {n_faces})")
     if mesh.GetSubdivisionSchemeAttr().Get() != UsdGeom.Tokens.none:
         problems.append(f"{name}: subdivisionScheme is not 'none', so renderers would smooth the cloth")
-    if st_values is not None and len(st_values) != n_points:
-        problems.append(f"{name}: primvars:st has {len(st_values)} values for {n_points} points")
-    holes = mesh.GetHoleIndicesAttr()
-    n_faces = len(counts)
-    for t in holes.GetTimeSamples():
-        hidden = np.asarray(holes.Get(t), dtype=np.int64)
-        if len(hidden) and (hidden.min() < 0 or hidden.max() >= n_faces):
-            problems.append(f"{name}: holeIndices at time {t} names a face outside [0, {n_faces})")
     return problems + _check_points(mesh, n_points, time_range)
 
 

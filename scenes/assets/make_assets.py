@@ -1,0 +1,130 @@
+"""Writes the mesh assets the shipped scenes read: ``python scenes/assets/make_assets.py`` (deterministic).
+
+- ``tablecloth.obj``: a round tablecloth of radius 0.75 m with a 4 cm hem turned down at its rim, triangles
+  cut in concentric rings (ring k has 6k vertices, so the triangles are nearly equilateral) and UVs from a
+  planar projection. tablecloth.toml drops it on a round table.
+- ``curtain.usda``: a small set in centimetres, Z up, holding a pleated curtain as quads, with face-corner
+  UVs, a material bound to it, a ``rings`` primvar marking the vertices hung on curtain rings, and a
+  ``hem`` GeomSubset of the bottom row of faces. curtain_override.toml writes a layer over it.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+
+
+def disc_with_hem(radius: float = 0.75, rings: int = 18, hem: float = 0.04) -> tuple[np.ndarray, list[list[int]]]:
+    """Points (x, 0, z) of a disc in concentric rings plus one ring turned down by ``hem``, and its triangles,
+    counter-clockwise seen from above (+Y)."""
+    points = [(0.0, 0.0, 0.0)]
+    ring_start = [0]
+    for k in range(1, rings + 1):
+        ring_start.append(len(points))
+        angles = 2 * np.pi * np.arange(6 * k) / (6 * k)
+        r = radius * k / rings
+        points += [(r * np.cos(a), 0.0, -r * np.sin(a)) for a in angles]  # -sin: counter-clockwise from +Y
+    faces = []
+    for k in range(1, rings + 1):
+        inner = list(range(ring_start[k - 1], ring_start[k - 1] + max(6 * (k - 1), 1)))
+        outer = list(range(ring_start[k], ring_start[k] + 6 * k))
+        faces += _stitch(inner, outer)
+    # The hem: a copy of the rim ring, lowered, joined to the rim by a band of triangles.
+    rim = list(range(ring_start[rings], ring_start[rings] + 6 * rings))
+    hem_start = len(points)
+    points += [(x, -hem, z) for x, _, z in (points[i] for i in rim)]
+    lowered = [hem_start + i for i in range(len(rim))]
+    for i in range(len(rim)):
+        j = (i + 1) % len(rim)
+        faces += [[rim[i], lowered[i], lowered[j]], [rim[i], lowered[j], rim[j]]]
+    return np.asarray(points), faces
+
+
+def _stitch(inner: list[int], outer: list[int]) -> list[list[int]]:
+    """Triangles between two closed rings, walking both by angle (the next vertex of the ring that is behind)."""
+    faces = []
+    i = o = 0
+    n_in, n_out = len(inner), len(outer)
+    if n_in == 1:  # the centre: a fan
+        return [[inner[0], outer[m], outer[(m + 1) % n_out]] for m in range(n_out)]
+    while i < n_in or o < n_out:
+        if o < n_out and (i >= n_in or (o + 1) / n_out <= (i + 1) / n_in):
+            faces.append([inner[i % n_in], outer[o], outer[(o + 1) % n_out]])
+            o += 1
+        else:
+            faces.append([inner[i % n_in], outer[o % n_out], inner[(i + 1) % n_in]])
+            i += 1
+    return faces
+
+
+def write_tablecloth(path: Path) -> None:
+    points, faces = disc_with_hem()
+    radius = np.abs(points[:, [0, 2]]).max()
+    uv = 0.5 + 0.5 * points[:, [0, 2]] / radius * np.array([1.0, -1.0])
+    lines = ["# tablecloth.obj: written by scenes/assets/make_assets.py (radius 0.75 m, 4 cm hem)"]
+    lines += [f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z in points]
+    lines += [f"vt {u:.6f} {v:.6f}" for u, v in uv]
+    lines += ["f " + " ".join(f"{i + 1}/{i + 1}" for i in face) for face in faces]
+    path.write_text("\n".join(lines) + "\n")
+
+
+def write_curtain(path: Path, rows: int = 25, cols: int = 33) -> None:
+    from pxr import Gf, Sdf, Usd, UsdGeom, UsdShade, Vt
+
+    width, height, pleat = 160.0, 120.0, 3.0  # cm
+    x = np.linspace(0.0, width, cols)
+    z = np.linspace(0.0, -height, rows)  # Z up: the curtain hangs down -Z from its rail
+    xx, zz = np.meshgrid(x, z)
+    yy = pleat * np.sin(2 * np.pi * xx / 20.0)  # pleats every 20 cm
+    points = np.stack([xx, yy, zz], axis=-1).reshape(-1, 3).astype(np.float32)
+    r, c = np.meshgrid(np.arange(rows - 1), np.arange(cols - 1), indexing="ij")
+    a = (r * cols + c).ravel()
+    quads = np.stack([a, a + 1, a + cols + 1, a + cols], axis=1)  # counter-clockwise seen from -Y
+    corner_uv = np.stack([(quads % cols) / (cols - 1), 1.0 - (quads // cols) / (rows - 1)], axis=-1).reshape(-1, 2)
+
+    stage = Usd.Stage.CreateNew(str(path))
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
+    UsdGeom.SetStageMetersPerUnit(stage, 0.01)
+    stage.SetMetadata("comment", "Written by scenes/assets/make_assets.py: a pleated curtain on a rail, in cm, Z up")
+    root = UsdGeom.Xform.Define(stage, "/Set")
+    stage.SetDefaultPrim(root.GetPrim())
+    window = UsdGeom.Xform.Define(stage, "/Set/Window")
+    window.AddTranslateOp().Set(Gf.Vec3d(-80.0, 0.0, 230.0))  # the rail, 2.3 m up
+    mesh = UsdGeom.Mesh.Define(stage, "/Set/Window/Curtain")
+    mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(points))
+    mesh.CreateExtentAttr(UsdGeom.PointBased.ComputeExtent(Vt.Vec3fArray.FromNumpy(points)))
+    mesh.CreateFaceVertexCountsAttr(Vt.IntArray([4] * len(quads)))
+    mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(quads.ravel().astype(np.int32)))
+    mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+    mesh.CreateDoubleSidedAttr(True)
+    primvars = UsdGeom.PrimvarsAPI(mesh)
+    st = primvars.CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.faceVarying)
+    st.Set(Vt.Vec2fArray.FromNumpy(corner_uv.astype(np.float32)))
+    rings = np.zeros(rows * cols, np.int32)
+    rings[0:cols:4] = 1  # a ring every 4th vertex of the top row, 20 cm apart
+    primvars.CreatePrimvar("rings", Sdf.ValueTypeNames.IntArray, UsdGeom.Tokens.vertex).Set(Vt.IntArray.FromNumpy(rings))
+    UsdGeom.Subset.CreateGeomSubset(mesh, "hem", UsdGeom.Tokens.face,
+                                    Vt.IntArray(list(range((rows - 2) * (cols - 1), (rows - 1) * (cols - 1)))))
+    material = UsdShade.Material.Define(stage, "/Set/Looks/Linen")
+    shader = UsdShade.Shader.Define(stage, "/Set/Looks/Linen/Surface")
+    shader.CreateIdAttr("UsdPreviewSurface")
+    shader.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).Set(Gf.Vec3f(0.85, 0.8, 0.7))
+    material.CreateSurfaceOutput().ConnectToSource(shader.ConnectableAPI(), "surface")
+    UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim()).Bind(material)
+    floor = UsdGeom.Mesh.Define(stage, "/Set/Floor")
+    corners = [(-150.0, -150.0, 0.0), (150.0, -150.0, 0.0), (150.0, 150.0, 0.0), (-150.0, 150.0, 0.0)]
+    floor.CreatePointsAttr(corners)
+    floor.CreateExtentAttr(UsdGeom.PointBased.ComputeExtent(Vt.Vec3fArray(corners)))
+    floor.CreateFaceVertexCountsAttr([4])
+    floor.CreateFaceVertexIndicesAttr([0, 1, 2, 3])
+    floor.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+    stage.GetRootLayer().Save()
+
+
+if __name__ == "__main__":
+    write_tablecloth(HERE / "tablecloth.obj")
+    write_curtain(HERE / "curtain.usda")
+    print(f"wrote {HERE / 'tablecloth.obj'} and {HERE / 'curtain.usda'}")

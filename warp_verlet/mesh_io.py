@@ -1,0 +1,188 @@
+"""Reading a cloth mesh from a file: trimesh for OBJ, PLY, STL, OFF, GLB/GLTF and the rest of its formats, pxr for
+a prim of a USD file.
+
+Both give a :class:`~warp_verlet.mesh_cloth.SourceMesh` in the scene's frame: metres and the scene's axes,
+after the scene's own scale, rotation and translation. USD points are taken in world space (the prim's
+local-to-world transform at its first time sample) and converted to metres with the stage's
+``metersPerUnit``; ``SourceMesh.to_local`` maps simulated points back into the prim's own space, which an
+override layer needs. Axes are never swapped: a Z-up asset is simulated Z-up (give gravity along -Z).
+
+trimesh triangulates every polygon as it loads (its OBJ and PLY readers split quads and n-gons into
+triangles), so a mesh read through it is made of triangles and gets no shear sticks. USD keeps the faces as
+authored, quads and n-gons included.
+
+Only the reader a scene needs is imported: trimesh for mesh files, pxr for USD.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from .faces import Faces
+from .mesh_cloth import MeshError, SourceMesh
+
+USD_SUFFIXES = (".usd", ".usda", ".usdc", ".usdz")
+
+
+def transform_matrix(translate=(0.0, 0.0, 0.0), rotate_degrees=(0.0, 0.0, 0.0), scale=(1.0, 1.0, 1.0)) -> np.ndarray:
+    """(4, 4) column-vector affine: scale, then rotate about X, then Y, then Z (fixed axes), then translate."""
+    rx, ry, rz = np.radians(rotate_degrees)
+    cx, sx, cy, sy, cz, sz = np.cos(rx), np.sin(rx), np.cos(ry), np.sin(ry), np.cos(rz), np.sin(rz)
+    about_x = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
+    about_y = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
+    about_z = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
+    m = np.eye(4)
+    m[:3, :3] = about_z @ about_y @ about_x @ np.diag(np.asarray(scale, np.float64))
+    m[:3, 3] = translate
+    return m
+
+
+def apply(matrix: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Points (N, 3) through a (4, 4) column-vector affine matrix."""
+    return points @ matrix[:3, :3].T + matrix[:3, 3]
+
+
+def read_mesh(path: Path, prim: str | None, transform: np.ndarray, named: tuple[tuple[str, str], ...] = ()) -> SourceMesh:
+    """The mesh at ``path`` (a USD ``prim``, which USD files need and other formats refuse), moved by
+    ``transform`` into the scene's frame. ``named``: ("primvar" or "subset", name) vertex sets to look up
+    for pins (USD only)."""
+    is_usd = path.suffix.lower() in USD_SUFFIXES
+    if not path.is_file():
+        raise MeshError(f"{path}: no such file" if not path.exists() else f"{path}: not a file")
+    if is_usd:
+        if prim is None:
+            raise MeshError(f"{path}: a USD file holds many prims; name the mesh with prim = \"/path/to/Mesh\"")
+        return _read_usd(path, prim, transform, named)
+    if prim is not None:
+        raise MeshError(f"{path}: prim is for USD files only; this is a {path.suffix or 'suffix-less'} file")
+    if named:
+        kind, name = named[0]
+        raise MeshError(f"{path}: pins by {kind} ({name!r}) need a USD file; this is a {path.suffix} file")
+    return _read_trimesh(path, transform)
+
+
+def _read_trimesh(path: Path, transform: np.ndarray) -> SourceMesh:
+    import trimesh
+
+    suffix = path.suffix.lower().lstrip(".")
+    if suffix not in trimesh.available_formats():
+        raise MeshError(f"{path}: trimesh cannot read .{suffix} files (it reads "
+                        f"{', '.join(sorted(trimesh.available_formats()))}; or give a USD file and a prim)")
+    try:
+        # process=False and maintain_order: the vertices and faces as the file has them, nothing merged or
+        # reordered, so the cache lines up with the file (welding is ours, and keeps the vertex order).
+        loaded = trimesh.load(str(path), process=False, maintain_order=True, force="mesh")
+    except Exception as exc:  # trimesh raises many types for a damaged file; all mean "cannot read"
+        raise MeshError(f"{path}: cannot read the mesh ({type(exc).__name__}: {exc})") from None
+    points = np.asarray(getattr(loaded, "vertices", np.zeros((0, 3))), np.float64).reshape(-1, 3)
+    triangles = np.asarray(getattr(loaded, "faces", np.zeros((0, 3))), np.int64).reshape(-1, 3)
+    uv = getattr(getattr(loaded, "visual", None), "uv", None)
+    uvs = np.asarray(uv, np.float32) if uv is not None and len(uv) == len(points) and len(points) else None
+    return SourceMesh(description=str(path), file=path, points=apply(transform, points), faces=Faces.uniform(triangles),
+                      uvs=uvs, uv_interpolation="vertex" if uvs is not None else None)
+
+
+def _usd_error(path: Path, exc: Exception) -> str:
+    """The plain cause of a Tf error, without USD's C++ source locations."""
+    text = str(exc).strip()
+    for marker in ("Failed to open layer", "Cannot determine file format", "Could not open"):
+        if marker in text:
+            return f"{path}: cannot open as USD ({marker.lower()})"
+    lines = [ln.strip() for ln in text.splitlines() if ln.strip() and "Error in '" not in ln]
+    return f"{path}: cannot open as USD ({lines[-1] if lines else 'unreadable'})"
+
+
+def _read_usd(path: Path, prim_path: str, transform: np.ndarray, named) -> SourceMesh:
+    from pxr import Sdf, Tf, Usd, UsdGeom
+
+    if not Sdf.Path.IsValidPathString(prim_path) or not Sdf.Path(prim_path).IsAbsolutePath():
+        raise MeshError(f"{path}: prim {prim_path!r} is not an absolute prim path like \"/World/Cloth\"")
+    try:
+        stage = Usd.Stage.Open(str(path), Usd.Stage.LoadAll)
+    except Tf.ErrorException as exc:
+        raise MeshError(_usd_error(path, exc)) from None
+    if stage is None:
+        raise MeshError(f"{path}: cannot open as USD")
+    prim = stage.GetPrimAtPath(prim_path)
+    if not prim.IsValid():
+        meshes = [str(p.GetPath()) for p in stage.Traverse() if p.IsA(UsdGeom.Mesh)][:5]
+        raise MeshError(f"{path}: no prim at {prim_path} (meshes in the file: {', '.join(meshes) or 'none'})")
+    if not prim.IsA(UsdGeom.Mesh):
+        raise MeshError(f"{path}: prim {prim_path} is a {prim.GetTypeName() or 'typeless prim'}, not a Mesh")
+    mesh = UsdGeom.Mesh(prim)
+    times = mesh.GetPointsAttr().GetTimeSamples()
+    time = Usd.TimeCode(times[0]) if times else Usd.TimeCode.Default()
+    raw = mesh.GetPointsAttr().Get(time)
+    counts = mesh.GetFaceVertexCountsAttr().Get(time)
+    indices = mesh.GetFaceVertexIndicesAttr().Get(time)
+    points = np.asarray(raw if raw is not None else [], np.float64).reshape(-1, 3)
+    faces = Faces(np.asarray(counts if counts is not None else [], np.int64),
+                  np.asarray(indices if indices is not None else [], np.int64))
+    # Gf matrices act on row vectors (p' = p M): transpose for the column-vector convention used here.
+    local_to_world = np.asarray(UsdGeom.Xformable(prim).ComputeLocalToWorldTransform(time), np.float64).T
+    to_metres = np.diag([UsdGeom.GetStageMetersPerUnit(stage)] * 3 + [1.0])
+    to_scene = transform @ to_metres @ local_to_world
+    uvs, interpolation = _read_uvs(mesh, len(points), len(faces.indices), time)
+    left = mesh.GetOrientationAttr().Get() == UsdGeom.Tokens.leftHanded
+    vertex_sets = {key: _named_vertices(path, mesh, faces, len(points), *key, time) for key in named}
+    return SourceMesh(description=f"{path} prim {prim_path}", file=path, points=apply(to_scene, points), faces=faces,
+                      uvs=uvs, uv_interpolation=interpolation, left_handed=left, prim_path=prim_path,
+                      to_local=np.linalg.inv(to_scene), named_vertices=vertex_sets)
+
+
+def _read_uvs(mesh, points: int, corners: int, time):
+    """primvars:st flattened (indexed primvars expanded), if it is per vertex or per face corner."""
+    from pxr import UsdGeom
+
+    st = UsdGeom.PrimvarsAPI(mesh).GetPrimvar("st")
+    if not st or not st.HasAuthoredValue():
+        return None, None
+    values = st.ComputeFlattened(time)
+    if values is None:
+        return None, None
+    uvs = np.asarray(values, np.float32).reshape(-1, 2)
+    interpolation = st.GetInterpolation()
+    if interpolation in (UsdGeom.Tokens.vertex, UsdGeom.Tokens.varying) and len(uvs) == points:
+        return uvs, "vertex"
+    if interpolation == UsdGeom.Tokens.faceVarying and len(uvs) == corners:
+        return uvs, "faceVarying"
+    return None, None  # constant or uniform UVs carry no texture layout worth keeping
+
+
+def _named_vertices(path: Path, mesh, faces: Faces, points: int, kind: str, name: str, time) -> np.ndarray:
+    """The vertices a primvar marks (non-zero values) or a GeomSubset holds (its points, or its faces' corners)."""
+    from pxr import UsdGeom
+
+    where = f"{path} prim {mesh.GetPath()}"
+    face_of_corner = np.repeat(np.arange(len(faces)), faces.counts)
+    if kind == "primvar":
+        primvar = UsdGeom.PrimvarsAPI(mesh).GetPrimvar(name)
+        if not primvar or not primvar.HasAuthoredValue():
+            names = [p.GetPrimvarName() for p in UsdGeom.PrimvarsAPI(mesh).GetPrimvars()]
+            raise MeshError(f"{where}: no primvar {name!r} (its primvars: {', '.join(names) or 'none'})")
+        values = np.asarray(primvar.ComputeFlattened(time), np.float64)
+        marked = np.flatnonzero(values.reshape(len(values), -1).any(axis=1)) if values.size else np.zeros(0, np.int64)
+        interpolation = primvar.GetInterpolation()
+        if interpolation in (UsdGeom.Tokens.vertex, UsdGeom.Tokens.varying) and len(values) == points:
+            return marked
+        if interpolation == UsdGeom.Tokens.uniform and len(values) == len(faces):
+            return np.unique(faces.indices[np.isin(face_of_corner, marked)])
+        if interpolation == UsdGeom.Tokens.faceVarying and len(values) == len(faces.indices):
+            return np.unique(faces.indices[marked])
+        raise MeshError(f"{where}: primvar {name!r} is {interpolation} with {len(values)} values; pins need one "
+                        "value per vertex, per face or per face corner")
+    subsets = {s.GetPrim().GetName(): s for s in UsdGeom.Subset.GetAllGeomSubsets(UsdGeom.Imageable(mesh))}
+    if name not in subsets:
+        raise MeshError(f"{where}: no GeomSubset {name!r} (its subsets: {', '.join(sorted(subsets)) or 'none'})")
+    subset = subsets[name]
+    members = np.asarray(subset.GetIndicesAttr().Get(time) or [], np.int64)
+    element = subset.GetElementTypeAttr().Get()
+    if element == UsdGeom.Tokens.face:
+        if len(members) and (members.min() < 0 or members.max() >= len(faces)):
+            raise MeshError(f"{where}: GeomSubset {name!r} names a face outside [0, {len(faces)})")
+        return np.unique(faces.indices[np.isin(face_of_corner, members)])
+    if len(members) and (members.min() < 0 or members.max() >= points):
+        raise MeshError(f"{where}: GeomSubset {name!r} names a point outside [0, {points})")
+    return np.unique(members)
