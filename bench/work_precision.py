@@ -27,6 +27,12 @@ per-second and physical quantities, the same at any S and K, so every point and 
 own values. The Jacobi solver has rigid sticks only: when the sweep includes it and the scene has a
 compliance, every point (and the reference) runs the scene with all sticks rigid, and the outputs say so.
 
+Where the points run (warp_verlet.sweep_backends): by default one at a time in this process, so that every
+timing is isolated; ``--workers N`` runs them in a local process pool and ``--ray [ADDRESS]`` as Ray tasks (the grid
+on a cluster). Points that ran in parallel on one machine share its cores and memory bandwidth: the outputs say how
+the timings were taken, and parallel timings are not to be mixed with isolated ones. On CUDA a local pool or Ray
+pins one point per GPU.
+
 Newton (optional peer): when ``import newton`` works, the same cloth also runs through Newton's VBD solver
 (bench.newton_peer) at ``--newton-points`` and its points join the table and plot; otherwise the sweep
 prints "Newton not installed: skipped".
@@ -55,6 +61,7 @@ except ModuleNotFoundError:  # Python 3.10
 
 from warp_verlet.scene import load_scene, parse_scene
 from warp_verlet.simulator import Simulator
+from warp_verlet.sweep_backends import quiet_warp as worker_quiet_warp
 
 from . import newton_peer
 from .common import arg_parser, cloth_size, machine, markdown_table, quiet_warp, time_frames, write_csv
@@ -152,8 +159,47 @@ def pareto(points: list[tuple[float, float]]) -> list[bool]:
     return out
 
 
+def reference_task(payload: dict, slot) -> dict:
+    """One reference run, in whichever process the backend chose: its trajectory, stretch and wall seconds.
+    (Ray sends bench's code with the task; warp_verlet's quiet_warp, not bench.common's, keeps ``wp.config``, which
+    cloudpickle cannot send, out of what travels.)"""
+    worker_quiet_warp()
+    t0 = time.perf_counter()
+    sim, traj = trajectory(payload["scene"], slot.device, payload["frames"])
+    st = sim.stretch()
+    return {"trajectory": traj, "stretch_rms": st.rms, "stretch_max": st.max, "wall": time.perf_counter() - t0}
+
+
+def point_task(payload: dict, slot) -> dict:
+    """One point of the grid (warm-up run and timed repeats, ``measure_point``), in whichever process the backend
+    chose: its times, final stretch, stick count, trajectory and whether the repeats were bit-identical."""
+    worker_quiet_warp()
+    m = measure_point(payload["scene"], slot.device, payload["frames"], payload["repeats"])
+    st = m["sim"].stretch(m["trajectory"][-1])
+    return {"times": m["times"], "identical": m["identical"], "trajectory": m["trajectory"],
+            "sticks": m["sim"].model.stick_count, "stretch_rms": st.rms, "stretch_max": st.max}
+
+
+def _results(backend, fn, items: dict) -> dict:
+    """Run ``fn`` on every payload of ``items`` (key -> payload) through ``backend``; the values by key, in any
+    finishing order. A point that fails stops the benchmark: a grid with holes has no Pareto front to report."""
+    out = {}
+    for outcome in backend.run(fn, list(items.items())):
+        if outcome.status != "done":
+            raise RuntimeError(f"work-precision point {outcome.key} {outcome.status}: {outcome.error}")
+        out[outcome.key] = outcome.value
+    return out
+
+
 def run(scene, iterations, substeps, solvers, seconds=0.5, repeats=3, device="cpu",
-        ref_substeps=64, ref_iterations=128, ref_solver="coloured", newton_points=(), log=print) -> dict:
+        ref_substeps=64, ref_iterations=128, ref_solver="coloured", newton_points=(), log=print,
+        backend=None) -> dict:
+    """The sweep. ``backend`` (warp_verlet.sweep_backends) runs the reference runs and the points: by default
+    ``InlineBackend(device)``, one at a time in this process (isolated timings); a local pool or Ray runs them in
+    parallel, and the result's ``timing`` says so."""
+    from warp_verlet.sweep_backends import InlineBackend
+
+    backend = backend or InlineBackend(device)
     scene, rigid_note = rigid_for(scene, [*solvers, ref_solver])
     if rigid_note:
         log(rigid_note, flush=True)
@@ -162,23 +208,27 @@ def run(scene, iterations, substeps, solvers, seconds=0.5, repeats=3, device="cp
     sim_seconds = frames / fps
     size = cloth_size(scene)
     started = time.perf_counter()
+    log(f"runs: {backend.description}; timings {backend.timing_note}", flush=True)
 
     # The reference, and its convergence check at half its K and half its S.
     log(f"reference: S = {ref_substeps}, K = {ref_iterations}, {ref_solver}, {frames} frames "
         f"({sim_seconds:.3f} s simulated)", flush=True)
+    budgets = {"ref": (ref_substeps, ref_iterations), "half K": (ref_substeps, max(1, ref_iterations // 2)),
+               "half S": (max(1, ref_substeps // 2), ref_iterations)}
+    done = _results(backend, reference_task, {
+        key: {"scene": point_scene(scene, s_, k_, ref_solver, frames), "frames": frames}
+        for key, (s_, k_) in budgets.items()})
     ref_runs = {}
-    for key, (s_, k_) in {"ref": (ref_substeps, ref_iterations), "half K": (ref_substeps, max(1, ref_iterations // 2)),
-                          "half S": (max(1, ref_substeps // 2), ref_iterations)}.items():
-        t0 = time.perf_counter()
-        sim, traj = trajectory(point_scene(scene, s_, k_, ref_solver, frames), device, frames)
-        ref_runs[key] = {"substeps": s_, "iterations": k_, "trajectory": traj, "stretch": sim.stretch()}
-        log(f"  {key:6s} S = {s_:3d}, K = {k_:4d}: {time.perf_counter() - t0:.1f} s wall, stretch rms "
-            f"{sim.stretch().rms:.3e}", flush=True)
+    for key, (s_, k_) in budgets.items():
+        r = done[key]
+        ref_runs[key] = {"substeps": s_, "iterations": k_, "trajectory": r["trajectory"]}
+        log(f"  {key:6s} S = {s_:3d}, K = {k_:4d}: {r['wall']:.1f} s wall, stretch rms {r['stretch_rms']:.3e}",
+            flush=True)
     traj_ref = ref_runs["ref"]["trajectory"]
     x_ref = traj_ref[-1]
     reference = {
         "substeps": ref_substeps, "iterations": ref_iterations, "solver": ref_solver, "frames": frames,
-        "stretch_rms": ref_runs["ref"]["stretch"].rms, "stretch_max": ref_runs["ref"]["stretch"].max,
+        "stretch_rms": done["ref"]["stretch_rms"], "stretch_max": done["ref"]["stretch_max"],
         "half_K": {"iterations": ref_runs["half K"]["iterations"],
                    "diff": rms_distance(ref_runs["half K"]["trajectory"][-1], x_ref) / size,
                    "diff_traj": rms_distance(ref_runs["half K"]["trajectory"], traj_ref) / size},
@@ -190,30 +240,33 @@ def run(scene, iterations, substeps, solvers, seconds=0.5, repeats=3, device="cp
         f"final frame; vs half S: {reference['half_S']['diff_traj']:.2e}, {reference['half_S']['diff']:.2e} "
         f"(RMS distance / cloth size)", flush=True)
 
-    rows, total, done, nondeterministic = [], len(iterations) * len(substeps) * len(solvers), 0, []
-    for solver in solvers:
-        for s_ in substeps:
-            for k_ in iterations:
-                done += 1
-                m = measure_point(point_scene(scene, s_, k_, solver, frames), device, frames, repeats)
-                sim, times = m["sim"], m["times"]
-                wall = float(np.median(times))
-                st = sim.stretch(m["trajectory"][-1])
-                row = {"solver": solver, "substeps": s_, "iterations": k_, "frames": frames,
-                       "sticks": sim.model.stick_count, "wall_per_sim_s": wall / sim_seconds,
-                       "wall_min": min(times) / sim_seconds, "wall_max": max(times) / sim_seconds,
-                       "Mproj_per_s": k_ * s_ * sim.model.stick_count * frames / wall / 1e6,
-                       "stretch_rms": st.rms, "stretch_max": st.max,
-                       "pos_error_traj": rms_distance(m["trajectory"], traj_ref) / size,
-                       "pos_error": rms_distance(m["trajectory"][-1], x_ref) / size}
-                rows.append(row)
-                if not m["identical"]:
-                    nondeterministic.append((solver, s_, k_))
-                log(f"[{done:3d}/{total}] {solver:8s} S = {s_:2d}, K = {k_:3d}: {row['wall_per_sim_s']:.4f} s per "
-                    f"simulated s ({row['wall_min']:.4f}..{row['wall_max']:.4f}), {row['Mproj_per_s']:6.1f} M proj/s, "
-                    f"position error {row['pos_error_traj']:.2e} trajectory, {row['pos_error']:.2e} final, "
-                    f"stretch rms {st.rms:.2e} max {st.max:.2e}  "
-                    f"[{time.perf_counter() - started:.0f} s]", flush=True)
+    grid = [(solver, s_, k_) for solver in solvers for s_ in substeps for k_ in iterations]
+    rows, total, nondeterministic = {}, len(grid), []
+    payloads = {point: {"scene": point_scene(scene, point[1], point[2], point[0], frames), "frames": frames,
+                        "repeats": repeats} for point in grid}
+    for outcome in backend.run(point_task, list(payloads.items())):
+        if outcome.status != "done":
+            raise RuntimeError(f"work-precision point {outcome.key} {outcome.status}: {outcome.error}")
+        (solver, s_, k_), m = outcome.key, outcome.value
+        times = m["times"]
+        wall = float(np.median(times))
+        row = {"solver": solver, "substeps": s_, "iterations": k_, "frames": frames,
+               "sticks": m["sticks"], "wall_per_sim_s": wall / sim_seconds,
+               "wall_min": min(times) / sim_seconds, "wall_max": max(times) / sim_seconds,
+               "Mproj_per_s": k_ * s_ * m["sticks"] * frames / wall / 1e6,
+               "stretch_rms": m["stretch_rms"], "stretch_max": m["stretch_max"],
+               "pos_error_traj": rms_distance(m["trajectory"], traj_ref) / size,
+               "pos_error": rms_distance(m["trajectory"][-1], x_ref) / size}
+        rows[outcome.key] = row
+        if not m["identical"]:
+            nondeterministic.append((solver, s_, k_))
+        log(f"[{len(rows):3d}/{total}] {solver:8s} S = {s_:2d}, K = {k_:3d}: {row['wall_per_sim_s']:.4f} s per "
+            f"simulated s ({row['wall_min']:.4f}..{row['wall_max']:.4f}), {row['Mproj_per_s']:6.1f} M proj/s, "
+            f"position error {row['pos_error_traj']:.2e} trajectory, {row['pos_error']:.2e} final, "
+            f"stretch rms {row['stretch_rms']:.2e} max {row['stretch_max']:.2e}  "
+            f"[{time.perf_counter() - started:.0f} s]", flush=True)
+    rows = [rows[point] for point in grid]  # the grid's order, whatever order the points finished in
+    nondeterministic.sort(key=grid.index)
 
     newton_note = None
     if newton_points:
@@ -245,7 +298,8 @@ def run(scene, iterations, substeps, solvers, seconds=0.5, repeats=3, device="cp
         row["pareto"] = int(on)
     return {"rows": rows, "reference": reference, "frames": frames, "sim_seconds": sim_seconds, "size": size,
             "nondeterministic": nondeterministic, "newton": newton_note, "rigid": rigid_note,
-            "elapsed": time.perf_counter() - started}
+            "elapsed": time.perf_counter() - started, "timing": backend.timing_note,
+            "parallel": backend.parallel > 1, "backend": backend.description}
 
 
 # ---------------------------------------------------------------- output
@@ -291,6 +345,10 @@ def write_outputs(res: dict, out: Path, title: str, command: list[str], plot: bo
         "the last frame (final); the Pareto front uses the trajectory error, since the final-frame error depends on "
         "the phase of the cloth's bounce at that instant. Stretch: |D - L| / L over structural sticks at the last "
         "frame.",
+        "",
+        f"Runs: {res.get('backend', 'in this process, one at a time')}. Timings: "
+        f"{res.get('timing', 'isolated: one point at a time')}"
+        + (" — compare them only with timings taken the same way." if res.get("parallel") else "."),
         "",
         "Damping (1/s) and compliance (m/N) are the scene's own at every point: they are per second and physical, "
         "so every point simulates the same problem." + (" " + res["rigid"] if res.get("rigid") else ""),
@@ -372,6 +430,21 @@ def _points(text: str) -> tuple[int, int]:
     return int(s), int(k)
 
 
+def _backend(args):
+    """Where the points run: this process (default), a local pool (--workers), or Ray (--ray). A benchmark sweep
+    pins one point per device: on CUDA one per GPU; on the CPU one at a time unless --workers or --ray asks for
+    more, and then every output says the timings were taken in parallel."""
+    from warp_verlet.sweep_backends import InlineBackend, LocalBackend, RayBackend, device_slots
+
+    if args.ray is not None:
+        device = "cuda" if args.device.startswith("cuda") else "cpu"
+        return RayBackend(args.ray, device, cpus_per_task=args.cpus_per_point)
+    if args.workers is not None:
+        threads = 1 if args.device == "cpu" else None
+        return LocalBackend(device_slots(args.device, args.workers, threads))
+    return InlineBackend(args.device)
+
+
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     p = arg_parser("bench.work_precision", __doc__)
@@ -389,12 +462,21 @@ def main(argv=None) -> int:
     p.add_argument("--newton-points", type=_points, nargs="*", default=[(4, 2), (4, 8)], metavar="SxK",
                    help="Newton VBD points (substeps x iterations), run when `import newton` works")
     p.add_argument("--no-plot", action="store_true")
+    p.add_argument("--workers", type=int, default=None,
+                   help="run the points in a local process pool of N workers (default: one at a time in this "
+                        "process, so that timings are isolated; with N > 1 the output says they ran in parallel)")
+    p.add_argument("--ray", nargs="?", const="local", metavar="ADDRESS",
+                   help="run each point as a Ray task (alone: a local Ray instance; auto or ADDRESS: a cluster); "
+                        "needs pip install 'warp-verlet[ray]'")
+    p.add_argument("--cpus-per-point", type=float, default=None,
+                   help="Ray: num_cpus per point on the CPU (default 1); on CUDA each point takes one GPU")
     p.add_argument("--out", type=Path, default=HERE / "results" / "work_precision")
     args = p.parse_args(argv)
     quiet_warp()
     scene = load(args.scene, args.resolution)
-    res = run(scene, args.iterations, args.substeps, args.solvers, args.seconds, args.repeats, args.device,
-              args.ref_substeps, args.ref_iterations, args.ref_solver, args.newton_points)
+    with _backend(args) as backend:
+        res = run(scene, args.iterations, args.substeps, args.solvers, args.seconds, args.repeats, args.device,
+                  args.ref_substeps, args.ref_iterations, args.ref_solver, args.newton_points, backend=backend)
     grid = " + ".join(f"{c.resolution[0]}x{c.resolution[1]}" for c in scene.cloths)
     title = (f"{args.scene.name} ({grid}), {res['sim_seconds']:.3f} s simulated, device {args.device}, "
              f"reference S = {args.ref_substeps}, K = {args.ref_iterations} {args.ref_solver}")
@@ -406,6 +488,7 @@ def main(argv=None) -> int:
         print(f"  {r['solver']:10s} S = {r['substeps']:2d}, K = {r['iterations']:3d}: {r['wall_per_sim_s']:.4f} s per "
               f"simulated s, position error {r['pos_error_traj']:.2e} trajectory ({r['pos_error']:.2e} final), "
               f"stretch rms {r['stretch_rms']:.2e}")
+    print(f"timings: {res['timing']}")
     print(f"wrote {args.out}/work_precision.csv, .md, .png in {res['elapsed']:.0f} s")
     return 0
 

@@ -216,3 +216,17 @@ def test_cpu_reference_outputs(tmp_path, capsys):
         assert "C / warp coloured, 1 thread" in md and "within the tolerance" in md
     else:
         assert "no C compiler found" in capsys.readouterr().out
+
+
+def test_work_precision_in_a_local_pool_gives_the_same_points_and_says_so(wp_run, tmp_path):
+    # The same grid in a 2-worker process pool: every point is the same simulation, so everything but the timings
+    # is bit for bit the serial run's; the outputs say that these timings were taken in parallel.
+    assert wpb.main([*TINY, "--newton-points", "--no-plot", "--workers", "2", "--out", str(tmp_path)]) == 0
+    serial, pooled = _rows(wp_run / "work_precision.csv"), _rows(tmp_path / "work_precision.csv")
+    timing = {"wall_per_sim_s", "wall_min", "wall_max", "Mproj_per_s", "pareto"}
+    assert [{k: v for k, v in r.items() if k not in timing} for r in pooled] == \
+        [{k: v for k, v in r.items() if k not in timing} for r in serial]
+    md = (tmp_path / "work_precision.md").read_text()
+    assert "Timings: in parallel: up to 2 variants at once on one machine" in md
+    assert "compare them only with timings taken the same way" in md
+    assert "Timings: isolated: one variant at a time on cpu." in (wp_run / "work_precision.md").read_text()

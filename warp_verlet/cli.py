@@ -1,4 +1,4 @@
-"""Command line: ``warp-verlet run|validate|preview`` (also ``python -m warp_verlet``).
+"""Command line: ``warp-verlet run|sweep|validate|preview`` (also ``python -m warp_verlet``).
 
 Exit codes: 0 success, 1 a run failed (divergence, unwritable, busy or full output, device), 2 invalid scene,
 cache or arguments, 130 interrupted (Ctrl-C), 143 terminated (SIGTERM). A run that does not finish says where
@@ -43,6 +43,19 @@ def _thread_count(text: str) -> int:
     if not 1 <= value <= MAX_THREADS:
         raise argparse.ArgumentTypeError(f"expected a number of threads in 1 .. {MAX_THREADS}, got {value}")
     return value
+
+
+def _at_least_one(what: str):
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a whole number of {what}, got {text!r}") from None
+        if value < 1:
+            raise argparse.ArgumentTypeError(f"expected at least 1 ({what}), got {value}")
+        return value
+
+    return parse
 
 
 _SLICE_PART = re.compile(r"\s*(-?\d+)?\s*")  # a whole number, or nothing
@@ -95,6 +108,29 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--preview", action="store_true",
                      help="after a successful run, also render <cache stem>.png next to the cache (as "
                           "`warp-verlet preview CACHE -o <cache stem>.png` would)")
+
+    sweep = commands.add_parser(
+        "sweep", help="run every variant of a parameter sweep (locally, or on a Ray cluster)",
+        description="Run a sweep file's variants (a base scene and the keys to vary; see the README's Sweeps "
+                    "section): one cache per variant, sweep.csv and sweep.md in the output directory. A re-run "
+                    "skips the variants already done with the same parameters.",
+    )
+    sweep.add_argument("sweep", type=Path, help="sweep file (TOML)")
+    sweep.add_argument("-o", "--output", type=Path, help="output directory (default: the sweep's [sweep] output)")
+    sweep.add_argument("--device", help="cpu, cuda or cuda:N (default: CUDA when present, else CPU)")
+    sweep.add_argument("--workers", type=_at_least_one("workers"),
+                       help="local pool size (default: one per GPU on CUDA, one per core on the CPU)")
+    sweep.add_argument("--threads", type=_thread_count,
+                       help="CPU relaxation threads per variant (default: the cores shared among the workers)")
+    sweep.add_argument("--ray", nargs="?", const="local", metavar="ADDRESS",
+                       help="run each variant as a Ray task: --ray alone starts a local Ray instance, --ray auto "
+                            "joins the cluster started on this machine with `ray start`, --ray ADDRESS joins that "
+                            "cluster (needs pip install 'warp-verlet[ray]')")
+    sweep.add_argument("--gpus-per-variant", type=float, help="Ray: num_gpus of each task on CUDA (default 1)")
+    sweep.add_argument("--cpus-per-variant", type=float, help="Ray: num_cpus of each task (default 1)")
+    sweep.add_argument("--restart", action="store_true", help="run every variant again (default: resume)")
+    sweep.add_argument("--dry-run", action="store_true", help="list the variants and exit without running")
+    sweep.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
 
     validate = commands.add_parser("validate", help="check a scene file without running it")
     validate.add_argument("scene", type=Path)
@@ -177,6 +213,43 @@ def _run(args) -> int:
     return 0
 
 
+def _sweep(args) -> int:
+    from .sweep import load_sweep, show
+
+    sweep = load_sweep(args.sweep, args.output)
+    if args.dry_run:
+        for v in sweep.variants:
+            params = ", ".join(f"{k} = {show(val)}" for k, val in v.params.items())
+            print(f"{v.index:5d}  {v.name}  {params}  [{v.hash}]")
+        print(f"{args.sweep}: valid sweep, {len(sweep.variants)} variants of {sweep.base}, output {sweep.output}")
+        return 0
+    from .sweep import run_sweep
+    from .sweep_backends import make_backend
+
+    backend = make_backend(args.device, args.workers, args.threads, args.ray, args.gpus_per_variant,
+                           args.cpus_per_variant)
+    print(f"{args.sweep}: {len(sweep.variants)} variants of {sweep.base}; {backend.description}", file=sys.stderr)
+    try:
+        with backend:
+            result = run_sweep(sweep, backend, resume=not args.restart, progress=not args.quiet,
+                               log=lambda text: print(text, file=sys.stderr))
+    except KeyboardInterrupt:
+        print(f"interrupted: {sweep.output}/sweep.csv and sweep.md list what finished; run the same command "
+              "again to resume", file=sys.stderr)
+        return 130
+    statuses = {}
+    for row in result.rows:
+        statuses[row["status"]] = statuses.get(row["status"], 0) + 1
+    tally = ", ".join(f"{n} {s}" for s, n in statuses.items())
+    print(f"{len(result.rows)} variants: {tally} ({len(result.ran)} run now, {len(result.resumed)} done before) "
+          f"in {result.elapsed:.1f} s")
+    for row in result.rows:
+        if row["status"] != "ok":
+            print(f"  {row['name']}: {row['status']}: {row.get('error')}")
+    print(f"summary          {result.csv}, {result.md}")
+    return 0 if not result.failed else 1
+
+
 def _preview_module():
     """warp_verlet.preview (pxr and matplotlib; never warp), or one clear error when the optional extra that
     brings matplotlib is not installed."""
@@ -222,7 +295,7 @@ def _where_the_frames_went(exc: BaseException) -> str:
 def main(argv: list[str] | None = None) -> int:
     warnings.showwarning = _show_warning
     args = build_parser().parse_args(argv)
-    command = {"run": _run, "validate": _validate, "preview": _preview}[args.command]
+    command = {"run": _run, "validate": _validate, "preview": _preview, "sweep": _sweep}[args.command]
     in_main_thread = threading.current_thread() is threading.main_thread()
     previous = signal.signal(signal.SIGTERM, _terminate) if in_main_thread else None
     try:

@@ -1,0 +1,238 @@
+"""warp-verlet sweep on the local backend: caches and a summary that match them, failures recorded while the rest go
+on, resuming, a worker that dies, Ctrl-C, and the command line."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from sweep_helpers import (DIVERGING_SWEEP, GRID_SWEEP, read_cache, read_rows, square_or_die, structural_stretch,
+                           write_sweep)
+from warp_verlet.cli import main
+from warp_verlet.sweep import cache_problems, load_sweep, run_sweep
+from warp_verlet.sweep_backends import InlineBackend, LocalBackend, Slot, device_slots
+
+
+def local(workers: int = 2) -> LocalBackend:
+    return LocalBackend(device_slots("cpu", workers))
+
+
+def check_rows_match_caches(out: Path, expect: int) -> list[dict]:
+    """Every ok row of sweep.csv against its cache read back with pxr: frames, point count (from the row's
+    resolution), and the stretch recomputed from the cache's points."""
+    rows = read_rows(out / "sweep.csv")
+    assert [int(r["index"]) for r in rows] == list(range(expect))
+    for r in rows:
+        if r["status"] != "ok":
+            continue
+        cache = Path(r["output"])
+        assert cache.parent == out and cache.name == f"{r['name']}.usdc"
+        assert cache_problems(cache, int(r["frames"])) == []
+        data = read_cache(cache)
+        rows_, cols = json.loads(r["cloth.0.resolution"]) if "cloth.0.resolution" in r else (4, 4)
+        assert (data["start"], data["end"]) == (0, int(r["frames"]))
+        assert data["points"].shape == (int(r["frames"]) + 1, rows_ * cols, 3)
+        rms, mx = structural_stretch(data["points"], rows_, cols)
+        assert float(r["stretch_rms"]) == pytest.approx(rms, rel=1e-4, abs=1e-9), r["name"]
+        assert float(r["stretch_max"]) == pytest.approx(mx, rel=1e-4, abs=1e-9), r["name"]
+        sidecar = json.loads((out / f"{r['name']}.json").read_text())
+        assert sidecar["hash"] == r["hash"] and sidecar["status"] == "ok"
+    return rows
+
+
+def test_grid_sweep_gives_valid_caches_and_a_matching_summary(tmp_path):
+    sweep = load_sweep(write_sweep(tmp_path))
+    result = run_sweep(sweep, local(), progress=False)
+    assert result.ran == [0, 1, 2, 3] and result.resumed == [] and not result.failed
+    out = tmp_path / "out"
+    rows = check_rows_match_caches(out, 4)
+    assert [(json.loads(r["cloth.0.resolution"]), int(r["simulation.substeps"])) for r in rows] == [
+        ([4, 4], 1), ([4, 4], 2), ([5, 3], 1), ([5, 3], 2)]
+    assert all(r["status"] == "ok" and int(r["frames"]) == 3 and float(r["wall_s"]) > 0 for r in rows)
+    # The substeps change the cloth (so the rows are not all one result): more substeps, less stretch.
+    assert float(rows[1]["stretch_rms"]) < float(rows[0]["stretch_rms"])
+    assert sorted(p.name for p in out.glob("*.usdc")) == [f"{r['name']}.usdc" for r in rows]
+    assert rows[3]["name"] == "003_resolution=5_3_substeps=2"
+    md = (out / "sweep.md").read_text()
+    assert "4 variants: 4 ok" in md and "in parallel: up to 2 variants at once" in md
+    assert all(r["name"] in md for r in rows)
+
+
+def test_a_diverging_variant_is_recorded_and_the_others_succeed(tmp_path):
+    sweep = load_sweep(write_sweep(tmp_path, DIVERGING_SWEEP))
+    result = run_sweep(sweep, local(), progress=False)
+    rows = read_rows(tmp_path / "out" / "sweep.csv")
+    assert [r["status"] for r in rows] == ["ok", "diverged", "ok"]
+    assert result.failed == [1]
+    bad = rows[1]
+    assert "diverged at frame 1" in bad["error"] and "beyond position_bound" in bad["error"]
+    assert bad["frames"] == "0" and bad["stretch_rms"] == ""
+    # The diverged run's cache holds the frames before the divergence (frame 0) and is still a valid file.
+    assert cache_problems(Path(bad["output"]), 0) == []
+    for r in (rows[0], rows[2]):
+        assert cache_problems(Path(r["output"]), 3) == [] and r["error"] == ""
+    assert json.loads((tmp_path / "out" / f"{bad['name']}.json").read_text())["status"] == "diverged"
+
+
+def test_a_resumed_sweep_runs_only_what_is_missing(tmp_path):
+    path = write_sweep(tmp_path)
+    out = tmp_path / "out"
+    first = run_sweep(load_sweep(path), local(), progress=False)
+    assert first.ran == [0, 1, 2, 3]
+    before = {p.name: p.stat().st_mtime_ns for p in out.glob("*.usdc")}
+    (out / f"{first.rows[2]['name']}.usdc").unlink()
+    second = run_sweep(load_sweep(path), local(), progress=False)
+    assert second.ran == [2] and second.resumed == [0, 1, 3]
+    after = {p.name: p.stat().st_mtime_ns for p in out.glob("*.usdc")}
+    changed = sorted(n for n in after if after[n] != before.get(n))
+    assert changed == [f"{first.rows[2]['name']}.usdc"]
+    rows = check_rows_match_caches(out, 4)
+    assert [r["resumed"] for r in rows] == ["yes", "yes", "no", "yes"]
+    # The resumed rows keep the measurements of the run that made them.
+    for i in (0, 1, 3):
+        assert float(rows[i]["wall_s"]) == pytest.approx(first.rows[i]["wall_s"], rel=1e-5)
+
+
+def test_resume_runs_again_a_short_cache_a_changed_parameter_and_a_failure(tmp_path):
+    path = write_sweep(tmp_path)
+    out = tmp_path / "out"
+    first = run_sweep(load_sweep(path), InlineBackend("cpu"), progress=False)
+    # Variant 0: a cache cut short (a run killed after 2 frames), its sidecar still saying ok.
+    from warp_verlet.runner import run_scene
+
+    sweep = load_sweep(path)
+    run_scene(sweep.variants[0].scene, output=out / f"{first.rows[0]['name']}.usdc", device="cpu", frames=2)
+    # Variant 1: the sidecar of another parameter set.
+    side = out / f"{first.rows[1]['name']}.json"
+    side.write_text(json.dumps({**json.loads(side.read_text()), "hash": "0" * 20}))
+    # Variant 3: recorded as failed.
+    side = out / f"{first.rows[3]['name']}.json"
+    side.write_text(json.dumps({**json.loads(side.read_text()), "status": "diverged"}))
+    second = run_sweep(sweep, InlineBackend("cpu"), progress=False)
+    assert second.ran == [0, 1, 3] and second.resumed == [2]
+    check_rows_match_caches(out, 4)
+    # A changed base scene changes every hash: nothing is resumed.
+    (tmp_path / "base.toml").write_text((tmp_path / "base.toml").read_text().replace("iterations = 2", "iterations = 3"))
+    third = run_sweep(load_sweep(path), InlineBackend("cpu"), progress=False)
+    assert third.ran == [0, 1, 2, 3] and third.resumed == []
+
+
+def test_a_worker_that_dies_is_recorded_as_killed_and_the_rest_go_on():
+    backend = LocalBackend([Slot("cpu", 1)] * 2)
+    outcomes = {o.key: o for o in backend.run(square_or_die, [(k, k) for k in (2, 13, 3, 7, 4, 5)])}
+    assert sorted(outcomes) == [2, 3, 4, 5, 7, 13]
+    assert outcomes[13].status == "killed" and "SIGKILL" in outcomes[13].error and "alone" in outcomes[13].error
+    assert outcomes[7].status == "error" and "ValueError: seven is refused" in outcomes[7].error
+    for k in (2, 3, 4, 5):
+        assert outcomes[k].status == "done" and outcomes[k].value["value"] == k * k, outcomes[k]
+        assert outcomes[k].value["device"] == "cpu"
+
+
+def test_local_pool_pins_one_variant_per_slot():
+    backend = LocalBackend([Slot("cpu", 1), Slot("cpu", 1)])
+    outcomes = list(backend.run(square_or_die, [(k, k) for k in range(6)]))
+    assert sorted(o.value["value"] for o in outcomes) == [k * k for k in range(6)]
+    assert len({o.value["pid"] for o in outcomes}) <= 2 and os.getpid() not in {o.value["pid"] for o in outcomes}
+    assert backend.timing_note.startswith("in parallel")
+    assert LocalBackend([Slot("cpu", 1)]).timing_note.startswith("isolated")
+    assert LocalBackend([Slot("cuda:0"), Slot("cuda:1")]).timing_note.startswith("one variant per GPU")
+
+
+def test_device_slots():
+    assert device_slots("cpu", 2, None) == [Slot("cpu", max(1, os.cpu_count() // 2))] * 2 or os.cpu_count() is None
+    assert device_slots("cpu", 3, 4) == [Slot("cpu", 4)] * 3
+    with pytest.raises(Exception, match="at least 1 worker"):
+        device_slots("cpu", 0)
+    with pytest.raises(Exception, match="expected a device"):
+        device_slots("tpu", 1)
+
+
+# ---------------------------------------------------------------------------------------------- Ctrl-C
+
+SLOW_SWEEP = """\
+[sweep]
+scene = "base.toml"
+output = "{out}"
+frames = 400
+
+[axes]
+"cloth.0.resolution" = [[24, 24]]
+simulation.substeps = [8, 9, 10, 11, 12, 13]
+"""
+
+
+def test_ctrl_c_stops_cleanly_and_the_sweep_resumes(tmp_path):
+    path = write_sweep(tmp_path, SLOW_SWEEP)
+    out = tmp_path / "out"
+    command = [sys.executable, "-m", "warp_verlet", "sweep", str(path), "--device", "cpu", "--workers", "1", "-q"]
+    proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    deadline = time.monotonic() + 300
+    while time.monotonic() < deadline and proc.poll() is None:  # wait for the first finished variant
+        sidecars = list(out.glob("*.json"))
+        if sidecars:
+            break
+        time.sleep(0.2)
+    assert proc.poll() is None, proc.communicate()
+    os.killpg(proc.pid, signal.SIGINT)  # what Ctrl-C in a terminal does: the whole process group
+    stdout, stderr = proc.communicate(timeout=120)
+    assert proc.returncode == 130, stderr
+    assert "run the same command again to resume" in stderr
+    rows = read_rows(out / "sweep.csv")
+    statuses = [r["status"] for r in rows]
+    assert set(statuses) <= {"ok", "interrupted"} and "ok" in statuses and "interrupted" in statuses, statuses
+    for r in rows:  # consistent: an ok row has its complete cache and sidecar; an interrupted one no sidecar
+        sidecar = out / f"{r['name']}.json"
+        if r["status"] == "ok":
+            assert cache_problems(Path(r["output"]), 400) == [] and json.loads(sidecar.read_text())["status"] == "ok"
+        else:
+            assert not sidecar.exists() and "interrupted" in r["error"]
+    done = [int(r["index"]) for r in rows if r["status"] == "ok"]
+    again = run_sweep(load_sweep(path), InlineBackend("cpu"), progress=False)
+    assert again.resumed == done and sorted(again.ran) == [i for i in range(6) if i not in done]
+    assert [r["status"] for r in again.rows] == ["ok"] * 6
+
+
+# ---------------------------------------------------------------------------------------------- command line
+
+def test_cli_sweep_runs_resumes_and_reports(tmp_path, capsys):
+    path = write_sweep(tmp_path, DIVERGING_SWEEP)
+    assert main(["sweep", str(path), "--device", "cpu", "--workers", "2", "-q"]) == 1  # one variant diverged
+    text = capsys.readouterr().out
+    assert "3 variants: 2 ok, 1 diverged (3 run now, 0 done before)" in text
+    assert "001_gravity=0_-1e+30_0: diverged: simulation diverged at frame 1" in text
+    assert main(["sweep", str(path), "--device", "cpu", "--workers", "1", "-q"]) == 1
+    assert "(1 run now, 2 done before)" in capsys.readouterr().out
+    assert main(["sweep", str(path), "--dry-run"]) == 0
+    listing = capsys.readouterr().out
+    assert "000_gravity=0_-9.81_0" in listing and "valid sweep, 3 variants" in listing
+
+
+def test_cli_sweep_errors(tmp_path, capsys, monkeypatch):
+    path = write_sweep(tmp_path)
+    bad = tmp_path / "bad.toml"
+    bad.write_text('[sweep]\nscene = "base.toml"\n[axes]\n"cloth.0.mass" = [0.2, -1.0]\n')
+    assert main(["sweep", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert f"error: {bad}: axes.cloth.0.mass: the value -1 gives an invalid scene" in err
+    assert "cloth[0].mass: expected a number in (0.0, inf), got -1.0" in err
+    assert main(["sweep", str(path), "--workers", "2", "--cpus-per-variant", "1"]) == 1
+    assert "Ray's" in capsys.readouterr().err
+    monkeypatch.setitem(sys.modules, "ray", None)  # as if Ray were not installed
+    assert main(["sweep", str(path), "--device", "cpu", "--ray"]) == 1
+    assert "pip install 'warp-verlet[ray]'" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()  # nothing ran
+
+
+def test_example_sweep_file_is_valid():
+    example = Path(__file__).resolve().parent.parent / "scenes" / "sweeps" / "wind_stiffness.toml"
+    sweep = load_sweep(example)
+    assert len(sweep.variants) >= 4 and sweep.base.name == "wind_sheet.toml"
+    assert all(math.isfinite(v.scene.simulation.wind[2]) for v in sweep.variants)
