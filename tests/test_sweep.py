@@ -75,8 +75,9 @@ def test_a_diverging_variant_is_recorded_and_the_others_succeed(tmp_path):
     bad = rows[1]
     assert "diverged at frame 1" in bad["error"] and "beyond position_bound" in bad["error"]
     assert bad["frames"] == "0" and bad["stretch_rms"] == ""
-    # The diverged run's cache holds the frames before the divergence (frame 0) and is still a valid file.
-    assert cache_problems(Path(bad["output"]), 0) == []
+    # The diverged run's frames before the divergence (frame 0) are in its partial file (output_file.py), a
+    # valid cache; the variant's own cache path stays free, so a re-run runs it again.
+    assert bad["output"].endswith(".partial.usdc") and cache_problems(Path(bad["output"]), 0) == []
     for r in (rows[0], rows[2]):
         assert cache_problems(Path(r["output"]), 3) == [] and r["error"] == ""
     assert json.loads((tmp_path / "out" / f"{bad['name']}.json").read_text())["status"] == "diverged"

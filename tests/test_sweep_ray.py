@@ -52,9 +52,9 @@ def test_ray_gives_the_local_summary_and_bit_identical_caches(tmp_path, ray_inst
     assert sorted(remote.ran) == sorted(local.ran) == list(range(len(local.rows)))
     rows_local, rows_ray = read_rows(tmp_path / "local" / "sweep.csv"), read_rows(tmp_path / "ray" / "sweep.csv")
     same_rows(rows_local, rows_ray, tmp_path / "local", tmp_path / "ray")
-    for r in rows_ray:
-        a, b = tmp_path / "local" / f"{r['name']}.usdc", tmp_path / "ray" / f"{r['name']}.usdc"
-        assert filecmp.cmp(a, b, shallow=False), r["name"]  # byte for byte
+    for r in rows_ray:  # the caches, or a failed variant's partial file, where each row says it is
+        a, b = tmp_path / "local" / Path(r["output"]).name, tmp_path / "ray" / Path(r["output"]).name
+        assert Path(r["output"]) == b and filecmp.cmp(a, b, shallow=False), r["name"]  # byte for byte
     statuses = [r["status"] for r in rows_ray]
     if text is DIVERGING_SWEEP:
         assert statuses == ["ok", "diverged", "ok"] and "diverged at frame 1" in rows_ray[1]["error"]

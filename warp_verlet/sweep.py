@@ -561,22 +561,35 @@ def run_variant(task: dict, slot) -> dict:
         output = shipped / output.name
     row: dict = {"device": slot.device, "host": socket.gethostname()}
     threads = slot.threads if slot.device == "cpu" else None
+    written = output
     try:
         summary = run_scene(task["scene"], output=output, device=slot.device, threads=threads)
         row.update(status="ok", wall_s=summary.wall_seconds, frames=summary.frames, stretch_rms=summary.stretch_rms,
                    stretch_max=summary.stretch_max, torn=summary.torn, device=summary.device)
     except DivergenceError as exc:
         row.update(status="diverged", error=str(exc), frames=exc.frame - 1)
+        written = _frames_kept(exc, output)
     except WarpVerletError as exc:
         row.update(status="failed", error=f"{type(exc).__name__}: {exc}")
+        written = _frames_kept(exc, output)
+    if written != output:  # a run that did not finish keeps its frames in NAME.partial.EXT (output_file.py)
+        row["output"] = str(Path(task["output"]).with_name(written.name))
     row["task_s"] = time.perf_counter() - started
     if shipped is not None:
-        if output.exists():
-            row["_files"] = {output.name: output.read_bytes()}
+        if written.exists():
+            row["_files"] = {written.name: written.read_bytes()}
         import shutil
 
         shutil.rmtree(shipped, ignore_errors=True)
     return row
+
+
+def _frames_kept(exc: BaseException, output: Path) -> Path:
+    """Where a failed run left its frames: its partial file, or ``output`` itself when it wrote none."""
+    from .output_file import output_report
+
+    report = output_report(exc)
+    return report.partial if report is not None and report.partial is not None else output
 
 
 def cache_problems(path: Path, frames: int) -> list[str]:
