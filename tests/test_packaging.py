@@ -27,3 +27,17 @@ def test_kernels_install_under_the_package_only(tmp_path):
     spec, name = out.stdout.split()[-2:]  # Warp may print its banner first
     assert spec == "None"
     assert name == "warp_verlet.kernels.relax"
+
+
+def test_a_source_checkout_maps_its_kernels_like_an_install(tmp_path):
+    """Without site-packages (-S: no install, no editable finder) and with only the checkout on sys.path, as
+    Ray's workers and `python -m` in the checkout see it: warp_verlet.kernels is the checkout's kernels/, and
+    the mapping loads no top-level "kernels" module (the checkout's root on sys.path exposes its folders, so
+    one could be imported by name there, but nothing here does)."""
+    probe = ("import sys; sys.path.insert(0, sys.argv[1]); import warp_verlet.kernels as k; "
+             "print(k.__file__, k.__name__, 'kernels' in sys.modules)")
+    out = subprocess.run([sys.executable, "-S", "-c", probe, str(REPO)], cwd=tmp_path, capture_output=True, text=True,
+                         check=True)
+    kernels_file, name, top_level = out.stdout.split()[-3:]
+    assert Path(kernels_file) == REPO / "kernels" / "__init__.py"
+    assert (name, top_level) == ("warp_verlet.kernels", "False")
