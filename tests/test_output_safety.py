@@ -27,30 +27,13 @@ from warp_verlet import output_file
 from warp_verlet.cli import main
 from warp_verlet.errors import DiskFullError, OutputBusyError, OutputError, WarpVerletError
 from warp_verlet.output_file import CacheOutput, estimate_cache, output_report
+from test_cli import SCENE as CLI_SCENE
 from warp_verlet.runner import run_scene
 from warp_verlet.scene import load_scene
 from warp_verlet.usd_writer import CachedShape, PointCacheWriter, validate_cache
 
-SCENE = """
-[simulation]
-fps = 30
-frames = 6
-substeps = 2
-iterations = 4
-damping = 0.6
-
-[output]
-path = "small.usdc"
-save_every = 2
-
-[[cloth]]
-name = "sheet"
-resolution = [6, 7]
-size = [0.5, 0.6]
-origin = [0.0, 1.0, 0.0]
-sticks = ["structural", "shear"]
-pins = ["top-left", "top-right"]
-"""
+# test_cli's small scene, its first cloth only (one cloth keeps the frame sizes simple to reason about).
+SCENE = CLI_SCENE[:CLI_SCENE.index("[[cloth]]", CLI_SCENE.index("[[cloth]]") + 1)]
 # The same scene gone wrong: 1000 m/s^2 and no pins take the cloth past a 3 m bound during frame 3.
 DIVERGING = SCENE.replace("damping = 0.6", "damping = 0.0\ngravity = [0.0, -1000.0, 0.0]\nposition_bound = 3.0") \
     .replace('pins = ["top-left", "top-right"]', "pins = []")
