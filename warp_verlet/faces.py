@@ -152,7 +152,7 @@ def edge_keys(pairs: np.ndarray, base: int) -> np.ndarray:
     return lo.astype(np.int64) * base + hi
 
 
-def _side_table(faces: Faces, base: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def side_table(faces: Faces, base: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Every distinct side as a key (see ``edge_keys``), sorted: (keys (K,), where each key's faces start
     in the last array (K,), how many faces (K,), the faces of all sides grouped by key, in index order)."""
     pairs, face_of_side = faces.sides()
@@ -195,7 +195,7 @@ def edge_faces(faces: Faces, edges: np.ndarray) -> np.ndarray:
         return out
 
     base = int(faces.indices.max()) + 1
-    unique, start, count, face_of_side = _side_table(faces, base)
+    unique, start, count, face_of_side = side_table(faces, base)
     inside = (edges < base).all(axis=1)  # an edge to a vertex no face uses is no side (and would not fit a key)
     wanted = edge_keys(np.where(inside[:, None], edges, 0), base)
     at = np.minimum(np.searchsorted(unique, wanted), len(unique) - 1)

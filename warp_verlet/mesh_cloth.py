@@ -23,13 +23,13 @@ This module uses numpy only (no warp, no pxr, no trimesh).
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from .errors import WarpVerletError
-from .faces import Faces, edge_keys, next_corner
+from .faces import Faces, edge_keys, next_corner, side_table
 from .tethers import connected_labels
 
 # The default weld distance, as a fraction of the mesh's bounding-box diagonal: far below any edge a cloth
@@ -77,6 +77,9 @@ class ClothMesh:
     faces: Faces  # the source faces in particle indices (same face order)
     weld_distance: float  # m
     non_manifold_edges: int  # edges with more than two faces (no bend stick crosses them)
+    # stick_families' answers by family tuple: the scene's counts (stages.Need) and the topology ask for the
+    # same sticks, seconds of work at 1024^2, so they are built once per mesh.
+    _sticks: dict = field(default_factory=dict, repr=False)
 
     @property
     def particle_count(self) -> int:
@@ -213,7 +216,7 @@ def prepare(source: SourceMesh, weld_distance: float | None = None) -> ClothMesh
                         f"{area[f]:.3g} m^2 is nothing beside its longest side {longest[f]:.3g} m (collinear "
                         f"corners; {len(flat)} such faces)")
 
-    counts = _edge_face_counts(welded_faces)
+    counts = side_table(welded_faces, particle_points.shape[0])[2]  # faces beside each distinct edge
     crowded = int((counts > 2).sum())
     if crowded:
         edges = "1 edge is" if crowded == 1 else f"{crowded} edges are"
@@ -221,13 +224,6 @@ def prepare(source: SourceMesh, weld_distance: float | None = None) -> ClothMesh
                       "no bend stick crosses those edges", NonManifoldWarning, stacklevel=2)
     return ClothMesh(source=source, particle_of_vertex=particle_of_vertex, particle_points=particle_points,
                      faces=welded_faces, weld_distance=distance, non_manifold_edges=crowded)
-
-
-def _edge_face_counts(faces: Faces) -> np.ndarray:
-    """How many faces each distinct edge has."""
-    pairs, _ = faces.sides()
-    _, counts = np.unique(edge_keys(pairs, int(faces.indices.max()) + 1), return_counts=True)
-    return counts
 
 
 def _unique_pairs(pairs: np.ndarray, base: int, exclude: np.ndarray | None = None) -> np.ndarray:
@@ -242,7 +238,15 @@ def _unique_pairs(pairs: np.ndarray, base: int, exclude: np.ndarray | None = Non
 
 def stick_families(mesh: ClothMesh, families: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
     """The sticks of the listed families, in particle indices: ((M, 2) int32 (low, high), (M,) int8 family
-    code), family after family in STICK_FAMILIES order."""
+    code), family after family in STICK_FAMILIES order. Built once per mesh and families; read-only."""
+    if families not in mesh._sticks:
+        sticks, family = _build_stick_families(mesh, families)
+        sticks.flags.writeable = family.flags.writeable = False
+        mesh._sticks[families] = (sticks, family)
+    return mesh._sticks[families]
+
+
+def _build_stick_families(mesh: ClothMesh, families: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
     faces = mesh.faces
     base = mesh.particle_count
     pairs, face_of_side = faces.sides()

@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .errors import usd_cause
 from .faces import Faces
 from .mesh_cloth import MeshError, SourceMesh
 
@@ -84,16 +85,6 @@ def _read_trimesh(path: Path, transform: np.ndarray) -> SourceMesh:
                       uvs=uvs, uv_interpolation="vertex" if uvs is not None else None)
 
 
-def _usd_error(path: Path, exc: Exception) -> str:
-    """The plain cause of a Tf error, without USD's C++ source locations."""
-    text = str(exc).strip()
-    for marker in ("Failed to open layer", "Cannot determine file format", "Could not open"):
-        if marker in text:
-            return f"{path}: cannot open as USD ({marker.lower()})"
-    lines = [ln.strip() for ln in text.splitlines() if ln.strip() and "Error in '" not in ln]
-    return f"{path}: cannot open as USD ({lines[-1] if lines else 'unreadable'})"
-
-
 def _read_usd(path: Path, prim_path: str, transform: np.ndarray, named) -> SourceMesh:
     from pxr import Sdf, Tf, Usd, UsdGeom
 
@@ -102,7 +93,7 @@ def _read_usd(path: Path, prim_path: str, transform: np.ndarray, named) -> Sourc
     try:
         stage = Usd.Stage.Open(str(path), Usd.Stage.LoadAll)
     except Tf.ErrorException as exc:
-        raise MeshError(_usd_error(path, exc)) from None
+        raise MeshError(f"{path}: cannot open as USD ({usd_cause(exc)})") from None
     if stage is None:
         raise MeshError(f"{path}: cannot open as USD")
     prim = stage.GetPrimAtPath(prim_path)
