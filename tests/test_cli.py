@@ -157,20 +157,25 @@ def test_module_and_console_script_behave_the_same(scene_file):
     assert "cloth[0].mass" in module.stderr and "Traceback" not in module.stderr
 
 
-def test_ctrl_c_leaves_a_valid_cache_of_the_frames_done(scene_file, monkeypatch, capsys):
-    # Interrupt after frame 3, as a KeyboardInterrupt from the terminal would arrive between frames.
+def interrupt_runs_after(monkeypatch, last: int) -> None:
+    """Make run_scene raise KeyboardInterrupt after frame ``last``, as Ctrl-C from the terminal would arrive
+    between frames."""
     from warp_verlet import runner
 
     real = runner.run_scene
 
     def interrupted(*args, **kwargs):
         def progress(frame):
-            if frame == 3:
+            if frame == last:
                 raise KeyboardInterrupt
 
         return real(*args, **dict(kwargs, progress=progress))
 
     monkeypatch.setattr(runner, "run_scene", interrupted)
+
+
+def test_ctrl_c_leaves_a_valid_cache_of_the_frames_done(scene_file, monkeypatch, capsys):
+    interrupt_runs_after(monkeypatch, 3)
     assert main(["run", str(scene_file), "--device", "cpu", "-q"]) == 130
     assert "interrupted: frames 0 to 3 are in small.partial.usdc; small.usdc was not written" in capsys.readouterr().err
     cache = scene_file.parent / "small.partial.usdc"

@@ -27,7 +27,7 @@ from warp_verlet import output_file
 from warp_verlet.cli import main
 from warp_verlet.errors import DiskFullError, OutputBusyError, OutputError, WarpVerletError
 from warp_verlet.output_file import CacheOutput, estimate_cache, output_report
-from test_cli import SCENE as CLI_SCENE
+from test_cli import SCENE as CLI_SCENE, interrupt_runs_after
 from warp_verlet.runner import run_scene
 from warp_verlet.scene import load_scene
 from warp_verlet.usd_writer import CachedShape, PointCacheWriter, validate_cache
@@ -82,18 +82,7 @@ def test_a_rerun_that_diverges_keeps_the_previous_cache_byte_for_byte(work, good
 
 
 def test_a_rerun_interrupted_by_ctrl_c_keeps_the_previous_cache(work, good_cache, monkeypatch, capsys):
-    from warp_verlet import runner
-
-    real = runner.run_scene
-
-    def interrupted(*args, **kwargs):
-        def progress(frame):
-            if frame == 3:
-                raise KeyboardInterrupt
-
-        return real(*args, **dict(kwargs, progress=progress))
-
-    monkeypatch.setattr(runner, "run_scene", interrupted)
+    interrupt_runs_after(monkeypatch, 3)
     capsys.readouterr()
     assert run("small.toml") == 130
     assert "interrupted: frames 0 to 3 are in small.partial.usdc; small.usdc is as it was" in capsys.readouterr().err

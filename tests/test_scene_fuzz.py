@@ -297,9 +297,13 @@ def test_extreme_numbers_load_in_range_or_are_refused(tmp_path, path, number):
     except SceneError as err:
         assert names_key(err, key), f"{key} = {number!r}: {err}"
         return
-    value = loaded_value(scene, path)
     # It loaded: the value is the one written (as a float where a number is expected), of the right type,
     # finite, and inside the documented range.
+    assert_number_loaded(loaded_value(scene, path), number, integer, lo, hi, lo_open, hi_open)
+
+
+def assert_number_loaded(value, number, integer: bool, lo, hi, lo_open: bool, hi_open: bool) -> None:
+    """``value`` is ``number`` as written (a float where a number is expected), finite, within [lo, hi]."""
     if integer:
         assert isinstance(value, int) and value == number
     else:

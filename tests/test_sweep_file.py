@@ -4,7 +4,6 @@ expected, as for scene files; ranges, random draws, names and hashes; and fuzzin
 
 from __future__ import annotations
 
-import math
 import sys
 from pathlib import Path
 
@@ -13,7 +12,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from sweep_helpers import BASE_SCENE
-from test_scene_fuzz import RANGES, extreme_numbers, full_scene, loaded_value, same
+from test_scene_fuzz import RANGES, assert_number_loaded, extreme_numbers, full_scene, loaded_value, same
 from toml_text import dump
 from warp_verlet.errors import SceneError
 from warp_verlet.sweep import Sweep, load_sweep, parameter_hash
@@ -283,15 +282,7 @@ def test_numeric_axis_values_load_in_range_or_name_the_axis(tmp_path, path, spec
         assert err.key == f"axes.{axis}", f"{axis} = {number!r}: {err}"
         return
     (variant,) = sweep.variants
-    value = loaded_value(variant.scene, path)
-    if integer:
-        assert isinstance(value, int) and value == number
-    else:
-        assert isinstance(value, float) and value == float(number) and math.isfinite(value)
-    if lo is not None:
-        assert value > lo if lo_open else value >= lo
-    if hi is not None:
-        assert value < hi if hi_open else value <= hi
+    assert_number_loaded(loaded_value(variant.scene, path), number, integer, lo, hi, lo_open, hi_open)
 
 
 def test_every_byte_prefix_of_the_shipped_sweeps_is_an_error_or_a_sweep(tmp_path):

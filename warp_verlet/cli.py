@@ -25,37 +25,30 @@ from .output_file import output_report
 from .scene import load_scene
 
 
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number of frames, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected at least 1 frame, got {value}")
-    return value
+def _count(plural: str, too_few: str, most: int | None = None):
+    """An argparse type: a whole number of ``plural`` from 1 (to ``most``), each error naming what it counts.
+    ``too_few`` is the message for a value under 1 (``{value}`` filled in)."""
 
-
-def _thread_count(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number of threads, got {text!r}") from None
-    if not 1 <= value <= MAX_THREADS:
-        raise argparse.ArgumentTypeError(f"expected a number of threads in 1 .. {MAX_THREADS}, got {value}")
-    return value
-
-
-def _at_least_one(what: str):
     def parse(text: str) -> int:
         try:
             value = int(text)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"expected a whole number of {what}, got {text!r}") from None
+            raise argparse.ArgumentTypeError(f"expected a whole number of {plural}, got {text!r}") from None
         if value < 1:
-            raise argparse.ArgumentTypeError(f"expected at least 1 ({what}), got {value}")
+            raise argparse.ArgumentTypeError(too_few.format(value=value))
+        if most is not None and value > most:
+            raise argparse.ArgumentTypeError(f"expected a number of {plural} in 1 .. {most}, got {value}")
         return value
 
     return parse
+
+
+_positive_int = _count("frames", "expected at least 1 frame, got {value}")
+_thread_count = _count("threads", f"expected a number of threads in 1 .. {MAX_THREADS}, got {{value}}", MAX_THREADS)
+
+
+def _at_least_one(what: str):
+    return _count(what, f"expected at least 1 ({what}), got {{value}}")
 
 
 _SLICE_PART = re.compile(r"\s*(-?\d+)?\s*")  # a whole number, or nothing
