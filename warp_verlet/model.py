@@ -238,6 +238,18 @@ class Model:
         torn[self._tear_entry_stick[stick_weight == 0.0]] = True
         return torn
 
+    def restore_tears(self, state, torn_pairs: np.ndarray) -> None:
+        """Mark the sticks between the particle pairs ``torn_pairs`` (K, 2) torn in ``state``: tears carried
+        over from a simulator of the same particles whose model was rebuilt (another stick order). Pairs that
+        are no stick here are ignored."""
+        def key(pairs):
+            pairs = np.sort(np.asarray(pairs, np.int64).reshape(-1, 2), axis=1)
+            return pairs[:, 0] * self.particle_count + pairs[:, 1]
+        torn = np.isin(key(self.host_sticks), key(torn_pairs))
+        weight = np.where(torn[self._tear_entry_stick], 0.0, 1.0).astype(np.float32)
+        state.stick_weight.assign(weight)
+        state.torn_entries.assign(np.array([int((weight == 0.0).sum())], np.int32))
+
     def hidden_faces(self, torn: np.ndarray) -> list[np.ndarray]:
         """Per cloth, the sorted indices of the faces that border a torn structural stick."""
         faces = self.stick_faces[torn]

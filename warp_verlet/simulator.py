@@ -19,7 +19,7 @@ cut every colour over several threads (warp_verlet/cpu_team.py); the result is b
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Callable
 
 import numpy as np
@@ -27,7 +27,7 @@ import warp as wp
 
 from warp_verlet.kernels.guard import find_diverged
 
-from .errors import ArgumentError, WarpVerletError
+from .errors import ArgumentError, StateError, WarpVerletError
 from .memory import available_host_bytes, check_fits
 from .model import Model
 from .scene import Scene
@@ -96,6 +96,8 @@ class Simulator:
         self._accumulator = 0.0
         self._first_diverged = None  # allocated by the first divergence check
         self._frame_graphs: dict[int, object] = {}  # substeps -> the captured frame
+        self._substep_in_frame = 0  # substeps advance() has taken since the last frame boundary
+        self.clamped_seconds = 0.0  # what the last advance() dropped from its bank (a stall)
         self.budget = self._new_budget()
         # A frame's substeps are captured once and replayed: a CUDA graph, or on the CPU Warp's own capture
         # (replayed in C++: 2.4 -> 1.2 ms per frame at 32^2, bit-identical). Threaded relaxation needs its
@@ -148,6 +150,7 @@ class Simulator:
             self._initial = State(self.model)
         self.state.assign(self._initial)
         self._accumulator = 0.0
+        self._substep_in_frame = 0
         self.budget = self._new_budget()
 
     # ------------------------------------------------------------------ stepping
@@ -162,6 +165,8 @@ class Simulator:
         CPU capture) once the first frame (which initialises x_prev) has run, unless the CPU relaxation is
         threaded. With a target_stretch, the budget then chooses the next frame's substeps from this frame's
         stretch (one host copy of the positions per frame)."""
+        if not self.at_frame_boundary:
+            raise StateError("step_frame() runs whole frames, but advance() stopped mid-frame: finish_frame() first")
         n, dt, state = self.substeps, self.dt, self.state
         if state.dt_prev is not None:
             self.solver.check_step(state, dt)
@@ -180,25 +185,107 @@ class Simulator:
                 wp.capture_launch(self._frame_graphs[n])
                 state.time += n * dt
                 state.steps += n
-        if self.budget is not None:
-            self.budget.observe(self.stretch().rms)
+        self._end_frame()
 
-    def advance(self, frame_time: float) -> float:
+    def advance(self, frame_time: float, on_frame: Callable[[], bool | None] | None = None) -> float:
         """Real-time stepping: bank ``frame_time`` seconds, run as many fixed substeps as it pays for, and
         return the interpolation factor alpha in [0, 1) for :meth:`render_positions`.
 
         The bank is clamped to ``max_frame_time`` so that a stall (a debugger pause, a slow frame) cannot
-        queue more substeps than the next frame can afford: the spiral of death."""
+        queue more substeps than the next frame can afford: the spiral of death. ``clamped_seconds`` says how
+        much the last call dropped.
+
+        ``on_frame()`` is called each time a frame's ``substeps`` substeps are complete (a frame is 1/fps
+        simulated seconds, whatever the substeps); when it returns True, stepping stops there, at the frame
+        boundary, and the rest of the bank waits for the next call (``advance(0.0)`` spends it): the moment to
+        :meth:`retune` or record a frame."""
         if not (frame_time >= 0.0 and np.isfinite(frame_time)):
             raise ArgumentError(f"frame_time must be a finite number of seconds >= 0, got {frame_time}")
+        banked = self._accumulator + frame_time
+        self.clamped_seconds = max(banked - self.settings.max_frame_time, 0.0)
+        self._accumulator = min(banked, self.settings.max_frame_time)
         dt = self.dt
-        self._accumulator = min(self._accumulator + frame_time, self.settings.max_frame_time)
         # The tiny epsilon keeps 1/60 s from paying for 3.9999999 substeps of 1/240 s instead of 4.
-        n = int(self._accumulator / dt + 1e-9)
-        for _ in range(n):
+        while self._accumulator / dt + 1e-9 >= 1.0:
             self.solver.step(self.state, dt)
-        self._accumulator = max(self._accumulator - n * dt, 0.0)
+            self._accumulator = max(self._accumulator - dt, 0.0)
+            self._substep_in_frame += 1
+            if self._substep_in_frame == self.substeps:
+                self._end_frame()
+                dt = self.dt  # a target_stretch budget may have chosen other substeps for the next frame
+                if on_frame is not None and on_frame():
+                    break
         return self._accumulator / dt
+
+    def finish_frame(self, on_frame: Callable[[], bool | None] | None = None) -> None:
+        """Run substeps up to the next frame boundary (a whole frame when at one), outside real time: "step
+        one frame" of a paused viewer. The bank is left as it is."""
+        with wp.ScopedDevice(self.device):
+            while True:
+                self.step()
+                self._substep_in_frame += 1
+                if self._substep_in_frame == self.substeps:
+                    break
+        self._end_frame()
+        if on_frame is not None:
+            on_frame()
+
+    @property
+    def at_frame_boundary(self) -> bool:
+        """Whether the substeps taken make whole frames (where :meth:`retune` may change them)."""
+        return self._substep_in_frame == 0
+
+    def _end_frame(self) -> None:
+        self._substep_in_frame = 0
+        if self.budget is not None:
+            self.budget.observe(self.stretch().rms)
+
+    def retune(self, **changes) -> None:
+        """Change simulation settings that the model does not hold (gravity, wind, damping, substeps,
+        iterations, target_stretch, ...) from the next substep on: a new solver over the same model and state.
+        Only at a frame boundary, so every frame stays ``substeps`` equal steps of 1/fps seconds. Settings
+        that need another model (another precision) raise ArgumentError: build a new Simulator then
+        (:meth:`take_state`)."""
+        if not self.at_frame_boundary:
+            raise StateError("retune() changes the substeps of whole frames: call it at a frame boundary "
+                             "(advance()'s on_frame, or after finish_frame())")
+        settings = replace(self.settings, **changes)
+        scene = replace(self.scene, simulation=settings)
+        need = Need.of(scene)
+        if need.precision != self.model.precision:
+            raise ArgumentError(f"these settings need {need.precision} positions and this model holds "
+                                f"{self.model.precision}: build a new Simulator")
+        solver = VerletSolver(self.model, settings, need, self.threads if self.device.is_cpu else None)
+        if 1.0 / (settings.fps * settings.substeps) < solver.min_dt:
+            raise WarpVerletError(solver.too_small(1.0 / (settings.fps * settings.substeps), scene_dt=True))
+        self.solver.close()
+        self.scene, self.settings, self.solver = scene, settings, solver
+        self.min_dt = solver.min_dt
+        self._frame_graphs.clear()  # they replay the old solver's launches
+        if changes.keys() & {"target_stretch", "substeps", "max_substeps"}:
+            self.budget = self._new_budget()
+
+    def take_state(self, other: "Simulator") -> None:
+        """Continue from ``other``'s state: a simulator of an edited scene with the same particles (a pin released,
+        another tear threshold) picks up the positions, velocities, time, tears and sphere centres where
+        ``other`` left them, at a frame boundary."""
+        if other.model.particle_count != self.model.particle_count:
+            raise ArgumentError(f"take_state needs the same particles: {other.model.particle_count} there, "
+                                f"{self.model.particle_count} here")
+        if not other.at_frame_boundary:
+            raise StateError("take_state() continues from a frame boundary; the other simulator is mid-frame")
+        mine, theirs = self.state, other.state
+        for name in ("particle_q", "particle_q_inertial", "particle_dq"):
+            getattr(mine, name).assign(getattr(theirs, name).numpy().astype(self.model.host_position_dtype))
+        if theirs.sphere_centres is not None and mine.sphere_centres is not None:
+            wp.copy(mine.sphere_centres, theirs.sphere_centres)
+        if theirs.collider_clock is not None and mine.collider_clock is not None:
+            wp.copy(mine.collider_clock, theirs.collider_clock)
+        if self.model.tears and other.model.tears and other.torn_count():
+            self.model.restore_tears(mine, other.model.host_sticks[other.torn_sticks()])
+            self.sync_tears()
+        mine.time, mine.steps, mine.dt_prev = theirs.time, theirs.steps, theirs.dt_prev
+        self._accumulator = other._accumulator
 
     # ------------------------------------------------------------------ reading state
     def positions(self) -> np.ndarray:
