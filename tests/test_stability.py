@@ -212,7 +212,7 @@ def test_an_overflowing_plane_normal_keeps_its_direction_and_the_plane_holds(dev
     import numpy as np
 
     from warp_verlet import Simulator
-    from warp_verlet.usd_writer import _plane_corners, CachedPlane
+    from warp_verlet.usd_writer import plane_corners, CachedPlane
 
     scene = _scene(tmp_path, EDGE + '[[collider]]\ntype = "plane"\nnormal = [1e300, 1e300, 0.0]\n')
     (plane,) = scene.planes
@@ -222,7 +222,7 @@ def test_an_overflowing_plane_normal_keeps_its_direction_and_the_plane_holds(dev
         sim.step_frame()
     height = sim.positions() @ np.asarray(plane.normal)  # the plane passes through the origin
     assert np.isfinite(height).all() and height.min() >= -1e-4  # the cloth fell onto the plane, not through it
-    corners = _plane_corners(CachedPlane(plane.name, plane.point, plane.normal, plane.display_size))
+    corners = plane_corners(CachedPlane(plane.name, plane.point, plane.normal, plane.display_size))
     assert np.isfinite(corners).all()
 
 

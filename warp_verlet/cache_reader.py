@@ -239,9 +239,38 @@ def read_cloths(cache: PointCache, frame: int) -> list[ClothFrame]:
         grid = cloth.grid if cloth.grid and len(points) == cloth.grid[0] * cloth.grid[1] else None
         hidden = _read(cache.path, cloth.prim, "holeIndices", lambda: cloth.prim.GetHoleIndicesAttr().Get(time),
                        where)  # None or empty when the mesh never tears
+        hidden = np.asarray(hidden if hidden is not None else (), np.int64)
+        if cloth.prim.GetFaceVertexCountsAttr().GetNumTimeSamples() > 1:  # torn faces removed from the topology
+            hidden = np.union1d(hidden, _removed_faces(cache.path, cloth, time, where))
         world = _to_world(cloth.prim, time, _finite(cache.path, cloth.prim, points, frame))
-        out.append(ClothFrame(cloth, world, np.asarray(hidden if hidden is not None else (), np.int64), grid))
+        out.append(ClothFrame(cloth, world, hidden, grid))
     return out
+
+
+def _removed_faces(path: Path, cloth: ClothPrim, time: Usd.TimeCode, where: str) -> np.ndarray:
+    """The faces of the cloth's whole topology (its default value) that its topology at ``time`` leaves out: a
+    cache written with torn_faces = "remove" samples the topology without the torn faces, in their order."""
+    counts = _read(path, cloth.prim, "faceVertexCounts", lambda: cloth.prim.GetFaceVertexCountsAttr().Get(time), where)
+    indices = _read(path, cloth.prim, "faceVertexIndices", lambda: cloth.prim.GetFaceVertexIndicesAttr().Get(time),
+                    where)
+    try:
+        now = Faces(np.asarray(counts or [], np.int32), np.asarray(indices or [], np.int32))
+    except ValueError as e:
+        raise PreviewError(f"{path}: {where}: {e}") from e
+    whole = cloth.faces
+    if len(now) == len(whole):
+        return np.zeros(0, np.int64)
+    uniform_whole, uniform_now = whole.as_uniform(), now.as_uniform()
+    if uniform_whole is not None and uniform_now is not None and uniform_whole.shape[1] == uniform_now.shape[1]:
+        row = np.dtype((np.void, uniform_whole.dtype.itemsize * uniform_whole.shape[1]))
+        kept = np.isin(np.ascontiguousarray(uniform_whole).view(row).ravel(),
+                       np.ascontiguousarray(uniform_now.astype(uniform_whole.dtype)).view(row).ravel())
+    else:  # faces of several sizes: compared one by one
+        def split(f: Faces):
+            return [tuple(c) for c in np.split(f.indices, np.cumsum(f.counts)[:-1])]
+        present = set(split(now))
+        kept = np.array([face in present for face in split(whole)], bool)
+    return np.flatnonzero(~kept)
 
 
 def read_frame(cache: PointCache, frame: int) -> FrameGeometry:

@@ -20,7 +20,7 @@ from pathlib import Path
 
 from . import __version__
 from .cpu_team import MAX_THREADS, usable_cores
-from .errors import SceneError, WarpVerletError
+from .errors import SceneError, ServerError, WarpVerletError
 from .output_file import output_report
 from .scene import load_scene
 
@@ -144,7 +144,73 @@ def build_parser() -> argparse.ArgumentParser:
                               "last and evenly spaced ones between) as panels; a GIF at most 120, evenly spaced")
     preview.add_argument("--size", type=parse_size, metavar="WxH",
                          help="image size in pixels (default: 800x800 for a PNG, 480x480 for a GIF)")
+
+    live = commands.add_parser(
+        "live", help="simulate a scene in real time in the browser, with controls (needs the live extra)",
+        description="Serve a live page of the scene at http://HOST:PORT: play, pause, step, reset; wind, "
+                    "substeps, iterations, target stretch, tear threshold; release pins; drag spheres; save "
+                    "what was simulated since the last reset as a USD cache. See the README's Live section.",
+    )
+    live.add_argument("scene", type=Path, help="scene file (TOML, see docs/scenes.md)")
+    live.add_argument("--device", help="cpu, cuda or cuda:N (default: CUDA when present, else CPU)")
+    _server_arguments(live)
+    live.add_argument("--record", type=Path, metavar="PATH",
+                      help="where Save cache writes (default: beside the scene's output, as NAME_live.EXT); "
+                           "the page can change it")
+    live.add_argument("--seconds", type=float, help="stop after this many wall seconds (default: until Ctrl-C)")
+
+    view = commands.add_parser(
+        "view", help="play a USD point cache in the browser: timeline, play/pause, frame slider (no GPU, no Warp)",
+        description="Serve a page that plays a cache written by `warp-verlet run` or by live's Save cache: "
+                    "cloths, ropes, torn faces and colliders.",
+    )
+    view.add_argument("cache", type=Path, help="point cache (.usd, .usdc or .usda)")
+    _server_arguments(view)
+    view.add_argument("--seconds", type=float, help="stop after this many wall seconds (default: until Ctrl-C)")
     return parser
+
+
+def _server_arguments(command) -> None:
+    command.add_argument("--host", default="127.0.0.1",
+                         help="address to serve on (default 127.0.0.1: this machine only). Another address, "
+                              "such as 0.0.0.0, lets other machines drive the page, and warns")
+    command.add_argument("--port", type=int, default=8080, help="port to serve on (default 8080)")
+    command.add_argument("--max-grid-quads", type=_at_least_one("max-grid-quads"), metavar="N",
+                         help="draw a larger grid as a coarser one of N quads a side (default 256); the "
+                              "simulation and caches keep every vertex")
+
+
+def _serve(app, what: str, seconds: float | None) -> int:
+    print(f"{what}: open {app.url} in a browser (Ctrl-C to stop)", flush=True)
+    try:
+        app.run(seconds)
+    except KeyboardInterrupt:
+        pass
+    return 0
+
+
+def _live(args) -> int:
+    from .warp_setup import start_warp
+
+    start_warp(verbose=False, cpu=args.device in (None, "cpu"), note=_note)
+    from .live_app import LiveApp
+    from .live_session import LiveSession
+
+    scene = load_scene(args.scene)
+    app = LiveApp(LiveSession(scene, args.device), args.host, args.port, args.record, args.max_grid_quads)
+    return _serve(app, f"{args.scene}: live", args.seconds)
+
+
+def _view(args) -> int:
+    from .cache_player import CachePlayer
+    from .cache_reader import PreviewError
+
+    try:
+        app = CachePlayer(args.cache, args.host, args.port, args.max_grid_quads)
+    except PreviewError as exc:  # a bad cache: the same exit code as a bad scene
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    return _serve(app, f"{args.cache}", args.seconds)
 
 
 def _validate(args) -> int:
@@ -288,12 +354,13 @@ def _where_the_frames_went(exc: BaseException) -> str:
 def main(argv: list[str] | None = None) -> int:
     warnings.showwarning = _show_warning
     args = build_parser().parse_args(argv)
-    command = {"run": _run, "validate": _validate, "preview": _preview, "sweep": _sweep}[args.command]
+    command = {"run": _run, "validate": _validate, "preview": _preview, "sweep": _sweep, "live": _live,
+               "view": _view}[args.command]
     in_main_thread = threading.current_thread() is threading.main_thread()
     previous = signal.signal(signal.SIGTERM, _terminate) if in_main_thread else None
     try:
         return command(args)
-    except SceneError as exc:
+    except (SceneError, ServerError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     except WarpVerletError as exc:

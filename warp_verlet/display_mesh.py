@@ -45,6 +45,7 @@ class DisplayMesh:
         faces = as_faces(faces)
         self.vertex_count = vertex_count
         self.grid = grid
+        self.rope = len(faces) == 0  # no faces: drawn as a polyline through every vertex
         self.note = ""  # what the screen says when the drawing is coarser than the cloth
         if grid is not None and max(grid) - 1 > max_grid_quads:
             rows, cols = grid

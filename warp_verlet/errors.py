@@ -48,6 +48,11 @@ class DivergenceError(WarpVerletError):
         )
 
 
+class ServerError(WarpVerletError):
+    """A browser view's web server cannot start as asked: a port in use, a host that cannot be bound, viser
+    not installed (a bad argument: exit code 2)."""
+
+
 class OutputError(WarpVerletError):
     """The output path cannot be written."""
 

@@ -109,26 +109,13 @@ def run_scene(
 def _simulate(scene: Scene, output: Path, target: CacheOutput, device: str | None,
               progress: Callable[[int], None] | None, overlap: bool, threads: int | None) -> RunSummary:
     from .simulator import Simulator  # imports warp
-    from .usd_writer import CachedPlane, CachedSphere, PointCacheWriter  # imports pxr
 
     settings = scene.simulation
     sim = Simulator(scene, device, threads=threads)
     model = sim.model
     override = scene.output.kind == "override"
-    shapes = [cached_shape(s.topology, spec, override) for s, spec in zip(model.cloths, scene.cloths)]
-    colliders = [] if override else (
-        [CachedSphere(s.name, s.radius, s.keyframes[0][1], s.moving, s.purpose) for s in scene.spheres]
-        + [CachedPlane(p.name, p.point, p.normal, p.display_size, p.purpose) for p in scene.planes])
     check_initial_state(scene, sim)
-    target.check_space(estimate_cache(shapes, colliders, text=target.partial.suffix == ".usda"),
-                       settings.frames + 1, scene.output.save_every)
-    writer = PointCacheWriter(
-        target.partial, shapes, fps=settings.fps, up_axis=scene.output.up_axis,
-        meters_per_unit=scene.output.meters_per_unit, save_every=scene.output.save_every,
-        metadata={"generator": f"warp-verlet {__version__}", "scene": scene.source, "device": str(sim.device)},
-        colliders=colliders, torn_faces=scene.output.torn_faces, before_save=target.before_save,
-        override_asset=scene.cloths[0].mesh.mesh.source.file if override else None,
-    )
+    writer = open_writer(scene, sim, target, settings.frames + 1)
     to_cache = CacheVertices(model, scene, override)
     start = time.perf_counter()
     points = sim.positions()
@@ -156,12 +143,37 @@ def _simulate(scene: Scene, output: Path, target: CacheOutput, device: str | Non
     )
 
 
-def cached_shape(topology, spec, override: bool):
+def open_writer(scene: Scene, sim, target: CacheOutput, samples: int, every_sphere_moves: bool = False,
+                tears: bool = False):
+    """The point cache writer for ``scene``, writing to ``target``'s partial file, once its disk space for
+    ``samples`` frames is checked. ``every_sphere_moves``: sample every sphere's centre per frame (a live
+    session, where spheres are dragged); ``tears``: author torn faces even for cloths whose scene cannot tear
+    (a live session whose tear threshold was set later)."""
+    from .usd_writer import CachedPlane, CachedSphere, PointCacheWriter  # imports pxr
+
+    override = scene.output.kind == "override"
+    shapes = [cached_shape(s.topology, spec, override, tears) for s, spec in zip(sim.model.cloths, scene.cloths)]
+    colliders = [] if override else (
+        [CachedSphere(s.name, s.radius, s.keyframes[0][1], s.moving or every_sphere_moves, s.purpose)
+         for s in scene.spheres]
+        + [CachedPlane(p.name, p.point, p.normal, p.display_size, p.purpose) for p in scene.planes])
+    target.check_space(estimate_cache(shapes, colliders, text=target.partial.suffix == ".usda"), samples,
+                       scene.output.save_every)
+    return PointCacheWriter(
+        target.partial, shapes, fps=scene.simulation.fps, up_axis=scene.output.up_axis,
+        meters_per_unit=scene.output.meters_per_unit, save_every=scene.output.save_every,
+        metadata={"generator": f"warp-verlet {__version__}", "scene": scene.source, "device": str(sim.device)},
+        colliders=colliders, torn_faces=scene.output.torn_faces, before_save=target.before_save,
+        override_asset=scene.cloths[0].mesh.mesh.source.file if override else None,
+    )
+
+
+def cached_shape(topology, spec, override: bool, tears: bool = False):
     """What the cache writes of one cloth, from its topology: the vertices, faces and UVs of its source."""
     from .usd_writer import CachedShape
 
     return CachedShape(topology.name, topology.cache_faces, topology.uvs, topology.vertex_count,
-                       tears=spec.tear_threshold is not None, uv_interpolation=topology.uv_interpolation,
+                       tears=tears or spec.tear_threshold is not None, uv_interpolation=topology.uv_interpolation,
                        left_handed=topology.left_handed,
                        prim_path=spec.mesh.mesh.source.prim_path if override else None)
 

@@ -501,6 +501,16 @@ def parse_scene(data: dict, file: str = "<scene>", scene_path: Path | None = Non
     cloth_specs = top.take("cloth", cloths)
     collider_specs = top.take("collider", colliders, ())
     top.finish()
+    scene = Scene(source=file, simulation=simulation, output=output, cloths=cloth_specs, colliders=collider_specs)
+    check_scene(scene)
+    return scene
+
+
+def check_scene(scene: Scene) -> None:
+    """The checks across sections (solver against cloths, names, float32 range), one SceneError for the first
+    problem: run by parse_scene, and again on a scene edited in code (a live session's new tear threshold)."""
+    file, simulation, output = scene.source, scene.simulation, scene.output
+    cloth_specs, collider_specs = scene.cloths, scene.colliders
     if simulation.solver == "jacobi":
         for i, spec in enumerate(cloth_specs):
             if spec.compliance:
@@ -529,7 +539,6 @@ def parse_scene(data: dict, file: str = "<scene>", scene_path: Path | None = Non
                 raise SceneError(file, f"{section}[{i}].name", f"expected a unique name, but {n!r} is used twice")
     _check_prim_names(file, cloth_specs, collider_specs)
     _check_float32(file, simulation, cloth_specs, collider_specs)
-    return Scene(source=file, simulation=simulation, output=output, cloths=cloth_specs, colliders=collider_specs)
 
 
 def _check_override(file: str, cloths: tuple[ClothSpec, ...]) -> None:

@@ -100,7 +100,7 @@ class CachedPlane:
 COLLIDERS_PATH = WORLD_PATH.AppendChild("Colliders")
 
 
-def _plane_corners(plane: CachedPlane) -> np.ndarray:
+def plane_corners(plane: CachedPlane) -> np.ndarray:
     """The square's corners, counter-clockwise seen from the normal's side."""
     n = np.asarray(plane.normal, dtype=np.float64)
     helper = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 0.0, 1.0])
@@ -243,7 +243,7 @@ class PointCacheWriter:
                     op.Set(tuple(float(c) for c in collider.centre))
             else:
                 plane = UsdGeom.Mesh.Define(stage, prim_path)
-                corners = _plane_corners(collider)
+                corners = plane_corners(collider)
                 plane.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(corners))
                 plane.CreateExtentAttr(UsdGeom.PointBased.ComputeExtent(Vt.Vec3fArray.FromNumpy(corners)))
                 plane.CreateFaceVertexCountsAttr(Vt.IntArray([4]))
