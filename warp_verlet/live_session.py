@@ -235,9 +235,10 @@ class LiveSession:
         for spec in self.scene.cloths:
             if threshold is not None and spec.mesh is not None and spec.mesh.mesh.non_manifold_edges:
                 raise WarpVerletError(f"cloth '{spec.name}' has non-manifold edges, and tearing needs a manifold mesh")
-        cloths = tuple(replace(c, tear_threshold=threshold) for c in self.scene.cloths)
-        self._edit(f"tear threshold {threshold:g}" if threshold else "tearing off",
-                   lambda: self._rebuild(replace(self.scene, cloths=cloths)))
+
+        def edited() -> Scene:
+            return replace(self.scene, cloths=tuple(replace(c, tear_threshold=threshold) for c in self.scene.cloths))
+        self._edit(f"tear threshold {threshold:g}" if threshold else "tearing off", lambda: self._rebuild(edited()))
 
     def pins(self) -> list[Pin]:
         """The pins still holding, in scene order."""
@@ -250,15 +251,14 @@ class LiveSession:
 
     def release_pin(self, pin: Pin) -> None:
         """Let one pinned particle go (and the tethers that hung from it)."""
-        with self._lock:
+        def edited() -> Scene:  # from the scene as it is when the edit applies (after earlier releases)
             spec = self.scene.cloths[pin.cloth]
-            label = pin.label(self.scene)
             if spec.mesh is not None:
                 spec = replace(spec, mesh=replace(spec.mesh, pins=tuple(p for p in spec.mesh.pins if p != pin.key)))
             else:
                 spec = replace(spec, pins=tuple(p for p in spec.pins if tuple(p) != pin.key))
-            cloths = self.scene.cloths[:pin.cloth] + (spec,) + self.scene.cloths[pin.cloth + 1:]
-            self._edit(f"released {label}", lambda: self._rebuild(replace(self.scene, cloths=cloths)))
+            return replace(self.scene, cloths=self.scene.cloths[:pin.cloth] + (spec,) + self.scene.cloths[pin.cloth + 1:])
+        self._edit(f"released {pin.label(self.scene)}", lambda: self._rebuild(edited()))
 
     def move_sphere(self, index: int, centre) -> None:
         """Put sphere ``index`` (scene order) at ``centre`` (m) now. Spheres with a path keep to their path."""
