@@ -1,0 +1,80 @@
+"""``warp-verlet live`` and ``view`` from the command line, no browser needed: the server's safety (a port in
+use, binding beyond localhost), bad caches, and a player that never imports Warp."""
+
+import socket
+import subprocess
+import sys
+
+import pytest
+
+from browser import REPO, free_port
+
+
+def cli(*args, timeout=120):
+    return subprocess.run([sys.executable, "-m", "warp_verlet", *map(str, args)], capture_output=True, text=True,
+                          timeout=timeout, cwd=REPO)
+
+
+@pytest.fixture
+def viser():
+    return pytest.importorskip("viser", reason="the browser views need viser: pip install 'warp-verlet[live]'")
+
+
+@pytest.fixture
+def busy_port():
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        s.listen()
+        yield s.getsockname()[1]
+
+
+@pytest.fixture
+def rope_cache(tmp_path):
+    from warp_verlet.runner import run_scene
+    from warp_verlet.scene import load_scene
+
+    cache = tmp_path / "rope.usdc"
+    run_scene(load_scene(REPO / "scenes" / "rope.toml"), cache, device="cpu", frames=3)
+    return cache
+
+
+def test_a_port_in_use_is_one_clear_error(viser, busy_port, rope_cache):
+    for command in (["live", REPO / "scenes" / "rope.toml", "--device", "cpu"], ["view", rope_cache]):
+        result = cli(*command, "--port", busy_port, "--seconds", 1)
+        assert result.returncode == 2, result.stderr
+        assert f"port {busy_port} on 127.0.0.1 is already in use" in result.stderr
+        assert "--port" in result.stderr and "Traceback" not in result.stderr
+
+
+def test_serves_on_localhost_and_warns_beyond_it(viser, rope_cache):
+    cache = rope_cache
+    port = free_port()
+    local = cli("view", cache, "--port", port, "--seconds", 0.5)
+    assert local.returncode == 0, local.stderr
+    assert f"http://127.0.0.1:{port}" in local.stdout and "warning" not in local.stderr
+    anywhere = cli("view", cache, "--host", "0.0.0.0", "--port", free_port(), "--seconds", 0.5)
+    assert anywhere.returncode == 0, anywhere.stderr
+    assert "warning: serving on 0.0.0.0" in anywhere.stderr and "reachable from other machines" in anywhere.stderr
+
+
+def test_view_refuses_what_is_not_a_cache(tmp_path):
+    missing = cli("view", tmp_path / "nothing.usdc", "--port", free_port())
+    assert missing.returncode == 2 and "nothing.usdc: no such file" in missing.stderr
+    text = tmp_path / "notes.usda"
+    text.write_text("hello")
+    bad = cli("view", text, "--port", free_port())
+    assert bad.returncode == 2 and "not a USD file" in bad.stderr
+
+
+def test_the_player_never_imports_warp():
+    code = ("import sys, warp_verlet.cache_player, warp_verlet.cli; "
+            "assert 'warp' not in sys.modules, 'warp imported'; print('ok')")
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO)
+    assert result.stdout.strip() == "ok", result.stderr
+
+
+def test_live_refuses_a_bad_scene_before_serving(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[[cloth]]\nresolution = [4]\nsize = [1.0, 1.0]\n")
+    result = cli("live", bad, "--port", free_port(), "--seconds", 1)
+    assert result.returncode == 2 and "cloth[0].resolution" in result.stderr
