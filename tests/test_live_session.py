@@ -189,10 +189,13 @@ def test_a_keyframed_sphere_cannot_be_dragged():
 
 
 def test_a_stall_is_clamped_and_logged():
-    session = LiveSession(make_scene({"substeps": 4, "max_frame_time": 0.1}, **HANGING), "cpu")
+    session = LiveSession(make_scene({"fps": 60, "substeps": 4, "max_frame_time": 0.1}, **HANGING), "cpu")
     session.tick(3.0)
-    assert session.sim.steps == 24  # 0.1 s of 1/240 s steps
-    assert any("stall" in line and "2900 ms" in line for line in session.events)
+    assert session.sim.steps == 8  # two frames of 1/240 s steps: slow motion, not 3 s of catching up
+    assert any("stall" in line and "2967 ms" in line for line in session.events)
+    tight = LiveSession(make_scene({"fps": 60, "substeps": 4, "max_frame_time": 0.02}, **HANGING), "cpu")
+    tight.tick(3.0)
+    assert tight.sim.steps == 4  # the scene's max_frame_time, when shorter
 
 
 def test_divergence_pauses_and_reset_recovers():

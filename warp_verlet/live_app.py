@@ -56,8 +56,6 @@ class LiveApp:
 
     # ------------------------------------------------------------------ scene
     def _add_colliders(self, scene: Scene) -> None:
-        from .usd_writer import CachedPlane, plane_corners
-
         self._sphere_list = []
         centres = self.session.sphere_centres()
         for i, sphere in enumerate(scene.spheres):
@@ -69,6 +67,8 @@ class LiveApp:
                     position=tuple(float(v) for v in centres[i]))
                 gizmo.on_update(self._dragged(i))
             self._sphere_list.append(_Sphere(handle, gizmo, centres[i]))
+        if scene.planes:
+            from .usd_writer import CachedPlane, plane_corners  # imports pxr: only for a scene with planes
         for plane in scene.planes:
             add_plane(self.server, plane.name,
                       plane_corners(CachedPlane(plane.name, plane.point, plane.normal, plane.display_size)))

@@ -15,6 +15,7 @@ move to the next port.
 from __future__ import annotations
 
 import ipaddress
+import os
 import socket
 import warnings
 from typing import Sequence
@@ -64,6 +65,8 @@ def check_port(host: str, port: int) -> None:
         raise ServerError(f"--host {host!r} is not an address this machine can bind: {exc.strerror}") from None
     family, _, _, _, address = infos[0]
     with socket.socket(family, socket.SOCK_STREAM) as probe:
+        if os.name != "nt":  # as the server binds: a port whose old connections linger (TIME_WAIT) is free
+            probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         try:
             probe.bind(address)
         except PermissionError:
