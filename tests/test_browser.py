@@ -62,14 +62,14 @@ def test_live_page_shows_the_cloth(page_of, live, tmp_path):
     image = screenshot(page, tmp_path / "live.png")
     # Where the cloth's vertices project (the camera is the page's initial one), the pixels are cloth-coloured;
     # the panel on the right and the notifications on the left are left out.
-    points = live.session.display_points(0.0)[0].reshape(64, 64, 3)[4:-4:6, 4:-4:6].reshape(-1, 3)
+    points = live.session.current_points()[0].reshape(64, 64, 3)[4:-4:6, 4:-4:6].reshape(-1, 3)
     xy = np.round(project(points, live.server.initial_camera)).astype(int)
     inside = (xy[:, 0] > 320) & (xy[:, 0] < 790) & (xy[:, 1] > 0) & (xy[:, 1] < 800)
     assert inside.sum() >= 20, "most of the cloth should be in view, left of the panel"
     on_cloth = reddish(image[xy[inside, 1], xy[inside, 0]])
     assert on_cloth.mean() > 0.95, f"{(~on_cloth).sum()} of {inside.sum()} cloth points are not cloth-coloured"
     # And not everywhere: below the cloth's lowest point the page is background.
-    lowest = int(project(live.session.display_points(0.0)[0], live.server.initial_camera)[:, 1].max())
+    lowest = int(project(live.session.current_points()[0], live.server.initial_camera)[:, 1].max())
     assert lowest < 760 and not reddish(image[lowest + 20:, 330:780]).any()
     keep_for_docs(tmp_path / "live.png", "live.png")
 
@@ -94,12 +94,12 @@ def test_pause_button_stops_the_frame_counter(page_of, live):
 def test_wind_set_in_the_page_moves_the_cloth_along_it(page_of, live):
     page = page_of(live.url)
     wait_until(lambda: frame_number(page) > 60, what="the cloth to settle a little")
-    before = np.concatenate(live.session.display_points(0.0)).mean(axis=0)
+    before = np.concatenate(live.session.current_points()).mean(axis=0)
     set_number(page, "Strength m/s²", 20)  # along the default direction, +Z: out of the cloth's plane
     wait_until(lambda: any("wind 20" in line for line in live.session.events), what="the wind edit")
     frame = live.session.frame
     wait_until(lambda: live.session.frame > frame + 60, what="a second of wind")
-    shift = np.concatenate(live.session.display_points(0.0)).mean(axis=0) - before
+    shift = np.concatenate(live.session.current_points()).mean(axis=0) - before
     assert shift[2] > 0.05, f"the cloth's centre moved by {shift} m"
     assert abs(shift[0]) < 0.01
 

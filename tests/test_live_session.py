@@ -23,7 +23,7 @@ def ticks(session, frames: int, per_frame: int = 1):
 
 
 def mean(session) -> np.ndarray:
-    return np.concatenate(session.display_points(0.0)).mean(axis=0)
+    return np.concatenate(session.current_points()).mean(axis=0)
 
 
 def test_ticks_run_real_time_and_count_frames():
@@ -142,7 +142,7 @@ def test_tearing_switched_on_live_tears_and_is_recorded(tmp_path):
     cache = open_cache(path)
     last = read_cloths(cache, cache.frames[-1])[0]
     assert len(last.hidden) > 0  # torn faces removed from the saved topology, read back as hidden
-    np.testing.assert_allclose(last.points, session.display_points(0.0)[0], atol=1e-6)
+    np.testing.assert_allclose(last.points, session.current_points()[0], atol=1e-6)
     assert len(read_cloths(cache, 0)[0].hidden) == 0
 
 

@@ -185,3 +185,23 @@ def test_divergence_check_finds_the_lowest_bad_particle(device):
     x[9] = 0.0
     sim.state.set_positions(x)
     assert sim.diverged_particle() == 12  # inf
+
+
+@pytest.mark.parametrize("solver", ["coloured", "jacobi"])
+def test_device_readbacks_match_the_host(device, solver):
+    """render_points and device_stretch (a viewer's readbacks) give what the host computes from every position:
+    the same interpolated points, and the same stretch over the untorn structural sticks."""
+    scene = make_scene({"solver": solver, "iterations": 2}, resolution=[20, 20], pins=["top-left", "top-right"],
+                       tear_threshold=1.05)
+    sim = Simulator(scene, device)
+    for _ in range(40):
+        sim.step_frame()
+    assert sim.torn_count() > 0  # so that skipping torn sticks is tested
+    host, reduced = sim.stretch(), sim.device_stretch()
+    assert reduced.max == pytest.approx(host.max, rel=1e-6)  # the max comes back as float32
+    assert reduced.rms == pytest.approx(host.rms, rel=1e-12)  # float64 sums in another order
+    chosen = np.arange(0, 400, 7)
+    np.testing.assert_allclose(sim.render_points(chosen, 0.3), sim.render_positions(0.3)[chosen], atol=1e-6)
+    untorn = Simulator(make_scene(resolution=[6, 6]), device)
+    untorn.step_frame()
+    assert untorn.device_stretch().rms == pytest.approx(untorn.stretch().rms, rel=1e-12)

@@ -72,9 +72,10 @@ class DisplayMesh:
         return self.vertex_index is not None
 
     def vertices(self, points: np.ndarray) -> np.ndarray:
-        """The drawn vertices of ``points`` (vertex_count, 3), as contiguous float32 (V, 3)."""
-        if self.vertex_index is not None:
-            points = points[self.vertex_index] if points.ndim == 2 else points
+        """The drawn vertices as contiguous float32 (V, 3), from all the cloth's ``points`` (vertex_count, 3) or
+        from the drawn ones already (drawn_vertex_count, 3: what a live session gathers on the device)."""
+        if self.vertex_index is not None and len(points) == self.vertex_count:
+            points = points[self.vertex_index]
         return np.ascontiguousarray(points, dtype=np.float32)
 
     def triangles(self, hidden_faces=()) -> np.ndarray:

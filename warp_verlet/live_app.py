@@ -46,7 +46,8 @@ class LiveApp:
         self.displays = [DisplayMesh(s.topology.cache_faces, s.topology.vertex_count,
                                      (s.topology.rows, s.topology.cols) if s.topology.is_grid else None, **kwargs)
                          for s in model.cloths]
-        points = session.display_points(0.0)
+        session.set_drawn([d.vertex_index for d in self.displays])
+        points = session.drawn_points(0.0)
         self.cloths = [ClothDrawing(self.server, spec.name, display, p, CLOTH_COLOURS[i % len(CLOTH_COLOURS)])
                        for i, (spec, display, p) in enumerate(zip(scene.cloths, self.displays, points))]
         self._add_colliders(scene)
@@ -176,7 +177,7 @@ class LiveApp:
     # ------------------------------------------------------------------ loop
     def draw(self, alpha: float) -> None:
         """Send the cloths' vertices (interpolated by ``alpha``) and the spheres' centres."""
-        points = self.session.display_points(alpha)
+        points = self.session.drawn_points(alpha)
         hidden = self.session.hidden_faces()
         start = time.perf_counter()
         for drawing, p, h in zip(self.cloths, points, hidden):

@@ -102,6 +102,7 @@ class LiveSession:
         # Per tick over the last second: (when it ended, wall seconds it simulated for, frames it completed).
         self._ticks: collections.deque[tuple[float, float, int]] = collections.deque()
         self._stall_logged = -math.inf
+        self._drawn: tuple[np.ndarray, np.ndarray] | None = None  # set_drawn: particles, split points per cloth
         self._start_recording()
         self.log(f"started on {self.sim.device}: {self.sim.model.particle_count} particles, "
                  f"{self.sim.model.stick_count} sticks")
@@ -319,7 +320,7 @@ class LiveSession:
 
     def readout(self) -> Readout:
         with self._lock:
-            stretch = self.sim.stretch()
+            stretch = self.sim.device_stretch()
             frames = sum(n for _, _, n in self._ticks)
             spent = sum(w for _, w, _ in self._ticks)
             window = self._clock() - self._ticks[0][0] + self._ticks[0][1] if self._ticks else 0.0
@@ -331,11 +332,32 @@ class LiveSession:
                 substeps=self.sim.substeps, iterations=self.sim.settings.iterations,
                 recorded=len(self._recording), recording_full=self._recording_full)
 
-    def display_points(self, alpha: float) -> list[np.ndarray]:
-        """Each cloth's cache vertices, interpolated ``alpha`` of the way through the last substep."""
+    def current_points(self) -> list[np.ndarray]:
+        """Each cloth's cache vertices now (float32, all of them): what a frame of the recording holds."""
         with self._lock:
-            points = self.sim.render_positions(alpha) if alpha > 0.0 else self.sim.positions()
-            return self._to_cache(points)
+            return self._to_cache(self.sim.positions())
+
+    def set_drawn(self, vertices: list[np.ndarray | None]) -> None:
+        """Which vertices of each cloth :meth:`drawn_points` returns (None: all of them)."""
+        particles, sizes = [], []
+        for slot, chosen in zip(self.sim.model.cloths, vertices):
+            topology = slot.topology
+            chosen = np.arange(topology.vertex_count) if chosen is None else np.asarray(chosen)
+            of_vertex = chosen if topology.vertex_particle is None else topology.vertex_particle[chosen]
+            particles.append(slot.first + of_vertex)
+            sizes.append(len(chosen))
+        with self._lock:
+            self._drawn = (np.concatenate(particles).astype(np.int32), np.cumsum(sizes)[:-1])
+
+    def drawn_points(self, alpha: float) -> list[np.ndarray]:
+        """The drawn vertices of each cloth (``set_drawn``; all by default), ``alpha`` of the way through the last
+        substep (``Simulator.render_positions``), float32, gathered on the device: only they cross to the
+        host."""
+        with self._lock:
+            if self._drawn is None:
+                self.set_drawn([None] * len(self.sim.model.cloths))
+            particles, splits = self._drawn
+            return np.split(self.sim.render_points(particles, alpha), splits)
 
     def hidden_faces(self) -> list[np.ndarray]:
         with self._lock:

@@ -95,6 +95,8 @@ class Simulator:
         self._initial = None  # a clone of the start, made by the first reset()
         self._accumulator = 0.0
         self._first_diverged = None  # allocated by the first divergence check
+        self._gather = None  # render_points: (the particles asked for, their device copy, the output)
+        self._stretch_arrays = None  # device_stretch: structural sticks and the sums, made at its first call
         self._frame_graphs: dict[int, object] = {}  # substeps -> the captured frame
         self._substep_in_frame = 0  # substeps advance() has taken since the last frame boundary
         self.clamped_seconds = 0.0  # what the last advance() dropped from its bank (a stall)
@@ -207,14 +209,20 @@ class Simulator:
         dt = self.dt
         # The tiny epsilon keeps 1/60 s from paying for 3.9999999 substeps of 1/240 s instead of 4.
         while self._accumulator / dt + 1e-9 >= 1.0:
-            self.solver.step(self.state, dt)
-            self._accumulator = max(self._accumulator - dt, 0.0)
-            self._substep_in_frame += 1
-            if self._substep_in_frame == self.substeps:
+            n = self.substeps
+            if self.at_frame_boundary and self._accumulator / (n * dt) + 1e-9 >= 1.0 and self._use_graph:
+                self.step_frame()  # a whole frame banked: its capture replayed (bit-identical, one launch)
+                self._accumulator = max(self._accumulator - n * dt, 0.0)
+            else:
+                self.solver.step(self.state, dt)
+                self._accumulator = max(self._accumulator - dt, 0.0)
+                self._substep_in_frame += 1
+                if self._substep_in_frame < n:
+                    continue
                 self._end_frame()
-                dt = self.dt  # a target_stretch budget may have chosen other substeps for the next frame
-                if on_frame is not None and on_frame():
-                    break
+            dt = self.dt  # a target_stretch budget may have chosen other substeps for the next frame
+            if on_frame is not None and on_frame():
+                break
         return self._accumulator / dt
 
     def finish_frame(self, on_frame: Callable[[], bool | None] | None = None) -> None:
@@ -301,6 +309,52 @@ class Simulator:
         """Positions interpolated between the last two substeps: x_prev + alpha (x - x_prev)."""
         x, x_prev = self.positions(), self.previous_positions()
         return x_prev + x.dtype.type(alpha) * (x - x_prev)
+
+    def render_points(self, particles: np.ndarray, alpha: float) -> np.ndarray:
+        """``render_positions(alpha)[particles]`` as float32 (K, 3), gathered on the device, so that only the K
+        points cross to the host (a viewer drawing a 1024 x 1024 cloth as 256 x 256 copies 0.8 MB, not 36 MB).
+        ``particles`` is uploaded once and reused while the same array is passed."""
+        from warp_verlet.kernels.positions import instance
+        from warp_verlet.kernels.readback import gather_drawn
+
+        if self._gather is None or self._gather[0] is not particles:
+            with wp.ScopedDevice(self.device):
+                self._gather = (particles, wp.array(np.asarray(particles, np.int32), dtype=int),
+                                wp.empty(len(particles), dtype=wp.vec3f))
+        _, index, out = self._gather
+        q = self.state
+        wp.launch(instance(gather_drawn, self.model.position_dtype), len(index), device=self.device,
+                  inputs=[q.particle_q, q.particle_q_inertial, q.particle_dq, index, float(alpha)], outputs=[out])
+        return out.numpy().copy() if self.device.is_cpu else out.numpy()
+
+    def device_stretch(self) -> StretchStats:
+        """:meth:`stretch`, reduced on the device: three numbers come back instead of every position, for a
+        viewer's readout. Its sum's order (and so the RMS's last bits) may vary between runs on a GPU, so the
+        budget and the run summary use :meth:`stretch`."""
+        from warp_verlet.kernels.positions import instance
+        from warp_verlet.kernels.readback import structural_stretch
+
+        m = self.model
+        with wp.ScopedDevice(self.device):
+            if self._stretch_arrays is None:
+                chosen = np.flatnonzero(m.structural)
+                entry = np.zeros(m.stick_count, np.int32)
+                if m.tears:  # the weight entry that says whether a stick is torn (either of a Jacobi stick's two)
+                    entry[m._tear_entry_stick] = np.arange(len(m._tear_entry_stick), dtype=np.int32)
+                self._stretch_arrays = (wp.array(m.host_sticks[chosen].astype(np.int32), dtype=wp.vec2i),
+                                        wp.array(m.host_rest[chosen].astype(np.float32), dtype=float),
+                                        wp.array(entry[chosen], dtype=int), wp.zeros(1, dtype=wp.float64),
+                                        wp.zeros(1, dtype=float), wp.zeros(1, dtype=int))
+            ends, rest, entry, sum_squares, largest, count = self._stretch_arrays
+            weight = self.state.stick_weight if m.tears else wp.empty(0, dtype=float)
+            for a in (sum_squares, largest, count):
+                a.zero_()
+            wp.launch(instance(structural_stretch, m.position_dtype), len(ends),
+                      inputs=[self.state.particle_q, ends, rest, entry, weight], outputs=[sum_squares, largest, count])
+            n = int(count.numpy()[0])
+        if n == 0:
+            return StretchStats(0.0, 0.0)
+        return StretchStats(float(largest.numpy()[0]), float(np.sqrt(sum_squares.numpy()[0] / n)))
 
     def diverged_particle(self) -> int | None:
         """The lowest index of a particle that is not finite or beyond ``position_bound``, or None. Checked on
