@@ -71,10 +71,11 @@ def open_page(browser, url: str):
     page = browser.new_page(viewport=VIEWPORT)
     page.goto(url)
     page.get_by_text("Connected").wait_for(timeout=30_000)
-    close = page.locator("button.mantine-Notification-closeButton")  # "Software WebGL rendering detected"
+    close = page.locator("#webgl-software-rendering button")  # "Software WebGL rendering detected"
     try:
-        close.first.click(timeout=5_000)
-    except Exception:  # noqa: BLE001 (no notification: a GPU browser)
+        close.click(timeout=10_000)
+        close.wait_for(state="detached", timeout=5_000)
+    except Exception:  # noqa: BLE001 (no notification: a browser on a GPU)
         pass
     page.wait_for_timeout(1_500)  # the scene's first draw
     return page

@@ -47,9 +47,11 @@ class CachePlayer:
                         for i, (centre, radius) in enumerate(first.spheres)]
         for i, corners in enumerate(first.planes):
             add_plane(self.server, f"plane{i}", corners)
-        everything = np.concatenate([c.points for c in first.cloth_frames] + list(first.ropes)
-                                    + [c[None] for c, _ in first.spheres])
-        frame_camera(self.server, everything.min(0), everything.max(0), cache.up_axis)
+        last = read_frame(cache, cache.frames[-1]) if len(cache.frames) > 1 else first
+        everything = np.concatenate([g for frame in (first, last) for g in
+                                     [c.points for c in frame.cloth_frames] + list(frame.ropes)
+                                     + [c[None] for c, _ in frame.spheres]])
+        frame_camera(self.server, everything.min(0), everything.max(0), cache.up_axis)  # the first and last frames
         self.frame = cache.frames[0]
         self.playing = False
         self._build_gui()

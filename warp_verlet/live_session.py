@@ -117,10 +117,11 @@ class LiveSession:
         ``max_frame_time`` of substeps per tick (seconds between draws on a large grid). What is dropped is
         logged as a stall."""
         with self._lock:
+            start = self._clock()
             if self.paused or self.diverged:
                 self._apply_pending()
+                self._note_wall(start)  # no frames: the rate readout falls to 0 within a second
                 return 0.0
-            start = self._clock()
             most = min(2.0 / self.sim.settings.fps, self.sim.settings.max_frame_time)
             dropped = max(wall_seconds - most, 0.0)
             alpha = self.sim.advance(min(wall_seconds, most), on_frame=self._on_frame)

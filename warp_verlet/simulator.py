@@ -307,7 +307,10 @@ class Simulator:
 
     def render_positions(self, alpha: float) -> np.ndarray:
         """Positions interpolated between the last two substeps: x_prev + alpha (x - x_prev)."""
-        x, x_prev = self.positions(), self.previous_positions()
+        x = self.positions()
+        if self.state.dt_prev is None:  # before the first step (or after set_velocity) there is no last substep
+            return x
+        x_prev = self.previous_positions()
         return x_prev + x.dtype.type(alpha) * (x - x_prev)
 
     def render_points(self, particles: np.ndarray, alpha: float) -> np.ndarray:
@@ -323,8 +326,9 @@ class Simulator:
                                 wp.empty(len(particles), dtype=wp.vec3f))
         _, index, out = self._gather
         q = self.state
+        alpha = 1.0 if q.dt_prev is None else float(alpha)  # no last substep yet: the positions themselves
         wp.launch(instance(gather_drawn, self.model.position_dtype), len(index), device=self.device,
-                  inputs=[q.particle_q, q.particle_q_inertial, q.particle_dq, index, float(alpha)], outputs=[out])
+                  inputs=[q.particle_q, q.particle_q_inertial, q.particle_dq, index, alpha], outputs=[out])
         return out.numpy().copy() if self.device.is_cpu else out.numpy()
 
     def device_stretch(self) -> StretchStats:

@@ -47,7 +47,7 @@ class State:
         self.model = model
         with wp.ScopedDevice(model.device):
             self.particle_q = wp.array(model.rest_positions, dtype=model.position_dtype)  # float32 widens exactly
-            self.particle_q_inertial = wp.empty_like(self.particle_q)
+            self.particle_q_inertial = wp.clone(self.particle_q)  # x_prev = x before the first step
             self.particle_dq = wp.zeros_like(self.particle_q)  # no initial velocity
             self.stick_weight = wp.clone(model.tear_weight_start) if model.tears else None
             self.torn_entries = wp.zeros(1, dtype=int) if model.tears else None
