@@ -136,6 +136,9 @@ def test_tearing_switched_on_live_tears_and_is_recorded(tmp_path):
     torn = session.readout().torn
     assert torn > 0
     assert any("tore" in line for line in session.events)
+    drawn_holes = session.hidden_faces()[0]  # what the page draws without
+    np.testing.assert_array_equal(drawn_holes, session.sim.model.hidden_faces(session.sim.torn_sticks())[0])
+    assert len(drawn_holes) > 0
     path = tmp_path / "torn.usda"
     count = session.save(path)
     assert count == session.frame + 1 and validate_cache(path) == []

@@ -79,6 +79,9 @@ def parse_size(text: str) -> tuple[int, int]:
     return width, height
 
 
+DEVICE_HELP = "cpu, cuda or cuda:N (default: CUDA when present, else CPU)"
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="warp-verlet",
@@ -90,7 +93,7 @@ def build_parser() -> argparse.ArgumentParser:
     run = commands.add_parser("run", help="simulate a scene and write its USD point cache")
     run.add_argument("scene", type=Path, help="scene file (TOML, see docs/scenes.md)")
     run.add_argument("-o", "--output", type=Path, help="output .usd/.usdc/.usda (default: the scene's [output] path)")
-    run.add_argument("--device", help="cpu, cuda or cuda:N (default: CUDA when present, else CPU)")
+    run.add_argument("--device", help=DEVICE_HELP)
     run.add_argument("--frames", type=_positive_int, help="number of frames (default: the scene's)")
     run.add_argument("--threads", type=_thread_count,
                      help=f"CPU threads for the relaxation, 1 .. {MAX_THREADS} (default: the cores, when the grid is "
@@ -110,7 +113,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sweep.add_argument("sweep", type=Path, help="sweep file (TOML)")
     sweep.add_argument("-o", "--output", type=Path, help="output directory (default: the sweep's [sweep] output)")
-    sweep.add_argument("--device", help="cpu, cuda or cuda:N (default: CUDA when present, else CPU)")
+    sweep.add_argument("--device", help=DEVICE_HELP)
     sweep.add_argument("--workers", type=_at_least_one("workers"),
                        help="local pool size (default: one per GPU on CUDA, one per core on the CPU)")
     sweep.add_argument("--threads", type=_thread_count,
@@ -152,7 +155,7 @@ def build_parser() -> argparse.ArgumentParser:
                     "what was simulated since the last reset as a USD cache. See the README's Live section.",
     )
     live.add_argument("scene", type=Path, help="scene file (TOML, see docs/scenes.md)")
-    live.add_argument("--device", help="cpu, cuda or cuda:N (default: CUDA when present, else CPU)")
+    live.add_argument("--device", help=DEVICE_HELP)
     _server_arguments(live)
     live.add_argument("--record", type=Path, metavar="PATH",
                       help="where Save cache writes (default: beside the scene's output, as NAME_live.EXT); "

@@ -84,9 +84,6 @@ class LiveSession:
                  clock: Callable[[], float] = time.perf_counter):
         from .simulator import Simulator  # imports warp
 
-        if any(c.mesh is not None and c.mesh.mesh is None for c in scene.cloths):
-            raise WarpVerletError("the scene's meshes are not loaded")
-        self._Simulator = Simulator
         self.device = device
         self.scene = scene
         self.sim = Simulator(scene, device)
@@ -121,7 +118,7 @@ class LiveSession:
             if self.paused or self.diverged:
                 self._apply_pending()
                 self._note_wall(start)  # no frames: the rate readout falls to 0 within a second
-                return 0.0
+                return 1.0  # paused at a frame boundary: draw that frame itself
             most = min(2.0 / self.sim.settings.fps, self.sim.settings.max_frame_time)
             dropped = max(wall_seconds - most, 0.0)
             alpha = self.sim.advance(min(wall_seconds, most), on_frame=self._on_frame)
@@ -171,7 +168,7 @@ class LiveSession:
             if count != self._torn:
                 self.log(f"frame {self.frame}: {count - self._torn} stick(s) tore ({count} torn)")
                 self._torn = count
-                hidden = model.hidden_faces(self.sim.sync_tears())
+                hidden = self._hidden = model.hidden_faces(self.sim.sync_tears())
                 self._tears_seen = True
         self._record(hidden)
         return bool(self._pending) or self._pause_requested
@@ -305,13 +302,16 @@ class LiveSession:
     def _rebuild(self, scene: Scene) -> None:
         """A new simulator for an edited scene, continuing from the current state."""
         check_scene(scene)
+        from .simulator import Simulator
+
         old = self.sim
-        new = self._Simulator(scene, self.device, threads=old.threads if old.device.is_cpu else None)
+        new = Simulator(scene, self.device, threads=old.threads if old.device.is_cpu else None)
         new.retune(**{k: getattr(old.settings, k) for k in ("wind", "substeps", "iterations", "target_stretch")})
         new.take_state(old)  # its reset() still goes back to the scene's start
         old.close()
         self.sim, self.scene = new, scene
         self._torn = new.torn_count()
+        self._hidden = new.model.hidden_faces(new.torn_sticks()) if self._torn else self._no_faces()
         self._to_cache = CacheVertices(new.model, scene, override=False)
 
     # ------------------------------------------------------------------ reading
@@ -361,17 +361,16 @@ class LiveSession:
             return np.split(self.sim.render_points(particles, alpha), splits)
 
     def hidden_faces(self) -> list[np.ndarray]:
+        """Per cloth, the faces beside torn sticks (as of the last frame boundary)."""
         with self._lock:
-            model = self.sim.model
-            if not model.tears or self._torn == 0:
-                return [np.zeros(0, np.int32) for _ in model.cloths]
-            return model.hidden_faces(self.sim.torn_sticks())
+            return self._hidden
 
     # ------------------------------------------------------------------ recording
     def _start_recording(self) -> None:
         self.frame = 0
         self._frames_done = 0
         self._torn = self.sim.torn_count()
+        self._hidden = self._no_faces()
         self._tears_seen = False
         self._to_cache = CacheVertices(self.sim.model, self.scene, override=False)
         self._recording: list[RecordedFrame] = []
@@ -379,6 +378,9 @@ class LiveSession:
         self._recording_full = False
         self._recorded_scene = self.scene
         self._record(None)
+
+    def _no_faces(self) -> list[np.ndarray]:
+        return [np.zeros(0, np.int32) for _ in self.sim.model.cloths]
 
     def _record(self, hidden) -> None:
         if self._recording_full:
