@@ -212,8 +212,25 @@ def test_divergence_pauses_and_reset_recovers():
     assert not session.diverged and session.frame == 0 and session.sim.time == 0.0
 
 
-def test_reset_empties_the_recording_and_keeps_the_edits(tmp_path):
-    session = LiveSession(make_scene(**HANGING), "cpu")
+def test_each_saved_frame_is_that_frame(device, tmp_path):
+    """The recording keeps a copy of every frame on the simulation's device: each saved frame is bit for bit
+    what a batch simulator of the same scene has at that frame (not a later frame's positions, not a view)."""
+    scene = make_scene({"substeps": 4, "damping": 0.5}, **HANGING)
+    session = LiveSession(scene, device)
+    ticks(session, 6, per_frame=2)  # half frames: each frame is recorded at its boundary, not at a tick
+    assert session.save(tmp_path / "frames.usdc") == 7
+    cache = open_cache(tmp_path / "frames.usdc")
+    batch = Simulator(scene, device)
+    for frame in range(7):
+        if frame:
+            batch.step_frame()
+        saved = read_cloths(cache, frame)[0].points
+        np.testing.assert_array_equal(saved, batch.positions(), err_msg=f"frame {frame}")
+    assert not np.array_equal(read_cloths(cache, 1)[0].points, read_cloths(cache, 6)[0].points)
+
+
+def test_reset_empties_the_recording_and_keeps_the_edits(device, tmp_path):
+    session = LiveSession(make_scene(**HANGING), device)
     ticks(session, 10)
     session.set_iterations(3)
     session.reset()
@@ -223,9 +240,9 @@ def test_reset_empties_the_recording_and_keeps_the_edits(tmp_path):
     assert open_cache(tmp_path / "after_reset.usdc").frames == (0, 1, 2, 3, 4)
 
 
-def test_recording_stops_at_its_limit():
+def test_recording_stops_at_its_limit(device):
     frame_bytes = 12 * 12 * 3 * 4
-    session = LiveSession(make_scene(**HANGING), "cpu", record_limit=5 * frame_bytes)
+    session = LiveSession(make_scene(**HANGING), device, record_limit=5 * frame_bytes)
     ticks(session, 10)
     r = session.readout()
     assert r.recorded == 5 and r.recording_full
