@@ -8,6 +8,8 @@ out=${OUT:-bench/results/live}
 mkdir -p "$out"
 export PYTHONUNBUFFERED=1
 exec > >(tee "$out/gpu-live.log") 2>&1
+python3 -m pip install -q --no-deps --no-build-isolation -e . 2>&1 | tail -2 \
+  || { echo "editable install failed: using the tree on PYTHONPATH"; ln -sfn ../kernels warp_verlet/kernels; }
 nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv,noheader
 python3 -m pytest -q -rs -p no:cacheprovider tests/test_live_session.py tests/test_bench_live_throughput.py 2>&1 | tail -8
 for budget in "--substeps 4 --iterations 8" "--substeps 32 --iterations 1 --tethers"; do
