@@ -51,12 +51,16 @@ def test_each_level_splits_the_finer_one_into_kept_particles_and_children(rows, 
 def one_pass(sim: Simulator) -> None:
     """One multilevel pass from the current positions, as a substep runs it (x_inertial = x on entry)."""
     m, state = sim.model, sim.state
-    wp.copy(state.particle_q_inertial, state.particle_q)
-    for level in m.levels:
-        for first, count in level.colour_ranges:
-            wp.launch(limit_coarse_colour, count, inputs=[state.particle_q, m.inv_mass, level.ends, level.limit, first])
-        wp.launch(prolongate, level.child.shape[0], inputs=[state.particle_q, state.particle_q_inertial, m.inv_mass,
-                                                            level.child, level.parents, level.weights])
+    # On the simulator's device: a launch left to the default device (CUDA on a GPU machine) would run on the CPU
+    # arrays' addresses there, an illegal memory access that breaks every later CUDA test of the session.
+    with wp.ScopedDevice(sim.device):
+        wp.copy(state.particle_q_inertial, state.particle_q)
+        for level in m.levels:
+            for first, count in level.colour_ranges:
+                wp.launch(limit_coarse_colour, count,
+                          inputs=[state.particle_q, m.inv_mass, level.ends, level.limit, first])
+            wp.launch(prolongate, level.child.shape[0], inputs=[state.particle_q, state.particle_q_inertial,
+                                                                m.inv_mass, level.child, level.parents, level.weights])
 
 
 @pytest.mark.parametrize("precision", ["float32", "float64"])

@@ -239,8 +239,9 @@ def test_every_position_kernel_computes_the_same_in_float64(device, case):
             np.testing.assert_allclose(b, a, rtol=0, atol=8 * np.spacing(np.float32(2.0)), err_msg=name)
         else:  # XPBD tension (D - L) / (w + alpha~): float32 rounds D (sticks up to 7 m) and w + alpha~ >= 5.76
             np.testing.assert_allclose(b, a, rtol=1e-5, atol=4 * np.spacing(np.float32(8.0)) / 5.76, err_msg=name)
-    assert any(not np.array_equal(a, b0) for a, b0 in zip(f32, [m.numpy() for m in make(wp.vec3, wp.float32)
-                                                             if isinstance(m, wp.array)])), f"{name} changed nothing"
+    with wp.ScopedDevice(device):
+        inputs = [m.numpy() for m in make(wp.vec3, wp.float32) if isinstance(m, wp.array)]
+    assert any(not np.array_equal(a, b0) for a, b0 in zip(f32, inputs)), f"{name} changed nothing"
 
 
 D = 1e-11  # m: 1e-4 of a float32 spacing at 1.25 m, so only float64 arithmetic throughout sees it
