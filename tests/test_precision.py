@@ -57,7 +57,10 @@ def test_a_free_cloth_falls_freely_at_1000_substeps_in_float64(device):
     x0 = f32.positions().astype(np.float64)
     for _ in range(20 * 1000):
         f32.solver.step(f32.state, 1 / 60000)  # no check_step: what the check prevents
-    assert fall_error(f32, x0, 20 / 60) > 0.01  # measured 0.27: the relaxation's rounding cancels gravity
+    # Short by 0.27 of the 0.55 m fall on the CPU and by 1.8e-3 of it on CUDA (an H100, whose compiler contracts the
+    # steps into FMAs that round differently): the relaxation's rounding cancels gravity. 1e-4 of the fall (55 um,
+    # over 200 float32 spacings at 2 m) is 1e5 times the float64 bound above.
+    assert fall_error(f32, x0, 20 / 60) > 1e-4
 
 
 def test_float64_exact_start_and_free_fall(device):
