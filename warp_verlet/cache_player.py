@@ -37,7 +37,7 @@ class CachePlayer:
         self.cloths = {}
         for i, c in enumerate(first.cloth_frames):
             name = str(c.cloth.prim.GetPath().name)
-            self.displays[name] = DisplayMesh(c.cloth.faces, len(c.points), c.grid, **kwargs)
+            self.displays[name] = DisplayMesh(c.cloth.faces, len(c.points), c.grid, rest_points=c.points, **kwargs)
             self.cloths[name] = ClothDrawing(self.server, name, self.displays[name], c.points,
                                              CLOTH_COLOURS[i % len(CLOTH_COLOURS)])
         self.ropes = [self.server.scene.add_line_segments(f"/ropes/{i}", rope_segments(r), colors=ROPE_COLOUR,

@@ -179,8 +179,9 @@ def _server_arguments(command) -> None:
                               "such as 0.0.0.0, lets other machines drive the page, and warns")
     command.add_argument("--port", type=int, default=8080, help="port to serve on (default 8080)")
     command.add_argument("--max-grid-quads", type=_at_least_one("max-grid-quads"), metavar="N",
-                         help="draw a larger grid as a coarser one of N quads a side (default 256); the "
-                              "simulation and caches keep every vertex")
+                         help="draw a larger grid as a coarser one of N quads a side (default 256), and a mesh "
+                              "of more than (N + 1)^2 vertices decimated to about that many; the simulation and "
+                              "caches keep every vertex")
 
 
 def _serve(app, what: str, seconds: float | None) -> int:

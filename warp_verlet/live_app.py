@@ -43,9 +43,11 @@ class LiveApp:
         self._pins_changed = False  # a pin was released: the dropdown is refreshed with the next readouts
         model = session.sim.model
         kwargs = {} if max_grid_quads is None else {"max_grid_quads": max_grid_quads}
+        start = session.current_points()  # a large mesh is decimated for display on its starting pose
         self.displays = [DisplayMesh(s.topology.cache_faces, s.topology.vertex_count,
-                                     (s.topology.rows, s.topology.cols) if s.topology.is_grid else None, **kwargs)
-                         for s in model.cloths]
+                                     (s.topology.rows, s.topology.cols) if s.topology.is_grid else None,
+                                     rest_points=points, **kwargs)
+                         for s, points in zip(model.cloths, start)]
         session.set_drawn([d.vertex_index for d in self.displays])
         points = session.drawn_points(0.0)
         self.cloths = [ClothDrawing(self.server, spec.name, display, p, CLOTH_COLOURS[i % len(CLOTH_COLOURS)])
