@@ -118,3 +118,40 @@ def test_a_live_session_gathers_the_decimated_vertices(tmp_path):
     # alpha = 1: the positions themselves, to the rounding of x_prev + (x - x_prev).
     np.testing.assert_allclose(session.drawn_points(1.0)[0], session.current_points()[0][display.vertex_index],
                                rtol=0, atol=1e-6)
+
+
+def test_live_and_view_pages_draw_a_large_mesh_decimated(tmp_path):
+    """The pages wire it up: a mesh cloth over the budget is drawn decimated in ``live`` (the mesh sent holds the
+    drawn vertices, at the simulation's positions) and in ``view`` (from the cache's first frame), and says so."""
+    pytest.importorskip("viser", reason="pip install 'warp-verlet[live]'")
+    from browser import free_port
+    from warp_verlet.cache_player import CachePlayer
+    from warp_verlet.live_app import LiveApp
+    from warp_verlet.live_session import LiveSession
+    from warp_verlet.runner import run_scene
+
+    points, faces = wavy_sheet(40)
+    write_obj(tmp_path / "sheet.obj", points, faces)
+    scene = mesh_scene(tmp_path, {"mesh": "sheet.obj", "pins": [0, 39]}, {"frames": 3})
+    app = LiveApp(LiveSession(scene, "cpu"), port=free_port(), max_grid_quads=10)
+    try:
+        display = app.displays[0]
+        assert display.reduced and "1,600 mesh vertices drawn as" in display.note
+        for _ in range(3):
+            app.session.tick(1 / 60)
+        app.draw(1.0)
+        sent = app.cloths[0].handle.vertices
+        assert sent.shape == (display.drawn_vertex_count, 3) and sent.dtype == np.float32
+        np.testing.assert_allclose(sent, app.session.current_points()[0][display.vertex_index], rtol=0, atol=1e-6)
+        assert app.cloths[0].handle.faces.max() == display.drawn_vertex_count - 1
+    finally:
+        app.server.stop()
+        app.session.close()
+
+    run_scene(scene, tmp_path / "sheet.usdc", device="cpu")
+    player = CachePlayer(tmp_path / "sheet.usdc", port=free_port(), max_grid_quads=10)
+    try:
+        [display] = player.displays.values()
+        assert display.reduced and display.drawn_vertex_count < 1600
+    finally:
+        player.server.stop()
