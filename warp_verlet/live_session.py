@@ -426,7 +426,12 @@ class LiveSession:
             writer = open_writer(scene, sim, target, len(frames), every_sphere_moves=True, tears=tears)
             with writer:
                 for f in frames:
-                    writer.write_frame(f.frame, f.points(), f.centres, f.hidden)
+                    # Save runs on its own thread: each frame's copy to the host is a Warp call, made under the
+                    # lock so that it never runs beside the simulation's own (one frame at a time, so the live
+                    # page waits a copy, not the whole save).
+                    with self._lock:
+                        points = f.points()
+                    writer.write_frame(f.frame, points, f.centres, f.hidden)
             target.commit()
         self.log(f"saved frames 0-{frames[-1].frame} to {path}")
         return len(frames)
