@@ -215,6 +215,15 @@ def test_the_lock_is_refused_without_waiting_and_released_after_any_run(work):
     run_scene(load_scene("small.toml"), device="cpu")  # the failed run released the lock
 
 
+@pytest.mark.skipif(not Path("/proc/self").is_dir(), reason="needs Linux's /proc, where no file can be created")
+def test_a_lock_file_that_cannot_be_created_is_not_called_busy(work):
+    # filelock times out on a directory where the lock file cannot be created at all, as it does on a held lock;
+    # the message says which of the two happened (the live page's Save to such a place showed "busy").
+    with pytest.raises(OutputError, match=r"cannot create its lock file /proc/\.small\.usdc\.lock") as refused:
+        run_scene(load_scene("small.toml"), output="/proc/small.usdc", device="cpu")
+    assert not isinstance(refused.value, OutputBusyError)
+
+
 # ---------------------------------------------------------------------------------- paths (defect 4)
 
 

@@ -258,6 +258,13 @@ class CacheOutput:
         try:
             lock.acquire(timeout=0)
         except Timeout:
+            # filelock also times out when it cannot create the lock file at all (a read-only or special
+            # directory): say that instead of "busy".
+            try:
+                os.close(os.open(self.lock_path, os.O_RDWR | os.O_CREAT, 0o644))
+            except OSError as exc:
+                raise self._fail(f"cannot create its lock file {self.lock_path}: "
+                                 f"{exc.strerror or exc}") from None
             raise OutputBusyError(f"cannot write {self.given}: another run is writing it now (it holds the lock "
                                   f"{self.lock_path}); wait for that run to finish, or choose another output "
                                   "path") from None
