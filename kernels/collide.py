@@ -110,11 +110,14 @@ def place_spheres(
     centres: wp.array(dtype=wp.vec3),
 ):
     """Centre of sphere s at the current time: linear between keyframes, held before the first and after
-    the last."""
+    the last. A sphere of one keyframe is left where it is: it starts there, and a live session may have
+    dragged it."""
     s = wp.tid()
     t = float(clock[0])
     first = key_start[s]
     last = key_start[s + 1] - 1
+    if last == first:
+        return
     c = key_centres[first]
     if t >= key_times[last]:
         c = key_centres[last]

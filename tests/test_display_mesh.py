@@ -155,3 +155,17 @@ def test_live_and_view_pages_draw_a_large_mesh_decimated(tmp_path):
         assert display.reduced and display.drawn_vertex_count < 1600
     finally:
         player.server.stop()
+
+
+def test_a_mesh_with_loose_vertices_is_decimated_around_them():
+    # A cache may hold vertices no face uses (a live scene refuses them, `view` plays any cache): the library drops
+    # them and numbers the rest anew, so they are left out before it runs and never drawn.
+    points, faces = wavy_sheet(60)
+    loose = np.array([[5.0, 5.0, 5.0], [6.0, 6.0, 6.0]])
+    mixed = np.concatenate([loose[:1], points, loose[1:]])  # one before every used vertex, one after
+    shifted = fan_triangles(faces)[0] + 1
+    display = DisplayMesh(shifted, len(mixed), max_grid_quads=12, rest_points=mixed)
+    reference = DisplayMesh(faces, len(points), max_grid_quads=12, rest_points=points)
+    np.testing.assert_array_equal(display.vertex_index, reference.vertex_index + 1)
+    np.testing.assert_array_equal(display.triangles(), reference.triangles())
+    np.testing.assert_array_equal(display.triangles([100, 2000]), reference.triangles([100, 2000]))

@@ -191,6 +191,66 @@ def test_a_keyframed_sphere_cannot_be_dragged():
         LiveSession(scene, "cpu").move_sphere(0, (0, 0, 0))
 
 
+def test_a_dragged_sphere_stays_where_it_is_put_beside_a_keyframed_one():
+    # Once any sphere moves, the spheres are placed from their keyframes every substep: a still sphere was put
+    # back at its start there, undoing every drag.
+    scene = parse_scene({
+        "cloth": [{"resolution": [4, 4], "size": [1.0, 1.0], "origin": [5.0, 5.0, 0.0]}],
+        "collider": [{"type": "sphere", "name": "still", "radius": 0.2, "centre": [0.0, -3.0, 0.0]},
+                     {"type": "sphere", "name": "moving", "radius": 0.2,
+                      "path": [[0.0, 0.0, -1.0, 0.0], [1.0, 1.0, -1.0, 0.0]]}],
+    }, file="<test>")
+    session = LiveSession(scene, "cpu")
+    session.move_sphere(0, (1.0, 2.0, 3.0))
+    ticks(session, 3)
+    np.testing.assert_array_equal(session.sphere_centres()[0], [1.0, 2.0, 3.0])
+    assert session.sphere_centres()[1][0] == pytest.approx(3 / 60, abs=1e-6)  # the other keeps to its path
+    session.reset()
+    np.testing.assert_array_equal(session.sphere_centres()[0], [0.0, -3.0, 0.0])  # Reset puts it back
+
+
+def test_tearing_switched_off_keeps_the_torn_sticks_torn(tmp_path):
+    session = LiveSession(make_scene({"substeps": 4, "damping": 0.5}, **HANGING), "cpu")
+    session.set_wind((0, 0, 1), 40.0)
+    session.set_tear_threshold(1.02)
+    ticks(session, 40)
+    torn, holes = session.readout().torn, session.hidden_faces()[0].copy()
+    assert torn > 0
+    session.set_tear_threshold(None)
+    ticks(session, 30)
+    assert session.readout().torn == torn  # none healed, none more
+    np.testing.assert_array_equal(session.hidden_faces()[0], holes)
+    assert session.readout().stretch_max < 0.5  # the torn sticks are not pulling their ends back together
+    session.save(tmp_path / "torn.usdc")
+    cache = open_cache(tmp_path / "torn.usdc")
+    np.testing.assert_array_equal(read_cloths(cache, cache.frames[-1])[0].hidden, holes)
+
+
+def test_a_released_pin_after_tears_records_the_same_holes(tmp_path):
+    session = LiveSession(make_scene({"substeps": 4, "damping": 0.5}, **HANGING), "cpu")
+    session.set_wind((0, 0, 1), 40.0)
+    session.set_tear_threshold(1.02)
+    ticks(session, 40)
+    session.set_wind((0, 0, 1), 0.0)
+    session.release_pin(session.pins()[0])
+    ticks(session, 2)
+    holes = session.hidden_faces()[0]
+    session.save(tmp_path / "released.usdc")
+    cache = open_cache(tmp_path / "released.usdc")
+    np.testing.assert_array_equal(read_cloths(cache, cache.frames[-1])[0].hidden, holes)
+
+
+def test_pause_mid_frame_then_step_stops_at_that_frame():
+    session = LiveSession(make_scene({"fps": 60, "substeps": 4}, **HANGING), "cpu")
+    session.tick(2 / 240)  # half a frame
+    session.pause()
+    assert not session.paused  # it waits for the frame boundary
+    session.step_frame()  # the boundary: the pause holds there
+    assert session.paused and session.frame == 1
+    ticks(session, 3)
+    assert session.frame == 1 and session.readout().paused
+
+
 def test_a_stall_is_clamped_and_logged():
     session = LiveSession(make_scene({"fps": 60, "substeps": 4, "max_frame_time": 0.1}, **HANGING), "cpu")
     session.tick(3.0)
@@ -205,9 +265,12 @@ def test_divergence_pauses_and_reset_recovers():
     session = LiveSession(make_scene({"position_bound": 1.2}, resolution=[4, 4]), "cpu")  # nothing pinned: falls
     ticks(session, 60)
     assert session.diverged and any("diverged" in line for line in session.events)
+    assert session.readout().paused  # the page's button and frame readout say so
     frame = session.frame
+    session.set_iterations(3)  # an edit while diverged applies, and steps nothing
     ticks(session, 5)
-    assert session.frame == frame
+    assert session.frame == frame and session.sim.settings.iterations == 3
+    assert sum("diverged" in line for line in session.events) == 1
     session.reset()
     assert not session.diverged and session.frame == 0 and session.sim.time == 0.0
 

@@ -78,6 +78,8 @@ class CachePlayer:
     def toggle(self) -> None:
         self.playing = not self.playing
         self.play_button.label = "Pause" if self.playing else "Play"
+        if self.playing and self.frame >= self.cache.frames[-1]:  # Play at the end plays again from the start
+            self.slider.value = self.cache.frames[0]
 
     def show(self, frame: int) -> None:
         """Draw ``frame`` (the nearest frame the cache holds)."""
@@ -116,7 +118,9 @@ class CachePlayer:
                 clock += due / self.cache.fps
                 nxt = self.frame + due
                 if nxt > frames[-1]:
-                    if not self.loop.value:
+                    if not self.loop.value:  # stop on the last frame, drawn
+                        if self.frame != frames[-1]:
+                            self.slider.value = frames[-1]
                         self.toggle()
                         continue
                     nxt = frames[0] + (nxt - frames[-1] - 1) % len(frames)

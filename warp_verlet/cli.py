@@ -194,14 +194,25 @@ def _serve(app, what: str, seconds: float | None) -> int:
 
 
 def _live(args) -> int:
+    from .errors import OutputError
+    from .live_app import default_record_path  # live_app imports neither warp nor viser at its top
+    from .output_file import CacheOutput, input_files
+    from .web_view import check_port
     from .warp_setup import start_warp
 
+    # What can be refused is refused before Warp starts and the simulator is built (seconds on a large scene).
+    scene = load_scene(args.scene)
+    check_port(args.host, args.port)
+    record = args.record or default_record_path(scene)
+    try:
+        CacheOutput(record, inputs=input_files(scene))  # checks the path only: nothing is written
+    except OutputError as exc:
+        raise ServerError(f"{'--record' if args.record else 'the default recording path'}: {exc}") from None
     start_warp(verbose=False, cpu=args.device in (None, "cpu"), note=_note)
     from .live_app import LiveApp
     from .live_session import LiveSession
 
-    scene = load_scene(args.scene)
-    app = LiveApp(LiveSession(scene, args.device), args.host, args.port, args.record, args.max_grid_quads)
+    app = LiveApp(LiveSession(scene, args.device), args.host, args.port, record, args.max_grid_quads)
     return _serve(app, f"{args.scene}: live", args.seconds)
 
 

@@ -30,10 +30,11 @@ class ColliderModel:
                 self.sphere_reach = wp.array([s.radius + s.thickness for s in self.spheres], dtype=float)
                 self.sphere_friction = wp.array([s.friction for s in self.spheres], dtype=float)
             if self.moving:
-                counts = [len(s.keyframes) for s in self.spheres]
-                self.key_start = wp.array(np.r_[0, np.cumsum(counts)].astype(np.int32), dtype=int)
-                self.key_times = wp.array([t for s in self.spheres for t, _ in s.keyframes], dtype=float)
-                self.key_centres = wp.array([c for s in self.spheres for _, c in s.keyframes], dtype=wp.vec3)
+                # A still sphere (one centre, however many keyframes) keeps one key: place_spheres leaves it be.
+                keys = [s.keyframes if s.moving else s.keyframes[:1] for s in self.spheres]
+                self.key_start = wp.array(np.r_[0, np.cumsum([len(k) for k in keys])].astype(np.int32), dtype=int)
+                self.key_times = wp.array([t for k in keys for t, _ in k], dtype=float)
+                self.key_centres = wp.array([c for k in keys for _, c in k], dtype=wp.vec3)
 
     def moving_centres(self, state) -> np.ndarray:
         """Centres of the moving spheres only, in scene order: what the cache samples per frame. Costs no

@@ -51,6 +51,14 @@ def decimate(triangles: np.ndarray, rest_points: np.ndarray, vertices: int) -> t
     into the coarse vertices); and, for every original vertex, the coarse vertex it collapsed into."""
     import fast_simplification
 
+    used = np.unique(triangles)
+    if len(used) < len(rest_points):  # the library drops vertices no triangle uses, renumbering the rest
+        local = np.full(len(rest_points), -1, np.int64)
+        local[used] = np.arange(len(used))
+        drawn, coarse, collapsed_into = decimate(local[triangles], np.asarray(rest_points)[used], vertices)
+        everywhere = np.full(len(rest_points), -1, np.int64)  # a loose vertex is in no face: never looked up
+        everywhere[used] = collapsed_into
+        return used[drawn], coarse, everywhere
     points = np.ascontiguousarray(rest_points, dtype=np.float64)
     coarse_points, coarse, collapses = fast_simplification.simplify(
         points, np.ascontiguousarray(triangles, dtype=np.int32), target_count=TRIANGLES_PER_VERTEX * vertices,

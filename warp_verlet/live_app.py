@@ -7,6 +7,7 @@ interpolated vertices (float32, binary) at most ``DRAW_HZ`` times a second and t
 
 from __future__ import annotations
 
+import sys
 import threading
 import time
 from pathlib import Path
@@ -40,7 +41,8 @@ class LiveApp:
         self._stop = threading.Event()
         self.send_seconds = 0.0  # wall time of the last update's sends (serialising and queueing)
         self.draws = 0
-        self._pins_changed = False  # a pin was released: the dropdown is refreshed with the next readouts
+        self._showing_budget = False  # show_readouts is setting the substeps slider to the budget's choice
+        self._saves: list[threading.Thread] = []  # Save runs on its own thread; run() waits for them at exit
         model = session.sim.model
         kwargs = {} if max_grid_quads is None else {"max_grid_quads": max_grid_quads}
         start = session.current_points()  # a large mesh is decimated for display on its starting pose
@@ -116,7 +118,7 @@ class LiveApp:
                                                                                 self.wind_strength.value)))
         with gui.add_folder("Solver"):
             self.substeps = gui.add_slider("Substeps", 1, max(MAX_SUBSTEPS_SLIDER, sim.substeps), 1, sim.substeps)
-            self.substeps.on_update(lambda _: self._guard(lambda: session.set_substeps(self.substeps.value)))
+            self.substeps.on_update(self._substeps_edited)
             iterations = sim.settings.iterations
             self.iterations = gui.add_slider("Iterations", 0, max(MAX_ITERATIONS_SLIDER, iterations), 1, iterations)
             self.iterations.on_update(lambda _: self._guard(lambda: session.set_iterations(self.iterations.value)))
@@ -153,6 +155,12 @@ class LiveApp:
         except WarpVerletError as exc:
             self.session.log(f"refused: {exc}")
 
+    def _substeps_edited(self, _) -> None:
+        # viser calls this also when show_readouts sets the slider to what the target-stretch budget chose: that
+        # is no edit (retuning would reset the budget's history and log substeps the user never set).
+        if not self._showing_budget:
+            self._guard(lambda: self.session.set_substeps(self.substeps.value))
+
     def _toggle_play(self) -> None:
         if self.session.paused:
             self.session.play()
@@ -169,12 +177,13 @@ class LiveApp:
     def _release_pin(self) -> None:
         pin = self._pins.get(self.pin_choice.value)
         if pin is not None:
-            self.session.release_pin(pin)
-            self._pins_changed = True
+            self.session.release_pin(pin)  # the dropdown follows once the release has applied (show_readouts)
 
     def _save(self) -> None:
         path = Path(self.record_path.value).expanduser()
-        threading.Thread(target=self._guard, args=(lambda: self.session.save(path),), daemon=True).start()
+        thread = threading.Thread(target=self._guard, args=(lambda: self.session.save(path),), daemon=True)
+        self._saves.append(thread)
+        thread.start()
 
     # ------------------------------------------------------------------ loop
     def draw(self, alpha: float) -> None:
@@ -189,6 +198,8 @@ class LiveApp:
             if not np.array_equal(centre, sphere.centre):
                 sphere.handle.position = tuple(float(v) for v in centre)
                 sphere.centre = centre
+                if sphere.gizmo is not None and not np.allclose(sphere.gizmo.position, centre):
+                    sphere.gizmo.position = tuple(float(v) for v in centre)  # moved by Reset, not by the drag
         self.send_seconds = time.perf_counter() - start
         self.draws += 1
 
@@ -204,10 +215,13 @@ class LiveApp:
         self.recorded_text.value = (f"{r.recorded} frame{'s' if r.recorded != 1 else ''}"
                                     + ("  (full)" if r.recording_full else ""))
         if r.substeps != self.substeps.value and self.session.sim.budget is not None:
-            self.substeps.value = r.substeps  # what the target_stretch budget chose
-        self.log_text.content = "\n".join(f"`{line}`  " for line in reversed(self.session.events))
-        if self._pins_changed:
-            self._pins_changed = False
+            self._showing_budget = True
+            try:
+                self.substeps.value = r.substeps  # what the target_stretch budget chose
+            finally:
+                self._showing_budget = False
+        self.log_text.content = "\n".join(f"`{line}`  " for line in reversed(self.session.event_lines()))
+        if list(self._pins.values()) != self.session.pins():  # a release has applied
             self._refresh_pins()
 
     def run(self, seconds: float | None = None) -> None:
@@ -231,6 +245,11 @@ class LiveApp:
                 # Sleep until the next draw is due (the simulation catches up through the accumulator).
                 time.sleep(max(0.0, 1.0 / DRAW_HZ - (time.perf_counter() - now)))
         finally:
+            saving = [t for t in self._saves if t.is_alive()]
+            if saving:
+                print(f"waiting for {len(saving)} cache save(s) to finish", file=sys.stderr)
+                for thread in saving:
+                    thread.join()
             self.server.stop()
             self.session.close()
 

@@ -37,6 +37,7 @@ from .runner import CacheVertices, check_initial_state, divergence_reason, open_
 from .scene import Scene, check_scene
 
 RECORD_LIMIT_BYTES = 2 << 30  # frames kept for save(): 2 GiB (170 frames of a 1024 x 1024 cloth)
+NEVER_TEARS = 1e30  # the tear threshold that "tearing off" becomes once sticks have torn: none tears again
 RECORD_DEVICE_SHARE = 0.5  # and at most this share of the GPU memory free when the recording starts
 EVENT_LOG_LENGTH = 12
 
@@ -131,7 +132,7 @@ class LiveSession:
             most = min(2.0 / self.sim.settings.fps, self.sim.settings.max_frame_time)
             dropped = max(wall_seconds - most, 0.0)
             alpha = self.sim.advance(min(wall_seconds, most), on_frame=self._on_frame)
-            while self._pending or self._pause_requested:
+            while (self._pending or self._pause_requested) and not self.diverged:
                 if not self.sim.at_frame_boundary:
                     break
                 self._apply_pending()
@@ -208,6 +209,9 @@ class LiveSession:
             start = self._clock()
             self.sim.finish_frame(on_frame=self._on_frame)
             self._note_wall(start)
+            if self._pause_requested:  # a pause asked for mid-frame: this frame's boundary is where it stops
+                self.paused, self._pause_requested = True, False
+                self.log(f"paused at frame {self.frame}")
 
     def reset(self) -> None:
         """Back to the scene's start: rest pose, nothing torn, spheres at their start, recording emptied. Edits
@@ -251,8 +255,11 @@ class LiveSession:
             if threshold is not None and spec.mesh is not None and spec.mesh.mesh.non_manifold_edges:
                 raise WarpVerletError(f"cloth '{spec.name}' has non-manifold edges, and tearing needs a manifold mesh")
 
-        def edited() -> Scene:
-            return replace(self.scene, cloths=tuple(replace(c, tear_threshold=threshold) for c in self.scene.cloths))
+        def edited() -> Scene:  # from the state when the edit applies
+            value = threshold
+            if value is None and self.sim.torn_count() > 0:
+                value = NEVER_TEARS  # no more tears, and the torn sticks stay torn (a model without tearing has none)
+            return replace(self.scene, cloths=tuple(replace(c, tear_threshold=value) for c in self.scene.cloths))
         self._edit(f"tear threshold {threshold:g}" if threshold else "tearing off", lambda: self._rebuild(edited()))
 
     def pins(self) -> list[Pin]:
@@ -320,6 +327,7 @@ class LiveSession:
         old.close()
         self.sim, self.scene = new, scene
         self._torn = new.torn_count()
+        # The same faces as before: tears carry over (take_state), and "tearing off" keeps them (NEVER_TEARS).
         self._hidden = new.model.hidden_faces(new.torn_sticks()) if self._torn else self._no_faces()
         self._to_cache = CacheVertices(new.model, scene, override=False)
 
@@ -328,6 +336,11 @@ class LiveSession:
         with self._lock:
             self.events.append(f"{self.frame / self.sim.settings.fps:7.2f} s  {text}")
 
+    def event_lines(self) -> list[str]:
+        """The event log, oldest first: a copy, since other threads append to it."""
+        with self._lock:
+            return list(self.events)
+
     def readout(self) -> Readout:
         with self._lock:
             stretch = self.sim.device_stretch()
@@ -335,7 +348,7 @@ class LiveSession:
             spent = sum(w for _, w, _ in self._ticks)
             window = self._clock() - self._ticks[0][0] + self._ticks[0][1] if self._ticks else 0.0
             return Readout(
-                frame=self.frame, seconds=self.frame / self.sim.settings.fps, paused=self.paused,
+                frame=self.frame, seconds=self.frame / self.sim.settings.fps, paused=self.paused or self.diverged,
                 frames_per_second=frames / window if window > 0 else 0.0,
                 ms_per_frame=1e3 * spent / frames if frames else 0.0,
                 stretch_rms=stretch.rms, stretch_max=stretch.max, torn=self.sim.torn_count(),
