@@ -37,8 +37,8 @@ from .runner import CacheVertices, check_initial_state, divergence_reason, open_
 from .scene import Scene, check_scene
 
 RECORD_LIMIT_BYTES = 2 << 30  # frames kept for save(): 2 GiB (170 frames of a 1024 x 1024 cloth)
-NEVER_TEARS = 1e30  # the tear threshold that "tearing off" becomes once sticks have torn: none tears again
 RECORD_DEVICE_SHARE = 0.5  # and at most this share of the GPU memory free when the recording starts
+NEVER_TEARS = 1e30  # the tear threshold that "tearing off" becomes once sticks have torn: none tears again
 EVENT_LOG_LENGTH = 12
 
 
