@@ -93,3 +93,30 @@ def test_live_refuses_a_bad_record_path_before_starting(tmp_path):
         assert f"error: --record: cannot write {record}" in result.stderr and problem in result.stderr
         assert "open http" not in result.stdout  # refused before serving
     assert not list(tmp_path.iterdir())  # nothing written
+
+
+def test_record_limit_takes_gibibytes_and_its_help_names_the_default(monkeypatch, tmp_path):
+    from warp_verlet import cli as cli_module
+    from warp_verlet.live_session import RECORD_LIMIT_BYTES
+
+    parser = cli_module.build_parser()
+    live = parser._subparsers._group_actions[0].choices["live"]
+    assert f"default {RECORD_LIMIT_BYTES / 2**30:g}," in live.format_help().replace("\n", " ").replace("  ", " ")
+    for bad in ("0", "-1", "nan", "lots"):
+        result = cli("live", REPO / "scenes" / "rope.toml", "--record-limit", bad, "--port", free_port())
+        assert result.returncode == 2 and "--record-limit" in result.stderr and "GiB" in result.stderr, bad
+    # The limit reaches the session: 1 byte holds no frame, so the recording is full at once.
+    made = []
+    monkeypatch.setattr("warp_verlet.live_app.LiveApp", lambda session, *a: made.append(session) or _Stopped())
+    assert cli_module.main(["live", str(REPO / "scenes" / "rope.toml"), "--device", "cpu", "--port",
+                            str(free_port()), "--record-limit", str(1 / 2**30), "--seconds", "0"]) == 0
+    assert made[0].record_limit == 1 and made[0].readout().recording_full
+    made[0].close()
+
+
+class _Stopped:
+    """Stands for LiveApp: serves nothing."""
+    url = "http://127.0.0.1"
+
+    def run(self, seconds):
+        pass

@@ -47,6 +47,16 @@ _positive_int = _count("frames", "expected at least 1 frame, got {value}")
 _thread_count = _count("threads", f"expected a number of threads in 1 .. {MAX_THREADS}, got {{value}}", MAX_THREADS)
 
 
+def _gibibytes(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of GiB, got {text!r}") from None
+    if not 0.0 < value < 1e6:  # finite, and more than nothing
+        raise argparse.ArgumentTypeError(f"expected a number of GiB in (0, 1e6), got {text}")
+    return value
+
+
 def _at_least_one(what: str):
     return _count(what, f"expected at least 1 ({what}), got {{value}}")
 
@@ -160,6 +170,10 @@ def build_parser() -> argparse.ArgumentParser:
     live.add_argument("--record", type=Path, metavar="PATH",
                       help="where Save cache writes (default: beside the scene's output, as NAME_live.EXT); "
                            "the page can change it")
+    live.add_argument("--record-limit", type=_gibibytes, metavar="GIB",
+                      help="most GiB of frames kept for Save cache, on the simulation's device (default 2, "
+                           "live_session.RECORD_LIMIT_BYTES; on a GPU also at most half of its free memory; a "
+                           "1024 x 1024 cloth takes 12 MiB a frame)")
     live.add_argument("--seconds", type=float, help="stop after this many wall seconds (default: until Ctrl-C)")
 
     view = commands.add_parser(
@@ -212,7 +226,9 @@ def _live(args) -> int:
     from .live_app import LiveApp
     from .live_session import LiveSession
 
-    app = LiveApp(LiveSession(scene, args.device), args.host, args.port, record, args.max_grid_quads)
+    limit = {} if args.record_limit is None else {"record_limit": int(args.record_limit * 2**30)}
+    session = LiveSession(scene, args.device, **limit)
+    app = LiveApp(session, args.host, args.port, record, args.max_grid_quads)
     return _serve(app, f"{args.scene}: live", args.seconds)
 
 
