@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import csv
 import math
+from pathlib import Path
 
 import pytest
 
@@ -15,7 +16,7 @@ from browser import free_port
 pytest.importorskip("viser", reason="bench.live_throughput needs viser: pip install 'warp-verlet[live]'")
 
 
-def rows_of(tmp_path, *extra: str) -> tuple[list[dict], "Path"]:
+def rows_of(tmp_path, *extra: str) -> tuple[list[dict], Path]:
     from bench import live_throughput
 
     args = ["--device", "cpu", "--sizes", "8", "--seconds", "0.5", "--port", str(free_port()), "--out", str(tmp_path),

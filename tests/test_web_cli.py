@@ -95,7 +95,7 @@ def test_live_refuses_a_bad_record_path_before_starting(tmp_path):
     assert not list(tmp_path.iterdir())  # nothing written
 
 
-def test_record_limit_takes_gibibytes_and_its_help_names_the_default(monkeypatch, tmp_path):
+def test_record_limit_takes_gibibytes_and_its_help_names_the_default(monkeypatch):
     from warp_verlet import cli as cli_module
     from warp_verlet.live_session import RECORD_LIMIT_BYTES
 
