@@ -262,7 +262,16 @@ def _validate(args) -> int:
     print(f"memory: {need.describe()}")
     how = " (auto: dt is below the float32 limit)" if need.precision == "float64" and sim.precision == "auto" else ""
     print(f"positions: {need.precision}{how}")
+    _warn_about(scene)
     return 0
+
+
+def _warn_about(scene) -> None:
+    """What the scene will not do as written (scene_warnings.py), one ``warning:`` line each on stderr."""
+    from .scene_warnings import scene_warnings  # numpy only
+
+    for text in scene_warnings(scene):
+        print(f"warning: {text}", file=sys.stderr)
 
 
 def _note(text: str) -> None:
@@ -271,6 +280,11 @@ def _note(text: str) -> None:
 
 def _run(args) -> int:
     scene = load_scene(args.scene)
+    if args.frames is not None:  # the warnings speak of the run as it will be
+        from dataclasses import replace
+
+        scene = replace(scene, simulation=replace(scene.simulation, frames=args.frames))
+    _warn_about(scene)
     from .warp_setup import start_warp
 
     # Quiet unless -v (Warp's banner, per-module load timings and, on a CPU run, its CUDA-driver warning),
