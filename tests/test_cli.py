@@ -193,14 +193,15 @@ def test_validate_imports_no_heavy_module(scene_file):
     assert out.stdout.split()[-4:] == ["0", "False", "False", "False"]
 
 
-def test_preview_without_matplotlib_says_which_extra_to_install(tmp_path):
-    # matplotlib is an optional extra ("preview"): without it the command fails with one clear line, not a
-    # traceback. sys.modules[name] = None makes the import fail as a missing package does.
-    probe = ("import sys; sys.modules['matplotlib'] = None; from warp_verlet.cli import main; "
+def test_preview_without_its_renderer_says_what_to_install(tmp_path):
+    # Mitsuba is in the base install, but an install with --no-deps lacks it: the command then fails with one
+    # clear line, not a traceback. sys.modules[name] = None makes the import fail as a missing package does.
+    probe = ("import sys; sys.modules['mitsuba'] = None; from warp_verlet.cli import main; "
              "print('rc', main(['preview', 'missing.usdc', '-o', 'x.png']))")
     out = subprocess.run([sys.executable, "-c", probe], cwd=tmp_path, capture_output=True, text=True, check=True)
     assert out.stdout.split()[-2:] == ["rc", "1"]
-    assert "pip install 'warp-verlet[preview]'" in out.stderr and "Traceback" not in out.stderr
+    assert "the preview needs mitsuba" in out.stderr and "pip install warp-verlet" in out.stderr
+    assert "Traceback" not in out.stderr
     assert not (tmp_path / "x.png").exists()
 
 

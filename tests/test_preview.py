@@ -12,6 +12,8 @@ from PIL import Image
 from pxr import Usd, UsdGeom, Vt
 
 from warp_verlet import preview
+from warp_verlet import preview_render as render
+from warp_verlet.cache_reader import ClothFrame, ClothPrim
 from warp_verlet.cli import main, parse_frame_slice, parse_size
 from warp_verlet.faces import Faces
 from warp_verlet.usd_writer import CachedPlane, CachedShape, CachedSphere, PointCacheWriter
@@ -236,35 +238,178 @@ def test_uniform_non_grid_faces_stay_one_array():
     assert preview.visible_polygons(HOUSE_POINTS, HOUSE, hidden=[0, 1, 2]) == []
 
 
+def geometry_of(points, faces, hidden=(), spheres=(), planes=(), frame=0) -> "preview.FrameGeometry":
+    """A FrameGeometry of one cloth, built without a cache: what the renderer is handed for one frame."""
+    faces = faces if isinstance(faces, Faces) else Faces.uniform(np.asarray(faces))
+    points = np.asarray(points, np.float64)
+    prim = ClothPrim(prim=None, faces=faces, grid=preview.grid_shape(faces, len(points)),
+                     points_needed=int(faces.indices.max()) + 1)
+    cloth = ClothFrame(prim, points, np.asarray(sorted(hidden), np.int64), prim.grid)
+    return preview.FrameGeometry(frame=frame, seconds=frame / 30, cloths=(), ropes=(), spheres=tuple(spheres),
+                                 planes=tuple(planes), cloth_frames=(cloth,))
+
+
+def inside(polygon_px: np.ndarray, width: int, height: int, shrink: float = 1.5) -> np.ndarray:
+    """(height, width) mask of the pixel centres inside a convex polygon (pixel coordinates, either winding)
+    by more than ``shrink`` pixels: away from the antialiased edge."""
+    y, x = np.mgrid[0:height, 0:width] + 0.5
+    signs = []
+    for a, b in zip(polygon_px, np.roll(polygon_px, -1, axis=0)):
+        edge = b - a
+        signs.append(((x - a[0]) * edge[1] - (y - a[1]) * edge[0]) / np.linalg.norm(edge))
+    signs = np.array(signs)
+    return np.all(signs > shrink, axis=0) | np.all(signs < -shrink, axis=0)
+
+
+def is_cloth_red(pixels: np.ndarray) -> np.ndarray:
+    pixels = np.asarray(pixels, np.float64)
+    return (pixels[..., 0] - pixels[..., 2]) > 60
+
+
+def is_sphere_grey(pixels: np.ndarray) -> np.ndarray:
+    pixels = np.asarray(pixels, np.float64)
+    return (np.ptp(pixels, axis=-1) < 25) & (pixels.mean(axis=-1) < 235)  # grey, darker than the background
+
+
+def is_background(pixels: np.ndarray) -> np.ndarray:
+    return np.all(np.asarray(pixels) >= 250, axis=-1)
+
+
+def panel_of(geometry, width=320, height=240):
+    panel = render.frame_panel(geometry, "Y", width, height)
+    return panel, render.render_panel(panel, width, height)
+
+
+QUAD = np.array([[-0.5, 1.0, 0.0], [-0.5, 0.0, 0.0], [0.5, 0.0, 0.0], [0.5, 1.0, 0.0]])  # facing +z, the camera
+
+
+def test_a_cloth_in_front_of_a_sphere_hides_it_pixel_by_pixel():
+    # A sphere just behind a quad, sticking out past its right edge. mplot3d's painter's algorithm sorted whole
+    # polygons by their centres and let sphere facets show through the cloth; a depth test per pixel does not.
+    sphere = (np.array([0.45, 0.5, -0.22]), 0.2)
+    panel, pixels = panel_of(geometry_of(QUAD, [[0, 1, 2, 3]], spheres=[sphere]))
+    quad = inside(panel.camera.to_pixels(QUAD, 320, 240), 320, 240)
+    assert quad.sum() > 5000
+    assert is_cloth_red(pixels[quad]).all()  # every pixel inside the quad's silhouette is cloth
+    assert not is_sphere_grey(pixels[quad]).any()
+    assert is_sphere_grey(pixels[~quad]).sum() > 100  # and the sphere is drawn where it sticks out
+
+
+def test_a_torn_face_is_a_hole_showing_the_background():
+    rows = cols = 4  # 3 x 3 faces; the middle one (index 4) torn
+    r, c = np.meshgrid(np.arange(rows), np.arange(cols), indexing="ij")
+    points = np.stack([c / 3 - 0.5, 1 - r / 3, 0 * r], -1).reshape(-1, 3)
+    faces = grid_faces(rows, cols)
+    panel, pixels = panel_of(geometry_of(points, faces, hidden=[4]))
+    hole = inside(panel.camera.to_pixels(points[faces[4]], 320, 240), 320, 240)
+    kept = inside(panel.camera.to_pixels(points[faces[0]], 320, 240), 320, 240)
+    assert hole.sum() > 300 and kept.sum() > 300
+    assert is_background(pixels[hole]).all()
+    assert is_cloth_red(pixels[kept]).all()
+
+
+def test_each_panel_is_framed_on_its_own_frame(tmp_path):
+    # The cloth travels 100 m between frames 0 and 6: framing both frames together made it a speck.
+    path = write_cache(tmp_path / "flying.usdc", rows=9, cols=9)
+    stage = Usd.Stage.Open(str(path))
+    attr = UsdGeom.Mesh(stage.GetPrimAtPath("/World/cloth")).GetPointsAttr()
+    attr.Set(Vt.Vec3fArray.FromNumpy(grid_points(9, 9, sag=0.3) + np.float32([100, 0, 0])), Usd.TimeCode(6))
+    stage.Save()
+    del stage
+    out = tmp_path / "two.png"
+    assert main(["preview", str(path), "-o", str(out), "--frames", "0:7:6", "--size", "640x340"]) == 0
+    pixels = load_rgb(out)
+    title, caption = preview.TITLE_ROOM_PX, min(preview.CAPTION_ROOM_PX, 340 // 20)
+    for left in (0, 320):
+        panel = pixels[title:340 - caption, left:left + 320]
+        ys, xs = np.nonzero(is_cloth_red(panel))
+        # The cloth spans its panel's width or height, less the margin around it (MARGIN of each half).
+        fill = max((np.ptp(xs) + 1) / panel.shape[1], (np.ptp(ys) + 1) / panel.shape[0])
+        assert fill > 0.9, (left, fill)
+
+
+def test_a_fine_grid_has_a_smooth_hem():
+    # A 256 x 256 grid whose bottom hem waves 12 times across: drawn as the old 64 x 64 coarse grid, the hem
+    # was a chord through every 4th point, off the curve by several pixels; now it follows the curve.
+    n = 256
+    r, c = np.meshgrid(np.arange(n + 1), np.arange(n + 1), indexing="ij")
+    x = c / n - 0.5
+    hem = 0.06 * np.sin(2 * np.pi * 12 * x)
+    y = 1 - r / n * (1 - hem)
+    points = np.stack([x, y, 0 * x], -1).reshape(-1, 3)
+    width = height = 400
+    panel, pixels = panel_of(geometry_of(points, grid_faces(n + 1, n + 1)), width, height)
+    # The hem's path on the image, finely sampled, and the cloth's coverage of each pixel from its blue
+    # channel, in linear light (the film averages a pixel's rays in linear light): the white background is 1,
+    # the flat, evenly lit cloth its interior's value.
+    fine_x = np.linspace(-0.5, 0.5, 40001)
+    curve = panel.camera.to_pixels(np.stack([fine_x, 0.06 * np.sin(2 * np.pi * 12 * fine_x), 0 * fine_x], -1),
+                                   width, height)
+    blue = render.srgb_to_linear(pixels[..., 2] / 255)
+    cloth_blue = np.median(blue[is_cloth_red(pixels)])
+    coverage = np.clip((1 - blue) / (1 - cloth_blue), 0, 1)
+    errors = []
+    for col in range(int(curve[:, 0].min()) + 3, int(curve[:, 0].max()) - 3):
+        # Each pixel's 2 x 2 rays sample two sub-columns: where the hem crosses each of them, on average.
+        crossings = np.interp([col + 0.25, col + 0.75], curve[:, 0], curve[:, 1])
+        window = np.arange(int(crossings.min()) - 4, int(crossings.max()) + 5)
+        # The cloth lies above the hem: its coverage of the window ends where the hem crosses, on average.
+        edge = window[0] + coverage[window, col].sum()
+        errors.append(edge - crossings.mean())
+    assert len(errors) > 250
+    assert np.abs(errors).max() < 1.0, np.abs(errors).max()
+
+
+def test_a_large_grid_is_drawn_at_about_one_quad_per_pixel():
+    n = 1024
+    faces, points = grid_faces(n + 1, n + 1), grid_points(n + 1, n + 1, sag=0.2)
+    geometry = geometry_of(points, faces)
+    panel = render.frame_panel(geometry, "Y", 480, 300)
+    mesh = panel.cloths[0]
+    assert len(mesh.triangles) == 2 * 480 * 480  # the panel's larger side, in quads, each side
+    # Both hems and every corner are kept exactly.
+    corners = points.reshape(n + 1, n + 1, 3)[[0, 0, -1, -1], [0, -1, 0, -1]]
+    assert all((np.abs(mesh.points - corner).max(axis=1) < 1e-6).any() for corner in corners)
+    small = render.frame_panel(geometry_of(grid_points(65, 65), grid_faces(65, 65)), "Y", 480, 300)
+    assert len(small.cloths[0].triangles) == 2 * 64 * 64  # a grid smaller than the panel is drawn whole
+
+
 def test_flat_faces_of_any_size_are_shaded_alike():
+    # Per-pixel lighting of a flat mesh of a pentagon, a quad and a triangle, tilted: one colour throughout.
     tilt = np.array([[1.0, 0.0, 0.0], [0.0, 0.8, 0.6], [0.0, -0.6, 0.8]])  # a plane facing neither axis
     points = HOUSE_POINTS @ tilt.T + [3.0, -2.0, 5.0]
-    polygons = preview.visible_polygons(points, HOUSE)
-    colours = preview._shade(polygons, (0.8, 0.3, 0.2))
-    np.testing.assert_allclose(colours, np.repeat(colours[:1], 3, axis=0), rtol=1e-12)
-    # A quad's shade is its mean normal's, the cross product of its diagonals, as for any grid.
-    bent = np.array([[[0.0, 0.0, 0.0], [1.0, 0.0, 0.3], [1.0, 1.0, 0.0], [0.0, 1.0, 0.2]]])
-    diagonals = np.cross(bent[0, 2] - bent[0, 0], bent[0, 3] - bent[0, 1])
-    np.testing.assert_allclose(preview._normals(bent)[0], diagonals, rtol=1e-12)
+    panel, pixels = panel_of(geometry_of(points, HOUSE))
+    red = is_cloth_red(pixels)
+    core = red & np.roll(red, 2, 0) & np.roll(red, -2, 0) & np.roll(red, 2, 1) & np.roll(red, -2, 1)
+    assert core.sum() > 2000
+    assert np.ptp(pixels[core], axis=0).max() <= 2
 
 
 def test_a_huge_ground_plane_is_clipped_to_the_cloth(cache):
     c = preview.open_cache(cache)
-    geometries = [preview.read_frame(c, f) for f in c.frames]
-    view, planes = preview.fit_view(geometries, c.up_axis)
-    assert (view.hi - view.lo).max() < 3.0  # the 1000 m ground would have made it 1000
-    assert all(len(p) == 1 for p in planes)
-    ground = planes[0][0]
+    geometry = preview.read_frame(c, 0)
+    panel = render.frame_panel(geometry, c.up_axis, 320, 240)
+    assert 2 * panel.camera.half_width < 3.0  # the 1000 m ground would have made it 1000
+    (ground,) = panel.planes
     assert np.allclose(ground[:, 1], 0.0)  # still the ground, at its height
-    xs = geometries[0].cloths[0][..., 0]
+    xs = geometry.cloth_frames[0].points[:, 0]
     assert ground[:, 0].min() < xs.min() and ground[:, 0].max() > xs.max()  # and it reaches past the cloth
+    pixels = render.render_panel(panel, 320, 240)
+    # The ground's colour, lit by the key light at its angle (Lambert) and the ambient share.
+    light = render.KEY_LIGHT * render.light_direction("Y")[1] + render.AMBIENT
+    plane = render.linear_to_srgb(render.srgb_to_linear(render.PLANE_COLOUR) * light) * 255
+    assert (np.abs(pixels - plane).max(axis=-1) < 3).sum() > 1000  # the ground is drawn, lit from above
 
 
-def test_y_up_is_drawn_vertical_by_a_rotation():
-    m = preview.to_display(np.eye(3), "Y")  # rows: the images of x, y and z
-    np.testing.assert_array_equal(m[1], [0, 0, 1])  # stage Y is matplotlib's vertical
-    assert np.linalg.det(m) == 1.0  # a rotation, not a mirror: fronts stay fronts
-    np.testing.assert_array_equal(preview.to_display(np.eye(3), "Z"), np.eye(3))
+def test_the_stage_up_axis_is_up_in_the_picture_and_nothing_is_mirrored():
+    for axis, up in (("Y", [0, 1, 0]), ("Z", [0, 0, 1])):
+        camera = render.fit_camera(np.eye(3), np.eye(3), axis, 1.0)
+        assert camera.up @ up > 0.9 and abs(camera.right @ up) < 1e-12  # vertical stays vertical
+        # right x up = towards the eye: a right-handed camera, so fronts stay fronts.
+        np.testing.assert_allclose(np.cross(camera.right, camera.up), camera.towards_eye, atol=1e-12)
+    # A Y-up stage is seen as the same stage turned Z-up would be: a rotation taking z to y.
+    turn = np.array([[1, 0, 0], [0, 0, 1], [0, -1, 0]])  # (x, y, z) -> (x, z, -y)
+    np.testing.assert_allclose(turn @ render.view_direction("Z"), render.view_direction("Y"), atol=1e-12)
 
 
 # --------------------------------------------------------------------------------- frame selection
@@ -378,14 +523,12 @@ def test_unwritable_output_exits_1_and_names_the_file(cache, tmp_path, capsys, m
 
 
 def test_a_failed_write_leaves_no_partial_file(cache, tmp_path, capsys, monkeypatch):
-    from matplotlib.figure import Figure
-
-    def fail_halfway(self, fname, **kwargs):
-        with open(fname, "wb") as f:
+    def fail_halfway(self, fp, *args, **kwargs):
+        with open(fp, "wb") as f:
             f.write(b"\x89PNG half")
         raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr(Figure, "savefig", fail_halfway)
+    monkeypatch.setattr(Image.Image, "save", fail_halfway)
     out = tmp_path / "p.png"
     rc, err = preview_rc(capsys, cache, "-o", out)
     assert rc == 1 and "cannot write preview" in err and "No space left on device" in err
@@ -449,14 +592,14 @@ def test_preview_needs_no_simulator_and_leaves_pyplot_alone(cache):
     assert out.stdout.split()[-3:] == ["0", "False", "False"]
 
 
-def test_validate_imports_no_matplotlib(tmp_path):
+def test_validate_imports_no_renderer(tmp_path):
     (tmp_path / "tiny.toml").write_text(RUN_SCENE)
     probe = (
         "import sys; from warp_verlet.cli import main; rc = main(['validate', 'tiny.toml']); "
-        "print(rc, *(m in sys.modules for m in ('warp', 'pxr', 'matplotlib')))"
+        "print(rc, *(m in sys.modules for m in ('warp', 'pxr', 'matplotlib', 'mitsuba')))"
     )
     out = subprocess.run([sys.executable, "-c", probe], cwd=tmp_path, capture_output=True, text=True, check=True)
-    assert out.stdout.split()[-4:] == ["0", "False", "False", "False"]
+    assert out.stdout.split()[-5:] == ["0", "False", "False", "False", "False"]
 
 
 # ------------------------------------------------------------------------------ damaged caches, big GIFs
@@ -495,16 +638,16 @@ def test_a_damaged_frame_is_one_clear_error(tmp_path, how, words):
 
 
 def test_a_gif_is_written_one_frame_at_a_time(cache, monkeypatch):
-    # matplotlib's PillowWriter held every frame until the end (120 frames at 8192 x 8192: 32 GB). Now each
+    # An animation held whole until the end would be 24 GB at 120 frames of 8192 x 8192. Now each
     # frame is on disk before the next is drawn.
     sizes = []
     real = preview._draw_panels
     out = cache.parent / "s.gif"
 
-    def spy(fig, *args):
+    def spy(*args):
         partials = list(cache.parent.glob(".s.*.partial.gif"))
         sizes.append(partials[0].stat().st_size if partials else 0)
-        return real(fig, *args)
+        return real(*args)
 
     monkeypatch.setattr(preview, "_draw_panels", spy)
     assert main(["preview", str(cache), "-o", str(out), "--size", "64x64"]) == 0
@@ -518,6 +661,7 @@ def test_a_size_that_cannot_be_held_is_refused_before_drawing(cache, monkeypatch
     monkeypatch.setattr(preview, "available_host_bytes", lambda: 200 * 10**6)
     assert main(["preview", str(cache), "-o", str(cache.parent / "big.gif"), "--size", "8192x8192"]) == 2
     err = capsys.readouterr().err
-    assert "--size 8192x8192: drawing one image of that size needs about 0.81 GB" in err and "0.2 GB" in err
+    need = 8192 * 8192 * preview.BYTES_PER_PIXEL / 1e9
+    assert f"--size 8192x8192: drawing one image of that size needs about {need:.2g} GB" in err and "0.2 GB" in err
     assert not (cache.parent / "big.gif").exists()
     assert main(["preview", str(cache), "-o", str(cache.parent / "small.gif"), "--size", "64x64"]) == 0

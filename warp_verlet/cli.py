@@ -5,7 +5,7 @@ cache or arguments, 130 interrupted (Ctrl-C), 143 terminated (SIGTERM). A run th
 its frames went (``NAME.partial.EXT``) and that the previous output was left as it was.
 
 Heavy modules are imported by the command that needs them: validate imports none of warp, pxr and
-matplotlib, and preview imports pxr and matplotlib but never warp.
+matplotlib, and preview imports pxr and its renderer (Mitsuba) but never warp.
 """
 
 from __future__ import annotations
@@ -355,14 +355,14 @@ def _sweep(args) -> int:
 
 
 def _preview_module():
-    """warp_verlet.preview (pxr and matplotlib; never warp), or one clear error when the optional extra that
-    brings matplotlib is not installed."""
+    """warp_verlet.preview (pxr, Mitsuba and Pillow; never warp), or one clear error when the install lacks the
+    renderer (the base install brings it; an install with --no-deps does not)."""
     try:
         from . import preview
     except ModuleNotFoundError as exc:
-        if exc.name and exc.name.split(".")[0] == "matplotlib":
-            raise WarpVerletError("the preview needs matplotlib, an optional extra: pip install "
-                                  "'warp-verlet[preview]'") from None
+        if exc.name and exc.name.split(".")[0] in ("mitsuba", "PIL"):
+            raise WarpVerletError(f"the preview needs {exc.name.split('.')[0]}, part of warp-verlet's base "
+                                  "install, which is missing here: pip install warp-verlet") from None
         raise
     return preview
 

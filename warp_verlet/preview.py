@@ -1,12 +1,12 @@
 """Headless previews of a USD point cache: a PNG of up to four frames side by side, or an animated GIF.
 
-The cache is read one frame at a time into plain numpy (``read_frame``), then drawn with matplotlib's Agg
-canvas (``draw_frame``). Only ``Figure`` and ``FigureCanvasAgg`` objects are used, never pyplot, so that
-importing this module does not choose or change the caller's matplotlib backend.
+The cache is read one frame at a time into plain numpy (``read_frame``); each panel is ray traced on the CPU
+by Mitsuba 3 (``preview_render``: a per-pixel depth test, a key light with shadows, smoothed edges), with a
+camera fitted to that frame's cloths, so a cloth that travelled far stays large. Pillow lays the panels out,
+writes their titles and the caption, and encodes the PNG or the GIF.
 
-Every surface drawn for one frame goes into a single ``Poly3DCollection``: matplotlib sorts polygons by
-depth only within a collection, so a cloth draped over a sphere is drawn in the right order only if the sphere's
-facets and the cloth's faces are sorted together. A cloth's faces may be triangles, quads, n-gons or a mix.
+A cloth's faces may be triangles, quads, n-gons or a mix; torn faces are holes. A large grid is drawn at about
+one grid cell per pixel of its panel.
 
 This module never imports warp: previewing a cache must not need the simulator.
 """
@@ -14,45 +14,31 @@ This module never imports warp: previewing a cache must not need the simulator.
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
 
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.figure import Figure
-from matplotlib.ticker import FuncFormatter, MaxNLocator
-from mpl_toolkits.mplot3d.art3d import Line3DCollection, Poly3DCollection
+from PIL import Image, ImageDraw, ImageFont
 
 from .errors import OutputError
 from .memory import available_host_bytes
-from .faces import next_corner
 # Reading is shared with the browser player; grid_shape and visible_polygons are re-exported for callers of
 # this module.
 from .cache_reader import (FrameGeometry, Polygons, PointCache, PreviewError, grid_shape,  # noqa: F401
                            open_cache, read_frame, visible_polygons)
+from .preview_render import clip_plane, render_frame  # noqa: F401  (clip_plane: re-exported)
 
 SUFFIXES = (".png", ".gif")
 DEFAULT_SIZE = {".png": (800, 800), ".gif": (480, 480)}  # pixels; a GIF is smaller because it has many frames
 MAX_PNG_PANELS = 4
 MAX_GIF_FRAMES = 120
 MAX_GIF_FPS = 50.0  # GIF delays are in 1/100 s and viewers slow down anything shorter than 2/100 s
-# Seen from above and in front, off to the right: a vertical cloth in the XY plane faces the camera at 30
-# degrees instead of edge-on, and a horizontal one still shows its folds.
-VIEW_ELEVATION, VIEW_AZIMUTH = 20.0, -60.0
-# A power of two, so that W / DPI inches is exact and the image comes out at exactly W x H pixels.
-DPI = 128
-TITLE_ROOM_PX, CAPTION_ROOM_PX = 26, 12  # room above each panel for its title, below them for the file name
-SPHERE_FACETS = (24, 48)  # latitude x longitude quads: small, so that depth sorting against the cloth works
-# Memory per pixel while one image is drawn and written: Agg's RGBA canvas (4), its RGB copy (3), the
-# palette image of a GIF frame (1) and Pillow's and the encoder's working copies (about 4). GIF frames are
-# written one at a time, so this does not grow with the frame count.
-BYTES_PER_PIXEL = 12
-
-CLOTH_COLOURS = ((0.80, 0.33, 0.24), (0.23, 0.47, 0.72), (0.36, 0.62, 0.33), (0.85, 0.62, 0.20))
-ROPE_COLOUR = (0.15, 0.15, 0.15)
-SPHERE_COLOUR = (0.70, 0.72, 0.76)
-PLANE_RGBA = (0.45, 0.45, 0.45, 0.25)
+TITLE_ROOM_PX, CAPTION_ROOM_PX = 26, 14  # room above each panel for its title, below them for the file name
+# Memory per pixel of the image while one image is drawn and written: Mitsuba's film (R, G, B, A, the albedo's
+# three channels and the filter weight, as float32: 32 bytes), the float64 copies the shading works on (about
+# 80), the 8-bit panel and the canvas (6), and Pillow's palette image and the encoder's working copies of a GIF
+# frame (about 5). GIF frames are written one at a time, so this does not grow with the frame count.
+BYTES_PER_PIXEL = 124
 
 
 # ------------------------------------------------------------------------------------- frame selection
@@ -95,177 +81,49 @@ def evenly_spaced(frames: Sequence[int], count: int) -> list[int]:
 # ---------------------------------------------------------------------------------------------- drawing
 
 
-@dataclass(frozen=True)
-class View:
-    """The camera of every panel: one box fitted over all drawn frames, so panels and GIF frames align."""
-
-    lo: np.ndarray  # stage coordinates
-    hi: np.ndarray
-    up_axis: str
-
-
-def to_display(points: np.ndarray, up_axis: str) -> np.ndarray:
-    """Stage coordinates to matplotlib's, whose z is vertical: a Y-up stage is turned by +90 degrees about X,
-    (x, y, z) -> (x, -z, y), a rotation, so the cloth keeps its handedness and its front faces the camera."""
-    if up_axis == "Z":
-        return points
-    return np.stack([points[..., 0], -points[..., 2], points[..., 1]], axis=-1)
-
-
-def _flatten(polygons: Polygons) -> tuple[np.ndarray, np.ndarray]:
-    """Every corner of ``polygons`` in one (C, 3) array, and each polygon's corner count: one layout for
-    both kinds of Polygons, so that what works on it needs no per-kind code."""
-    if isinstance(polygons, np.ndarray):
-        return polygons.reshape(-1, 3), np.full(len(polygons), polygons.shape[1], np.int64)
-    counts = np.fromiter(map(len, polygons), np.int64, len(polygons))
-    return (np.concatenate(polygons) if polygons else np.zeros((0, 3))), counts
-
-
-def _content_box(geometries: Sequence[FrameGeometry]) -> tuple[np.ndarray, np.ndarray]:
-    chunks = [_flatten(p)[0] for g in geometries for p in g.cloths] + [r for g in geometries for r in g.ropes]
-    chunks = [c for c in chunks if c.size]
-    chunks += [np.stack([c - r, c + r]) for g in geometries for c, r in g.spheres]
-    if not chunks:  # everything hidden: a unit box at the origin
-        return np.full(3, -0.5), np.full(3, 0.5)
-    allp = np.concatenate(chunks)
-    return allp.min(axis=0), allp.max(axis=0)
-
-
-def clip_plane(corners: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray | None:
-    """The part of a rectangular plane quad under the box [lo, hi] (its footprint on the plane), so that a
-    ground plane meant to look infinite does not shrink the cloth to a dot. None when they do not overlap."""
-    origin = corners[0]
-    u, v = corners[1] - origin, corners[-1] - origin
-    lu, lv = np.linalg.norm(u), np.linalg.norm(v)
-    if lu == 0 or lv == 0:
-        return None
-    u, v = u / lu, v / lv
-    box = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
-    pu, pv = (box - origin) @ u, (box - origin) @ v
-    u0, u1 = max(pu.min(), 0.0), min(pu.max(), lu)
-    v0, v1 = max(pv.min(), 0.0), min(pv.max(), lv)
-    if u1 <= u0 or v1 <= v0:
-        return None
-    return origin + np.array([u0 * u + v0 * v, u1 * u + v0 * v, u1 * u + v1 * v, u0 * u + v1 * v])
-
-
-def fit_view(geometries: Sequence[FrameGeometry], up_axis: str) -> tuple[View, list[list[np.ndarray]]]:
-    """The camera box over all frames, and each frame's planes clipped to the cloths' footprint."""
-    lo, hi = _content_box(geometries)
-    pad = 0.15 * max(float((hi - lo).max()), 1e-6)  # the ground shows a little around the cloth
-    planes = [[q for q in (clip_plane(p, lo - pad, hi + pad) for p in g.planes) if q is not None]
-              for g in geometries]
-    chunks = [lo[None], hi[None]] + [q for frame_planes in planes for q in frame_planes]
-    allp = np.concatenate(chunks)
-    return View(allp.min(axis=0), allp.max(axis=0), up_axis), planes
-
-
-def _sphere_quads(centre: np.ndarray, radius: float) -> np.ndarray:
-    n_lat, n_lon = SPHERE_FACETS
-    theta = np.linspace(0, np.pi, n_lat + 1)[:, None]
-    phi = np.linspace(0, 2 * np.pi, n_lon + 1)[None, :]
-    p = centre + radius * np.stack([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi),
-                                    np.cos(theta) * np.ones_like(phi)], axis=-1)
-    return np.stack([p[:-1, :-1], p[1:, :-1], p[1:, 1:], p[:-1, 1:]], axis=2).reshape(-1, 4, 3)
-
-
-def _normals(polygons: Polygons) -> np.ndarray:
-    """(Q, 3) Newell normals, twice each polygon's vector area: one formula for triangles, quads and
-    n-gons, the mean normal of a non-planar one (for a quad, the cross product of its diagonals). Corners are
-    taken relative to each polygon's first, so that a cloth far from the origin keeps its precision."""
-    corners, counts = _flatten(polygons)
-    if not len(counts):
-        return np.zeros((0, 3))
-    starts = np.cumsum(counts) - counts
-    rel = corners - np.repeat(corners[starts], counts, axis=0)
-    return np.add.reduceat(np.cross(rel, rel[next_corner(counts)]), starts, axis=0)
-
-
-def _shade(polygons: Polygons, rgb: Sequence[float]) -> np.ndarray:
-    """Lambert shading with a light over the camera's shoulder; |n.l| because cloth is seen from both sides."""
-    e, a = np.radians(VIEW_ELEVATION + 25), np.radians(VIEW_AZIMUTH + 20)
-    light = np.array([np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)])
-    n = _normals(polygons)
-    length = np.linalg.norm(n, axis=1)
-    lambert = np.abs(n @ light) / np.where(length > 0, length, 1.0)
-    shade = 0.35 + 0.65 * lambert
-    return np.concatenate([shade[:, None] * np.asarray(rgb)[None], np.ones((len(polygons), 1))], axis=1)
-
-
-def draw_frame(ax, geometry: FrameGeometry, planes: Sequence[np.ndarray], view: View) -> None:
-    """Draw one frame into a 3D axes: cloths, spheres and planes in one depth-sorted collection, ropes as lines."""
-    up = view.up_axis
-    polygons, faces, edges = [], [], []
-    for i, cloth in enumerate(geometry.cloths):
-        if not len(cloth):
-            continue
-        shown = to_display(cloth, up) if isinstance(cloth, np.ndarray) else [to_display(p, up) for p in cloth]
-        colours = _shade(shown, CLOTH_COLOURS[i % len(CLOTH_COLOURS)])
-        polygons += list(shown)
-        faces.append(colours)
-        edges.append(colours * [0.75, 0.75, 0.75, 1.0])  # the (coarse) grid lines show the folds
-    for centre, radius in geometry.spheres:
-        quads = to_display(_sphere_quads(centre, radius), up)
-        colours = _shade(quads, SPHERE_COLOUR)
-        polygons += list(quads)
-        faces.append(colours)
-        edges.append(colours)  # no visible facet seams
-    for plane in planes:
-        polygons.append(to_display(plane, up))
-        faces.append(np.array([PLANE_RGBA]))
-        edges.append(np.array([(0.3, 0.3, 0.3, 0.5)]))
-    if polygons:
-        ax.add_collection3d(Poly3DCollection(polygons, facecolors=np.concatenate(faces),
-                                             edgecolors=np.concatenate(edges), linewidths=0.3))
-    if geometry.ropes:
-        ax.add_collection3d(Line3DCollection([to_display(r, up) for r in geometry.ropes], colors=[ROPE_COLOUR],
-                                             linewidths=1.5))
-
-    lo, hi = to_display(view.lo, up), to_display(view.hi, up)
-    lo, hi = np.minimum(lo, hi), np.maximum(lo, hi)  # the Y-up turn flips one axis
-    span = hi - lo
-    floor = 0.05 * max(float(span.max()), 1e-6)  # a flat cloth still gets a box with some depth
-    centre, span = (lo + hi) / 2, np.maximum(span, floor)
-    ax.set_xlim(centre[0] - span[0] / 2, centre[0] + span[0] / 2)
-    ax.set_ylim(centre[1] - span[1] / 2, centre[1] + span[1] / 2)
-    ax.set_zlim(centre[2] - span[2] / 2, centre[2] + span[2] / 2)
-    ax.set_box_aspect(span, zoom=0.85)  # equal aspect: a metre is as long on every axis
-    ax.view_init(elev=VIEW_ELEVATION, azim=VIEW_AZIMUTH)
-    labels = ("x", "z", "y") if up == "Y" else ("x", "y", "z")
-    for axis, label, length in zip((ax.xaxis, ax.yaxis, ax.zaxis), labels, span / span.max()):
-        axis.set_major_locator(MaxNLocator(max(1, round(4 * length))))  # fewer ticks on a short axis: no pile-up
-        axis.set_label_text(label, fontsize=7)
-        axis.labelpad = -6  # the default pads push the labels out of a small panel
-    if up == "Y":  # matplotlib's y is the stage's -z: label the ticks with the stage's coordinate
-        ax.yaxis.set_major_formatter(FuncFormatter(lambda value, _: f"{-value + 0.0:g}"))
-    ax.tick_params(labelsize=6, pad=-2)
-    ax.set_title(f"frame {geometry.frame}   t = {geometry.seconds:.3f} s", fontsize=9, pad=2)
-
-
 def _panel_grid(panels: int) -> tuple[int, int]:
     return (2, 2) if panels > 2 else (1, panels)
 
 
-def _figure(size: tuple[int, int]) -> Figure:
-    fig = Figure(figsize=(size[0] / DPI, size[1] / DPI), dpi=DPI)
-    FigureCanvasAgg(fig)  # Agg, attached to this figure only: the global backend is left alone
-    return fig
+def _font(pixels: int) -> ImageFont.ImageFont:
+    """Pillow's own font (no system font needed), at ``pixels`` high where Pillow has FreeType."""
+    try:
+        return ImageFont.load_default(size=pixels)
+    except (TypeError, ImportError, OSError):  # a Pillow without FreeType: its fixed bitmap font
+        return ImageFont.load_default()
 
 
-def _draw_panels(fig: Figure, cache: PointCache, geometries: Sequence[FrameGeometry],
-                 planes: Sequence[Sequence[np.ndarray]], view: View) -> None:
-    fig.clear()
+def _title(geometry: FrameGeometry) -> str:
+    return f"frame {geometry.frame}   t = {geometry.seconds:.3f} s"
+
+
+def _draw_panels(cache: PointCache, geometries: Sequence[FrameGeometry], size: tuple[int, int]) -> Image.Image:
+    """One image of ``size``: a panel per frame (side by side for two, 2 x 2 for three or four), each titled
+    with its frame and time and framed on its own cloths; the cache's file name in the bottom-left corner."""
+    width, height = size
     rows, cols = _panel_grid(len(geometries))
-    for i, (geometry, frame_planes) in enumerate(zip(geometries, planes)):
-        ax = fig.add_subplot(rows, cols, i + 1, projection="3d")
-        draw_frame(ax, geometry, frame_planes, view)
-    fig.text(0.01, 0.01, cache.path.name, fontsize=7, color="0.4", ha="left", va="bottom")
-    # Margins in pixels, not fractions, so that a title fits above every panel whatever the image's height.
-    height = fig.get_figheight() * fig.dpi
-    title, caption = min(TITLE_ROOM_PX / height, 0.1), min(CAPTION_ROOM_PX / height, 0.05)  # thumbnails too
-    panel = (1 - caption - rows * title) / rows  # a panel's height as a figure fraction, a title above each
-    fig.subplots_adjust(left=0.0, right=0.96, bottom=caption, top=1 - title, wspace=0.08,
-                        hspace=title / panel if rows > 1 else 0.0)
+    # Margins in pixels, not fractions, so that a title fits above every panel whatever the image's height;
+    # a thumbnail gives them at most a tenth (titles) and a twentieth (caption) of its height.
+    caption = min(CAPTION_ROOM_PX, height // 20)
+    cell_h = (height - caption) // rows
+    title = min(TITLE_ROOM_PX, cell_h // 10)
+    cell_w = width // cols
+    image = Image.new("RGB", (width, height), (255, 255, 255))
+    draw = ImageDraw.Draw(image)
+    for i, geometry in enumerate(geometries):
+        r, c = divmod(i, cols)
+        x0, y0 = c * cell_w, r * cell_h
+        w = cell_w if c < cols - 1 else width - x0  # the last column and row take the odd pixels
+        h = (cell_h if r < rows - 1 else height - caption - y0) - title
+        if w >= 1 and h >= 1:
+            image.paste(Image.fromarray(render_frame(geometry, cache.up_axis, w, h)), (x0, y0 + title))
+        if title >= 6:
+            draw.text((x0 + w / 2, y0 + title / 2), _title(geometry), fill=(0, 0, 0), anchor="mm",
+                      font=_font(round(title * 0.55)))
+    if caption >= 6:
+        draw.text((4, height - caption / 2), cache.path.name, fill=(102, 102, 102), anchor="lm",
+                  font=_font(round(caption * 0.8)))
+    return image
 
 
 # ---------------------------------------------------------------------------------------------- writing
@@ -299,7 +157,7 @@ def _check_memory(size: tuple[int, int], available: int | None) -> None:
 
 class GifStream:
     """An animated GIF written one frame at a time, so that memory holds one frame and not the animation
-    (matplotlib's PillowWriter keeps every frame until the end: 120 frames at 8192 x 8192 are 32 GB). Each
+    (an animation held whole until the end would be 24 GB at 120 frames of 8192 x 8192). Each
     frame is quantised to its own 256-colour palette (the first frame's is the global colour table, later
     frames carry a local one); the animation loops forever."""
 
@@ -308,11 +166,9 @@ class GifStream:
         self._duration = int(1000 / fps)  # ms, as PillowWriter wrote it; GIF keeps 1/100 s
         self.frames = 0
 
-    def add(self, fig: Figure) -> None:
-        from PIL import GifImagePlugin, Image
+    def add(self, rgb: Image.Image) -> None:
+        from PIL import GifImagePlugin
 
-        fig.canvas.draw()
-        rgb = Image.fromarray(np.asarray(fig.canvas.buffer_rgba())[..., :3])  # opaque: the figure is white
         frame = rgb.convert("P", palette=Image.Palette.ADAPTIVE)
         del rgb
         if self.frames == 0:
@@ -349,24 +205,19 @@ def render_preview(cache_path: str | os.PathLike[str], output: str | os.PathLike
     cache = open_cache(cache_path)
     selected = select_frames(frames, cache.frames, cache.path)
     shown = evenly_spaced(selected, MAX_GIF_FRAMES if suffix == ".gif" else MAX_PNG_PANELS)
-    geometries = [read_frame(cache, f) for f in shown]
-    view, planes = fit_view(geometries, cache.up_axis)
-    width, height = size or DEFAULT_SIZE[suffix]
+    size = size or DEFAULT_SIZE[suffix]
 
-    # Same suffix, so Pillow and savefig pick the same format as for the real name; dot-prefixed, so it
-    # does not show up as a finished preview.
+    # Same suffix, so Pillow picks the same format as for the real name; dot-prefixed, so it does not show up
+    # as a finished preview.
     partial = output.with_name(f".{output.stem}.{os.getpid()}.partial{output.suffix}")
     try:
-        fig = _figure((width, height))
         if suffix == ".png":
-            _draw_panels(fig, cache, geometries, planes, view)
-            fig.savefig(partial, format="png", dpi=DPI)
+            _draw_panels(cache, [read_frame(cache, f) for f in shown], size).save(partial, format="PNG")
         else:
             gif = GifStream(partial, _gif_fps(shown, cache.fps))
             try:
-                for geometry, frame_planes in zip(geometries, planes):
-                    _draw_panels(fig, cache, [geometry], [frame_planes], view)
-                    gif.add(fig)
+                for frame in shown:  # one frame read, drawn and written at a time
+                    gif.add(_draw_panels(cache, [read_frame(cache, frame)], size))
             except BaseException:
                 gif.abandon()
                 raise
