@@ -3,6 +3,8 @@
 Skipped, with the reason, where viser, Playwright or Chromium is missing. UPDATE_SCREENSHOTS=1 copies the
 screenshots to docs/images (the README's pictures)."""
 
+import time
+
 import numpy as np
 import pytest
 
@@ -43,7 +45,8 @@ def live(tmp_path):
     from warp_verlet.live_app import LiveApp
     from warp_verlet.live_session import LiveSession
 
-    session = LiveSession(load_scene(REPO / "scenes" / "hanging_cloth.toml"), "cpu")
+    # Waiting, as `warp-verlet live` makes it: the simulation starts when the test's page connects.
+    session = LiveSession(load_scene(REPO / "scenes" / "hanging_cloth.toml"), "cpu", waiting=True)
     app = LiveApp(session, port=free_port(), record_path=tmp_path / "live.usdc")
     with Served(app):
         yield app
@@ -72,6 +75,14 @@ def test_live_page_shows_the_cloth(page_of, live, tmp_path):
     lowest = int(project(live.session.current_points()[0], live.server.initial_camera)[:, 1].max())
     assert lowest < 760 and not reddish(image[lowest + 20:, 330:780]).any()
     keep_for_docs(tmp_path / "live.png", "live.png")
+
+
+def test_the_simulation_starts_when_the_page_opens(page_of, live):
+    time.sleep(1.0)  # served for a second, no page yet
+    assert live.session.waiting and live.session.frame == 0 and live.session.sim.steps == 0
+    page = page_of(live.url)
+    wait_until(lambda: frame_number(page) > 5, what="the frame counter")
+    assert not live.session.waiting and any("started" in line for line in live.session.event_lines())
 
 
 def test_pause_button_stops_the_frame_counter(page_of, live):

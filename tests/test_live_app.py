@@ -4,7 +4,7 @@ their readouts refresh (viser runs a control's callback also when the server set
 import numpy as np
 import pytest
 
-from browser import REPO, free_port
+from browser import REPO, free_port, wait_until
 from conftest import make_scene
 from warp_verlet.scene import parse_scene
 
@@ -21,8 +21,9 @@ def app_of(tmp_path):
 
     apps = []
 
-    def make(scene):
-        apps.append(LiveApp(LiveSession(scene, "cpu"), port=free_port(), record_path=tmp_path / "live.usdc"))
+    def make(scene, waiting=False):
+        apps.append(LiveApp(LiveSession(scene, "cpu", waiting=waiting), port=free_port(),
+                            record_path=tmp_path / "live.usdc"))
         return apps[-1]
     yield make
     for app in apps:
@@ -87,3 +88,62 @@ def test_play_at_the_last_frame_plays_again_from_the_first(tmp_path):
         assert player.playing and player.frame == 0
     finally:
         player.server.stop()
+
+
+def connect_page(url: str):
+    """A websocket client of the page, as a browser's: it sends its camera, which is when viser counts a page as
+    connected (viser's own message, encoded as its browser client encodes it)."""
+    import msgspec
+    import viser
+    from viser._messages import ViewerCameraMessage
+    from websockets.sync.client import connect
+
+    page = connect(url.replace("http://", "ws://"), max_size=None, subprotocols=[f"viser-v{viser.__version__}"])
+    camera = ViewerCameraMessage(wxyz=(1.0, 0.0, 0.0, 0.0), position=(0.0, 0.0, 3.0), fov=1.0, near=0.01, far=100.0,
+                                 image_height=800, image_width=1200, look_at=(0.0, 0.0, 0.0),
+                                 up_direction=(0.0, 1.0, 0.0))
+    page.send(msgspec.msgpack.encode(camera.as_serializable_dict()))
+    return page
+
+
+def test_a_waiting_session_starts_when_the_first_page_connects(app_of):
+    app = app_of(make_scene({"fps": 60, "substeps": 4}, **HANGING), waiting=True)
+    session = app.session
+    for _ in range(30):  # half a second of the server's loop with no page
+        session.tick(1 / 60)
+    app.show_readouts(0.0)
+    assert session.frame == 0 and session.sim.steps == 0
+    assert app.frame_text.value == "0  (0.00 s)  waiting for a page"
+    page = connect_page(app.url)
+    try:
+        wait_until(lambda: not session.waiting, timeout=30, what="the page's connection to start the session")
+        assert app.frame_text.value == "0  (0.00 s)  starting"  # until the loop's next readout
+        for _ in range(3):
+            session.tick(1 / 60)
+        app.show_readouts(0.0)
+        assert session.frame == 3 and app.frame_text.value == "3  (0.05 s)"
+        assert session.readout().recorded == 4  # recorded from the start: frame 0 and three frames
+    finally:
+        page.close()
+
+
+def test_live_from_the_command_line_waits_for_a_page(monkeypatch, capsys):
+    from warp_verlet import cli
+
+    made = []
+
+    class Unserved:  # stands for LiveApp: serves nothing
+        url = "http://127.0.0.1"
+
+        def __init__(self, session, *args):
+            made.append(session)
+
+        def run(self, seconds):
+            pass
+
+    monkeypatch.setattr("warp_verlet.live_app.LiveApp", Unserved)
+    assert cli.main(["live", str(REPO / "scenes" / "rope.toml"), "--device", "cpu", "--port", str(free_port()),
+                     "--seconds", "0"]) == 0
+    assert made[0].waiting and made[0].frame == 0
+    assert "the simulation starts when a page connects" in capsys.readouterr().out
+    made[0].close()

@@ -310,3 +310,64 @@ def test_recording_stops_at_its_limit(device):
     r = session.readout()
     assert r.recorded == 5 and r.recording_full
     assert any("recording full" in line for line in session.events)
+
+
+def test_a_waiting_session_holds_still_until_started(tmp_path):
+    """``live`` makes its session waiting: nothing is simulated or recorded before start() (the first page), and
+    the wall time spent waiting is not caught up afterwards."""
+    session = LiveSession(make_scene({"fps": 60, "substeps": 4}, **HANGING), "cpu", waiting=True)
+    rest = session.current_points()[0].copy()
+    ticks(session, 30)  # half a second of wall time before any page connects
+    session.step_frame()  # nothing steps before the start
+    assert session.readout().waiting and session.frame == 0 and session.sim.steps == 0
+    np.testing.assert_array_equal(session.current_points()[0], rest)
+    session.set_iterations(3)  # an edit made while waiting applies at once, as while paused
+    assert session.sim.settings.iterations == 3
+    session.start()
+    assert not session.readout().waiting and session.frame == 0
+    ticks(session, 3)
+    assert session.frame == 3 and session.sim.steps == 12  # three frames of wall time, three frames
+    session.start()  # another page connecting changes nothing
+    assert session.frame == 3 and session.readout().recorded == 4
+    assert session.save(tmp_path / "started.usdc") == 4
+    cache = open_cache(tmp_path / "started.usdc")
+    assert cache.frames == (0, 1, 2, 3)
+    np.testing.assert_array_equal(read_cloths(cache, 0)[0].points, rest)
+    assert [line.split(" s  ", 1)[1] for line in session.event_lines()][1:4] == [
+        "waiting for a page to connect: the simulation and its recording start then", "iterations 3",
+        "started: simulating and recording from frame 0"]
+
+
+class FakeClock:
+    """The session's clock, moved by the test."""
+
+    def __init__(self):
+        self.now = 0.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
+def test_stalls_are_one_line_at_most_once_a_second_and_edits_stay_in_the_log():
+    clock = FakeClock()
+    session = LiveSession(make_scene({"fps": 60, "substeps": 2}, **HANGING), "cpu", clock=clock)
+    session.set_wind((0.0, 0.0, 1.0), 1.0)
+    session.set_iterations(3)
+    session.tick(1 / 60)  # the edits apply at the frame boundary
+    session.pause()
+    session.play()
+    edits = [line for line in session.event_lines() if "wind 1" in line or "iterations 3" in line
+             or "paused at frame 1" in line or "playing from frame 1" in line]
+    assert len(edits) == 4
+    stall_lines = set()
+    for _ in range(240):  # 30 s of ticks of 1/8 s: each banks 2 frames (1/30 s) and drops the rest
+        clock.now += 0.125
+        session.tick(0.125)
+        stall_lines.update(line for line in session.event_lines() if "stall" in line)
+        assert sum("stall" in line for line in session.event_lines()) == 1
+    # The first stall at once, then one line a second, each replacing the last: the log still holds the edits.
+    assert len(stall_lines) == 1 + 29
+    lines = session.event_lines()
+    assert all(edit in lines for edit in edits)
+    assert lines[-1].endswith("stalled 8 times in the last 1.0 s, worst 92 ms, 733 ms of wall time dropped in all "
+                              "(a tick banks at most 33 ms of wall time); the simulation runs slower than real time")

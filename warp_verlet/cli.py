@@ -227,9 +227,9 @@ def _live(args) -> int:
     from .live_session import LiveSession
 
     limit = {} if args.record_limit is None else {"record_limit": int(args.record_limit * 2**30)}
-    session = LiveSession(scene, args.device, **limit)
+    session = LiveSession(scene, args.device, waiting=True, **limit)  # starts when the first page connects
     app = LiveApp(session, args.host, args.port, record, args.max_grid_quads)
-    return _serve(app, f"{args.scene}: live", args.seconds)
+    return _serve(app, f"{args.scene}: live (the simulation starts when a page connects)", args.seconds)
 
 
 def _view(args) -> int:

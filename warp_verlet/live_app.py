@@ -1,7 +1,8 @@
 """``warp-verlet live``: a scene simulated in real time and shown in the browser, with its controls.
 
 The page (viser, warp_verlet/web_view.py) holds the controls; a :class:`~warp_verlet.live_session.LiveSession`
-holds the simulation. The loop here ticks the session with the wall time that passed, and sends the cloth's
+holds the simulation. A session made waiting (``warp-verlet live`` makes it so) starts when the first page
+connects. The loop here ticks the session with the wall time that passed, and sends the cloth's
 interpolated vertices (float32, binary) at most ``DRAW_HZ`` times a second and the readouts four times a second.
 """
 
@@ -58,6 +59,14 @@ class LiveApp:
         everything = np.concatenate(points + [s.centre[None] for s in self._sphere_list])
         frame_camera(self.server, everything.min(0), everything.max(0))
         self._build_gui(scene, record_path or default_record_path(scene))
+        self.server.on_client_connect(self._page_connected)
+
+    def _page_connected(self, _client) -> None:
+        """A page connected (on viser's thread): a session waiting for one starts now, and the page says so until
+        the first readout (the first steps load the kernels, which can take seconds)."""
+        if self.session.waiting:
+            self.frame_text.value = "0  (0.00 s)  starting"
+            self.session.start()
 
     # ------------------------------------------------------------------ scene
     def _add_colliders(self, scene: Scene) -> None:
@@ -95,7 +104,7 @@ class LiveApp:
             reset = gui.add_button("Reset")
             reset.on_click(lambda _: self._guard(session.reset))
         with gui.add_folder("Readouts"):
-            self.frame_text = gui.add_text("Frame", "0", disabled=True)
+            self.frame_text = gui.add_text("Frame", self._frame_line(session.readout()), disabled=True)
             self.rate_text = gui.add_text("Sim rate", "", disabled=True, hint="simulated frames per wall second "
                                           "and wall ms per simulated frame (1 s average)")
             self.stretch_text = gui.add_text("Stretch", "", disabled=True,
@@ -206,7 +215,7 @@ class LiveApp:
     def show_readouts(self, draw_rate: float) -> None:
         r = self.session.readout()
         self.play_button.label = "Play" if r.paused else "Pause"
-        self.frame_text.value = f"{r.frame}  ({r.seconds:.2f} s)" + ("  paused" if r.paused else "")
+        self.frame_text.value = self._frame_line(r)
         self.rate_text.value = f"{r.frames_per_second:.0f} frames/s, {r.ms_per_frame:.2f} ms/frame"
         self.stretch_text.value = f"RMS {100 * r.stretch_rms:.3f}%, max {100 * r.stretch_max:.2f}%"
         self.torn_text.value = str(r.torn)
@@ -223,6 +232,11 @@ class LiveApp:
         self.log_text.content = "\n".join(f"`{line}`  " for line in reversed(self.session.event_lines()))
         if list(self._pins.values()) != self.session.pins():  # a release has applied
             self._refresh_pins()
+
+    @staticmethod
+    def _frame_line(r) -> str:
+        state = "  waiting for a page" if r.waiting else "  paused" if r.paused else ""
+        return f"{r.frame}  ({r.seconds:.2f} s){state}"
 
     def run(self, seconds: float | None = None) -> None:
         """Tick, draw and show readouts until ``stop()``, Ctrl-C, or ``seconds`` of wall time."""

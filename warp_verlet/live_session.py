@@ -13,6 +13,10 @@ frame stays ``substeps`` equal steps of 1/fps seconds and a recording is a cache
   (``scene.check_scene``), built into a new simulator, which continues from the old one's state
   (``Simulator.take_state``; tears carried over by their particle pairs).
 
+A session made with ``waiting=True`` (``warp-verlet live``) holds still until ``start()`` (the live page calls it when
+its first page connects): the simulation and its recording begin then, not when the server starts, so that a cloth
+drop is not over, and its recording padded with idle frames, before anyone sees it.
+
 Every frame since the last reset is kept (up to ``record_limit`` bytes) and ``save()`` writes them through the
 same writer and the same atomic output as ``run`` (warp_verlet/runner.py, output_file.py). The frames are kept on
 the simulation's device, as a copy of its positions array: on a GPU that copy costs microseconds, where a copy to
@@ -40,6 +44,9 @@ RECORD_LIMIT_BYTES = 2 << 30  # frames kept for save(): 2 GiB (170 frames of a 1
 RECORD_DEVICE_SHARE = 0.5  # and at most this share of the GPU memory free when the recording starts
 NEVER_TEARS = 1e30  # the tear threshold that "tearing off" becomes once sticks have torn: none tears again
 EVENT_LOG_LENGTH = 12
+# Stalls are summed into one line of the event log, rewritten at most this often and replacing the previous stall
+# line, so that a simulation slower than real time does not push the user's own edits out of the log.
+STALL_REPORT_SECONDS = 1.0
 
 
 @dataclass(frozen=True)
@@ -63,6 +70,7 @@ class Readout:
     frame: int  # frames simulated since the last reset
     seconds: float  # simulated seconds since the last reset
     paused: bool
+    waiting: bool  # not started yet (``LiveSession.start``): nothing is simulated or recorded
     frames_per_second: float  # simulated frames per wall second, over the last second
     ms_per_frame: float  # wall milliseconds of simulation per simulated frame, over the last second
     stretch_rms: float
@@ -87,11 +95,29 @@ class RecordedFrame:
         return self.to_cache(self.positions.numpy())
 
 
+class _Stalls:
+    """The stalls since the event log's last stall line."""
+
+    def __init__(self):
+        self.count = 0
+        self.worst = 0.0  # the most wall seconds one tick dropped
+        self.dropped = 0.0  # wall seconds dropped in all
+        self.since = math.inf  # when the first of them began
+
+    def add(self, dropped: float, began: float) -> None:
+        self.count += 1
+        self.worst = max(self.worst, dropped)
+        self.dropped += dropped
+        self.since = min(self.since, began)
+
+
 class LiveSession:
-    """``scene`` running on ``device`` under interactive control. Every public method is thread-safe."""
+    """``scene`` running on ``device`` under interactive control. Every public method is thread-safe.
+
+    ``waiting``: hold still (nothing simulated, nothing recorded but the starting pose) until :meth:`start`."""
 
     def __init__(self, scene: Scene, device: str | None = None, record_limit: int = RECORD_LIMIT_BYTES,
-                 clock: Callable[[], float] = time.perf_counter):
+                 clock: Callable[[], float] = time.perf_counter, waiting: bool = False):
         from .simulator import Simulator  # imports warp
 
         self.device = device
@@ -105,14 +131,32 @@ class LiveSession:
         self._pause_requested = False
         self.paused = False
         self.diverged = False
+        self.waiting = waiting
         self.events: collections.deque[str] = collections.deque(maxlen=EVENT_LOG_LENGTH)
         # Per tick over the last second: (when it ended, wall seconds it simulated for, frames it completed).
         self._ticks: collections.deque[tuple[float, float, int]] = collections.deque()
-        self._stall_logged = -math.inf
+        self._stalls = _Stalls()
+        self._stall_reported = -math.inf  # when the last stall line was written
+        self._stall_line: str | None = None  # that line, as the event log holds it
+        self._stall_most = 0.0  # the wall seconds a tick banks at most, when the last stall happened
         self._drawn: tuple[np.ndarray, np.ndarray] | None = None  # set_drawn: particles, split points per cloth
         self._start_recording()
-        self.log(f"started on {self.sim.device}: {self.sim.model.particle_count} particles, "
+        self.log(f"built on {self.sim.device}: {self.sim.model.particle_count} particles, "
                  f"{self.sim.model.stick_count} sticks")
+        if waiting:
+            self.log("waiting for a page to connect: the simulation and its recording start then")
+
+    def start(self) -> None:
+        """End the wait of a session made with ``waiting=True``: from now on ticks simulate, and the recording
+        starts again from this moment's frame 0 (the wall time spent waiting is not caught up). Nothing happens
+        when the session is running already (a second page connecting)."""
+        with self._lock:
+            if not self.waiting:
+                return
+            self.waiting = False
+            self._apply_pending()
+            self._start_recording()
+            self.log("started: simulating and recording from frame 0")
 
     # ------------------------------------------------------------------ time
     def tick(self, wall_seconds: float) -> float:
@@ -125,9 +169,10 @@ class LiveSession:
         logged as a stall."""
         with self._lock:
             start = self._clock()
-            if self.paused or self.diverged:
+            if self.paused or self.diverged or self.waiting:
                 self._apply_pending()
                 self._note_wall(start)  # no frames: the rate readout falls to 0 within a second
+                self._report_stalls(start)
                 return 1.0  # paused at a frame boundary: draw that frame itself
             most = min(2.0 / self.sim.settings.fps, self.sim.settings.max_frame_time)
             dropped = max(wall_seconds - most, 0.0)
@@ -142,14 +187,34 @@ class LiveSession:
                     break
                 alpha = self.sim.advance(0.0, on_frame=self._on_frame)
             dropped += self.sim.clamped_seconds
+            now = self._clock()
             if dropped > 0.0:
-                now = self._clock()
-                if now - self._stall_logged > 2.0:  # at most one line every 2 s
-                    self._stall_logged = now
-                    self.log(f"stall: {dropped * 1e3:.0f} ms of wall time dropped (a tick banks at most "
-                             f"{most * 1e3:.0f} ms); the simulation runs slower than real time")
+                self._stalls.add(dropped, began=now - wall_seconds)
+                self._stall_most = most
+            self._report_stalls(now)
             self._note_wall(start)
             return alpha
+
+    def _report_stalls(self, now: float) -> None:
+        """The stalls so far as one line of the event log, in place of the previous stall line: the first stall
+        at once, then at most one line every STALL_REPORT_SECONDS, counting the stalls since the last line."""
+        stalls = self._stalls
+        if not stalls.count or now - self._stall_reported < STALL_REPORT_SECONDS:
+            return
+        why = (f"(a tick banks at most {self._stall_most * 1e3:.0f} ms of wall time); the simulation runs slower "
+               "than real time")
+        if stalls.count == 1:
+            text = f"stalled: {stalls.worst * 1e3:.0f} ms of wall time dropped {why}"
+        else:
+            span = now - max(stalls.since, self._stall_reported)
+            text = (f"stalled {stalls.count} times in the last {span:.1f} s, worst {stalls.worst * 1e3:.0f} ms, "
+                    f"{stalls.dropped * 1e3:.0f} ms of wall time dropped in all {why}")
+        if self._stall_line is not None and self._stall_line in self.events:
+            self.events.remove(self._stall_line)
+        self.log(text)
+        self._stall_line = self.events[-1]
+        self._stall_reported = now
+        self._stalls = _Stalls()
 
     def _note_wall(self, start: float) -> None:
         now = self._clock()
@@ -203,7 +268,7 @@ class LiveSession:
     def step_frame(self) -> None:
         """One frame, while paused (to the next frame boundary)."""
         with self._lock:
-            if self.diverged:
+            if self.diverged or self.waiting:
                 return
             self._apply_pending()
             start = self._clock()
@@ -307,7 +372,7 @@ class LiveSession:
                 self.log(f"refused: {what}: {exc}")
         with self._lock:
             self._pending.append(run)
-            if self.sim.at_frame_boundary and (self.paused or self.diverged):
+            if self.sim.at_frame_boundary and (self.paused or self.diverged or self.waiting):
                 self._apply_pending()
 
     def _apply_pending(self) -> None:
@@ -349,6 +414,7 @@ class LiveSession:
             window = self._clock() - self._ticks[0][0] + self._ticks[0][1] if self._ticks else 0.0
             return Readout(
                 frame=self.frame, seconds=self.frame / self.sim.settings.fps, paused=self.paused or self.diverged,
+                waiting=self.waiting,
                 frames_per_second=frames / window if window > 0 else 0.0,
                 ms_per_frame=1e3 * spent / frames if frames else 0.0,
                 stretch_rms=stretch.rms, stretch_max=stretch.max, torn=self.sim.torn_count(),
