@@ -42,6 +42,16 @@ DIVERGING = SCENE.replace("damping = 0.6", "damping = 0.0\ngravity = [0.0, -1000
 ENDLESS = SCENE.replace("frames = 6", "frames = 100000").replace("save_every = 2", "save_every = 500")
 
 
+@pytest.fixture(autouse=True)
+def lock_directory(tmp_path_factory, monkeypatch) -> Path:
+    """This test's own runtime directory, where the output locks go (output_file.lock_directory); the runs
+    these tests start in subprocesses inherit it."""
+    runtime = tmp_path_factory.mktemp("runtime")
+    runtime.chmod(0o700)
+    monkeypatch.setenv("XDG_RUNTIME_DIR", str(runtime))
+    return runtime / "warp-verlet"
+
+
 @pytest.fixture
 def work(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
@@ -101,7 +111,7 @@ def test_ctrl_c_before_the_output_is_opened_claims_no_cache(work, monkeypatch, c
     err = capsys.readouterr().err
     assert "interrupted: nothing was written; small.usdc was not written" in err
     assert "holds the frames" not in err and "are in" not in err
-    assert sorted(p.name for p in work.iterdir()) == [".small.usdc.lock", "small.toml"]
+    assert sorted(p.name for p in work.iterdir()) == ["small.toml"]
 
 
 def test_an_error_inside_the_run_keeps_its_frames_and_reports_them_to_the_api(work, good_cache):
@@ -172,8 +182,8 @@ def test_a_rerun_killed_with_sigkill_keeps_the_previous_cache_byte_for_byte(work
     err = capsys.readouterr().err
     assert f"note: removed {stale_temp}, a temporary file left by an earlier run that was killed during a save" in err
     assert "small.partial.usdc holds the frames of an earlier run" in err
-    assert sorted(p.name for p in work.iterdir()) == [".small.usdc.lock", "endless.toml", "small.partial.backup",
-                                                      "small.toml", "small.usdc"]
+    assert sorted(p.name for p in work.iterdir()) == ["endless.toml", "small.partial.backup", "small.toml",
+                                                      "small.usdc"]
 
 
 def test_sigterm_stops_like_ctrl_c_and_says_where_the_frames_are(work, good_cache):
@@ -205,7 +215,7 @@ def test_a_second_run_to_the_same_output_is_refused_at_once(work, good_cache, ca
 
 
 def test_the_lock_is_refused_without_waiting_and_released_after_any_run(work):
-    with FileLock(str(work / ".small.usdc.lock")):  # another process's run, as far as flock can tell
+    with FileLock(str(output_file.lock_path(work / "small.usdc"))):  # another process's run, as flock sees it
         with pytest.raises(OutputBusyError, match="another run is writing it now"):
             run_scene(load_scene("small.toml"), device="cpu")
         assert not (work / "small.usdc").exists() and not (work / "small.partial.usdc").exists()
@@ -216,12 +226,36 @@ def test_the_lock_is_refused_without_waiting_and_released_after_any_run(work):
 
 
 @pytest.mark.skipif(not Path("/proc/self").is_dir(), reason="needs Linux's /proc, where no file can be created")
-def test_a_lock_file_that_cannot_be_created_is_not_called_busy(work):
+def test_a_lock_that_cannot_be_created_is_not_called_busy(work, monkeypatch):
     # filelock times out on a directory where the lock file cannot be created at all, as it does on a held lock;
     # the message says which of the two happened (the live page's Save to such a place showed "busy").
-    with pytest.raises(OutputError, match=r"cannot create its lock file /proc/\.small\.usdc\.lock") as refused:
-        run_scene(load_scene("small.toml"), output="/proc/small.usdc", device="cpu")
+    monkeypatch.setenv("XDG_RUNTIME_DIR", "/proc")
+    with pytest.raises(OutputError, match=r"cannot create the output lock directory /proc/warp-verlet") as refused:
+        run_scene(load_scene("small.toml"), device="cpu")
     assert not isinstance(refused.value, OutputBusyError)
+    assert sorted(p.name for p in work.iterdir()) == ["small.toml"]
+
+
+def test_the_lock_lives_in_the_private_lock_directory_and_every_path_to_the_output_finds_it(work, lock_directory):
+    assert run("small.toml") == 0
+    assert sorted(p.name for p in work.iterdir()) == ["small.toml", "small.usdc"]  # nothing beside the output
+    (lock,) = lock_directory.iterdir()
+    assert lock.name.startswith("small.usdc.") and lock.name.endswith(".lock") and lock.stat().st_size == 0
+    assert lock_directory.stat().st_mode & 0o777 == 0o700
+    (work / "sub").mkdir()
+    (work / "alias").symlink_to(work)
+    assert output_file.lock_path(work / "small.usdc") == lock
+    assert output_file.lock_path(work / "alias" / "small.usdc") == lock  # the same directory, by another path
+    assert output_file.lock_path(work / "sub" / "small.usdc") != lock  # the same name elsewhere: another lock
+    assert output_file.lock_path(work / "other.usdc") != lock
+
+
+def test_a_lock_directory_open_to_others_is_refused(work, lock_directory):
+    lock_directory.mkdir(mode=0o777)
+    lock_directory.chmod(0o777)
+    with pytest.raises(OutputError, match="is not a private directory of this user's"):
+        run_scene(load_scene("small.toml"), device="cpu")
+    assert sorted(p.name for p in work.iterdir()) == ["small.toml"]
 
 
 # ---------------------------------------------------------------------------------- paths (defect 4)
@@ -231,15 +265,15 @@ def test_the_output_may_not_be_the_scene_or_a_symlink_to_it(work, capsys):
     scene = work / "x.usda"  # a scene whose name is a USD name
     scene.write_text(SCENE)
     before = scene.read_bytes()
-    assert run(str(scene), "-o", str(scene)) == 1
+    assert run(str(scene), "-o", str(scene)) == 2  # a bad argument (tests/test_exit_codes.py)
     assert "the output would overwrite the input file" in capsys.readouterr().err
     link = work / "link.usda"
     link.symlink_to(scene)
-    assert run(str(scene), "-o", str(link)) == 1
+    assert run(str(scene), "-o", str(link)) == 2
     err = capsys.readouterr().err
     assert "would overwrite the input file" in err and "link.usda is a symlink to it" in err
     # The default output named like the scene's own partial file is refused too.
-    assert run(str(work / "small.toml"), "-o", str(work / "small.partial.usdc")) == 1
+    assert run(str(work / "small.toml"), "-o", str(work / "small.partial.usdc")) == 2
     assert "kept for the frames of runs that did not finish" in capsys.readouterr().err
     assert scene.read_bytes() == before and link.is_symlink()
     assert sorted(p.name for p in work.iterdir()) == ["link.usda", "small.toml", "x.usda"]
@@ -396,7 +430,7 @@ def test_a_real_full_disk_refuses_up_front_and_stops_mid_run(small_disk, work, c
     out = small_disk / "c.usdc"
     assert run(str(scenes / "hanging_cloth.toml"), "-o", str(out)) == 1
     assert "the cache needs about 6" in capsys.readouterr().err
-    assert sorted(p.name for p in small_disk.iterdir()) == [".c.usdc.lock"]
+    assert sorted(p.name for p in small_disk.iterdir()) == []
 
     # 40 frames fit (about 2 MB); at frame 15 another program fills the disk but for 400 kB.
     def fill(frame):

@@ -1,8 +1,10 @@
 """Command line: ``warp-verlet run|sweep|validate|preview`` (also ``python -m warp_verlet``).
 
 Exit codes: 0 success, 1 a run failed (divergence, unwritable, busy or full output, device), 2 invalid scene,
-cache or arguments, 130 interrupted (Ctrl-C), 143 terminated (SIGTERM). A run that does not finish says where
-its frames went (``NAME.partial.EXT``) and that the previous output was left as it was.
+cache or arguments (an output name that is no USD file or names an input, a port in use), 130 interrupted
+(Ctrl-C), 143 terminated (SIGTERM), 141 standard output closed by its reader (``| head``: 128 + SIGPIPE, as a
+tool that signal ends; quietly, no traceback). A run that does not finish says where its frames went
+(``NAME.partial.EXT``) and that the previous output was left as it was.
 
 Heavy modules are imported by the command that needs them: validate imports none of warp, pxr and
 matplotlib, and preview imports pxr and its renderer (Mitsuba) but never warp.
@@ -11,6 +13,7 @@ matplotlib, and preview imports pxr and its renderer (Mitsuba) but never warp.
 from __future__ import annotations
 
 import argparse
+import os
 import re
 import signal
 import sys
@@ -21,7 +24,7 @@ from pathlib import Path
 from . import __version__
 from .cpu_team import MAX_THREADS, usable_cores
 from .errors import SceneError, ServerError, WarpVerletError
-from .output_file import output_report
+from .output_file import OutputNameError, output_report
 from .scene import load_scene
 
 
@@ -92,18 +95,29 @@ def parse_size(text: str) -> tuple[int, int]:
 DEVICE_HELP = "cpu, cuda or cuda:N (default: CUDA when present, else CPU)"
 
 
+def _device_name(text: str) -> str:
+    """An argparse type: a device's name as simulator.resolve_device takes it. A name of another form is a bad
+    argument (exit 2); a well-formed one that this machine lacks fails the run (exit 1)."""
+    if text == "cpu" or text == "cuda" or re.fullmatch(r"cuda:\d+", text):
+        return text
+    raise argparse.ArgumentTypeError(f"expected cpu, cuda or cuda:N, got {text!r}")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="warp-verlet",
         description="Verlet cloth simulation on NVIDIA Warp (CPU or CUDA), written as a USD point cache.",
+        epilog="A scene is a TOML file: `warp-verlet validate SCENE` checks one, naming the file, the key and "
+               "what was expected for each problem, and warns about settings that will not do what they say. "
+               "Each command's --help lists its options.",
     )
     parser.add_argument("--version", action="version", version=f"warp-verlet {__version__}")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     run = commands.add_parser("run", help="simulate a scene and write its USD point cache")
-    run.add_argument("scene", type=Path, help="scene file (TOML, see docs/scenes.md)")
+    run.add_argument("scene", type=Path, help="scene file (TOML; `warp-verlet validate SCENE` checks it)")
     run.add_argument("-o", "--output", type=Path, help="output .usd/.usdc/.usda (default: the scene's [output] path)")
-    run.add_argument("--device", help=DEVICE_HELP)
+    run.add_argument("--device", type=_device_name, help=DEVICE_HELP)
     run.add_argument("--frames", type=_positive_int, help="number of frames (default: the scene's)")
     run.add_argument("--threads", type=_thread_count,
                      help=f"CPU threads for the relaxation, 1 .. {MAX_THREADS} (default: the cores, when the grid is "
@@ -117,13 +131,13 @@ def build_parser() -> argparse.ArgumentParser:
 
     sweep = commands.add_parser(
         "sweep", help="run every variant of a parameter sweep (locally, or on a Ray cluster)",
-        description="Run a sweep file's variants (a base scene and the keys to vary; see the README's Sweeps "
-                    "section): one cache per variant, sweep.csv and sweep.md in the output directory. A re-run "
+        description="Run a sweep file's variants (a base scene and the keys to vary; --dry-run lists them): "
+                    "one cache per variant, sweep.csv and sweep.md in the output directory. A re-run "
                     "skips the variants already done with the same parameters.",
     )
     sweep.add_argument("sweep", type=Path, help="sweep file (TOML)")
     sweep.add_argument("-o", "--output", type=Path, help="output directory (default: the sweep's [sweep] output)")
-    sweep.add_argument("--device", help=DEVICE_HELP)
+    sweep.add_argument("--device", type=_device_name, help=DEVICE_HELP)
     sweep.add_argument("--workers", type=_at_least_one("workers"),
                        help="local pool size (default: one per GPU on CUDA, one per core on the CPU)")
     sweep.add_argument("--threads", type=_thread_count,
@@ -144,7 +158,7 @@ def build_parser() -> argparse.ArgumentParser:
     preview = commands.add_parser(
         "preview", help="render a USD point cache to a PNG or an animated GIF (no simulator needed)",
         description="Render a point cache headlessly with matplotlib: a .png shows up to 4 frames as panels, "
-                    "a .gif animates the frames. See docs/preview.md.",
+                    "a .gif animates the frames.",
     )
     preview.add_argument("cache", type=Path, help="point cache (.usd, .usdc or .usda) written by `warp-verlet run`")
     preview.add_argument("-o", "--output", type=Path, required=True,
@@ -162,10 +176,10 @@ def build_parser() -> argparse.ArgumentParser:
         "live", help="simulate a scene in real time in the browser, with controls (needs the live extra)",
         description="Serve a live page of the scene at http://HOST:PORT: play, pause, step, reset; wind, "
                     "substeps, iterations, target stretch, tear threshold; release pins; drag spheres; save "
-                    "what was simulated since the last reset as a USD cache. See the README's Live section.",
+                    "what was simulated since the last reset as a USD cache.",
     )
-    live.add_argument("scene", type=Path, help="scene file (TOML, see docs/scenes.md)")
-    live.add_argument("--device", help=DEVICE_HELP)
+    live.add_argument("scene", type=Path, help="scene file (TOML; `warp-verlet validate SCENE` checks it)")
+    live.add_argument("--device", type=_device_name, help=DEVICE_HELP)
     _server_arguments(live)
     live.add_argument("--record", type=Path, metavar="PATH",
                       help="where Save cache writes (default: beside the scene's output, as NAME_live.EXT); "
@@ -396,7 +410,33 @@ def _where_the_frames_went(exc: BaseException) -> str:
     return report.describe() if report is not None else "nothing was written"
 
 
+STDOUT_CLOSED = 128 + signal.SIGPIPE if hasattr(signal, "SIGPIPE") else 141
+
+
+def _stdout_closed() -> int:
+    """The reader of standard output went away (``warp-verlet validate scene.toml | head -1``): stop quietly.
+    Python's recipe (the library reference's note on SIGPIPE): point stdout at devnull, so that the interpreter's
+    own flush at exit does not raise again."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError, AttributeError):  # stdout is no file (captured by a test harness)
+        pass
+    return STDOUT_CLOSED
+
+
 def main(argv: list[str] | None = None) -> int:
+    """The console script: the command's exit code (see the module's docstring)."""
+    try:
+        try:
+            return _main(argv)
+        finally:  # also after --help and argparse's errors (SystemExit), whose text may sit in the buffer
+            sys.stdout.flush()
+    except BrokenPipeError:
+        return _stdout_closed()
+
+
+def _main(argv: list[str] | None) -> int:
     warnings.showwarning = _show_warning
     args = build_parser().parse_args(argv)
     command = {"run": _run, "validate": _validate, "preview": _preview, "sweep": _sweep, "live": _live,
@@ -405,7 +445,9 @@ def main(argv: list[str] | None = None) -> int:
     previous = signal.signal(signal.SIGTERM, _terminate) if in_main_thread else None
     try:
         return command(args)
-    except (SceneError, ServerError) as exc:
+    except BrokenPipeError:
+        raise  # main's: the reader of stdout went away
+    except (SceneError, ServerError, OutputNameError) as exc:  # bad input: nothing was run
         print(f"error: {exc}", file=sys.stderr)
         return 2
     except WarpVerletError as exc:

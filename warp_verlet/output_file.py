@@ -7,9 +7,12 @@ A run never writes its output path directly:
   interrupted or killed leaves its frames in ``NAME.partial.EXT`` and any previous ``NAME.EXT`` exactly as it
   was. The next run to that output replaces the partial file (with a note), and removes the temporary files
   USD had open when a run was killed in the middle of a save (``NAME.partial.XXXXXX``).
-* **One writer per output.** It holds an exclusive lock (filelock, on the hidden, empty ``.NAME.EXT.lock``
-  beside the output, which stays there) from before the simulator is built until the cache is in place: a
-  second run to the same output is refused at once (:class:`OutputBusyError`).
+* **One writer per output.** It holds an exclusive lock (filelock) from before the simulator is built until the
+  cache is in place: a second run of this user's to the same output is refused at once (:class:`OutputBusyError`).
+  The lock file is not beside the output, where it would litter the user's directory: it lives in a private
+  directory of the user's (:func:`lock_directory`), named after the output's directory (device and inode, so
+  that every path to it, through symlinks or bind mounts, finds the same lock) and its file name. It stays
+  there, empty: removing a lock file while another run opens it would let two runs hold "the" lock.
 * **Disk space.** It estimates the cache's size (:func:`estimate_cache`) and refuses to start when the disk
   cannot hold it. Before every save it checks the free space again, with the estimate refined from the sizes
   the saves so far actually took, and stops with the frames saved so far (:class:`DiskFullError`) rather than
@@ -23,15 +26,23 @@ This module imports neither warp nor pxr.
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import math
 import os
 import re
 import shutil
+import stat
+import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Iterable, Sequence
 
 from .errors import DiskFullError, OutputBusyError, OutputError
+
+
+class OutputNameError(OutputError):
+    """The output path is refused for its name alone (not a USD extension, a partial file's name, or an input
+    file): a bad argument, which nothing on the disk would change (the command line exits 2 for it)."""
 
 EXTENSIONS = (".usd", ".usda", ".usdc")
 PARTIAL = ".partial"  # NAME.usdc -> NAME.partial.usdc
@@ -166,6 +177,36 @@ def input_files(scene) -> list[Path]:
     return found
 
 
+def lock_directory() -> Path:
+    """Where this user's output locks live: ``$XDG_RUNTIME_DIR/warp-verlet`` (the per-user runtime directory,
+    private and emptied at logout), else ``<temp dir>/warp-verlet-<user>``. Created private (0700); one that is
+    a symlink, another user's or open to others is refused (another user could otherwise hold or swap the
+    locks)."""
+    runtime = os.environ.get("XDG_RUNTIME_DIR")
+    user = str(os.getuid()) if hasattr(os, "getuid") else re.sub(r"\W", "_", os.environ.get("USERNAME", "user"))
+    directory = Path(runtime) / "warp-verlet" if runtime else Path(tempfile.gettempdir()) / f"warp-verlet-{user}"
+    try:
+        directory.mkdir(mode=0o700, parents=bool(runtime), exist_ok=True)
+        info = os.lstat(directory)
+    except OSError as exc:
+        raise OutputError(f"cannot create the output lock directory {directory}: {exc.strerror or exc}") from None
+    private = stat.S_ISDIR(info.st_mode) and not info.st_mode & 0o077
+    if hasattr(os, "getuid"):
+        private = private and info.st_uid == os.getuid()
+    if not private:
+        raise OutputError(f"the output lock directory {directory} is not a private directory of this user's "
+                          "(a symlink, another user's, or open to others): remove it, or set XDG_RUNTIME_DIR")
+    return directory
+
+
+def lock_path(output: Path) -> Path:
+    """The lock file of a (resolved) output path, whose directory exists: in :func:`lock_directory`, named by
+    the directory's device and inode and the file's name, readable name first."""
+    parent = os.stat(output.parent)
+    key = hashlib.sha256(f"{parent.st_dev}:{parent.st_ino}:{output.name}".encode()).hexdigest()[:32]
+    return lock_directory() / f"{output.name[:100]}.{key}.lock"
+
+
 def _same_file(a: Path, b: Path) -> bool:
     if os.path.realpath(a) == os.path.realpath(b):
         return True
@@ -202,7 +243,7 @@ class CacheOutput:
         self.given = Path(path)
         self.path = Path(os.path.realpath(self.given))  # follows symlinks: the file they point to is written
         self.partial = partial_path(self.path)
-        self.lock_path = self.path.with_name(f".{self.path.name}.lock")
+        self.lock_path: Path | None = None  # chosen on entry (lock_path()), once the directory is known to exist
         # The partial file as the user will look for it: beside the output as given, unless that is a symlink.
         beside = self.given.with_name(self.partial.name)
         self.partial_shown = beside if _same_file(beside.parent, self.partial.parent) else self.partial
@@ -224,21 +265,23 @@ class CacheOutput:
     def _fail(self, problem: str) -> OutputError:
         return OutputError(f"cannot write {self.given}: {problem}")
 
+    def _refuse_name(self, problem: str) -> OutputNameError:
+        return OutputNameError(f"cannot write {self.given}: {problem}")
+
     def _check_path(self, inputs: list[Path]) -> None:
         path, given = self.path, self.given
         for source in inputs:
-            for candidate, what in ((path, "the output"), (self.partial, f"its partial file {self.partial.name}"),
-                                    (self.lock_path, f"its lock file {self.lock_path.name}")):
+            for candidate, what in ((path, "the output"), (self.partial, f"its partial file {self.partial.name}")):
                 if _same_file(candidate, source):
                     link = f" ({given} is a symlink to it)" if given.is_symlink() else ""
-                    raise self._fail(f"{what} would overwrite the input file {source}{link}; choose another "
-                                     "output path")
+                    raise self._refuse_name(f"{what} would overwrite the input file {source}{link}; choose "
+                                            "another output path")
         if path.suffix not in EXTENSIONS:
-            raise self._fail(f"the file name must end in {', '.join(EXTENSIONS)}"
-                             + (f" (it is a symlink to {path})" if given.is_symlink() else ""))
+            raise self._refuse_name(f"the file name must end in {', '.join(EXTENSIONS)}"
+                                    + (f" (it is a symlink to {path})" if given.is_symlink() else ""))
         if path.stem.endswith(PARTIAL):
-            raise self._fail(f"names ending in {PARTIAL}{path.suffix} are kept for the frames of runs that did "
-                             "not finish; choose another name")
+            raise self._refuse_name(f"names ending in {PARTIAL}{path.suffix} are kept for the frames of runs that "
+                                    "did not finish; choose another name")
         parent = path.parent
         if not parent.is_dir():
             raise self._fail(f"directory {given.parent} does not exist")
@@ -254,6 +297,10 @@ class CacheOutput:
     def __enter__(self) -> CacheOutput:
         from filelock import FileLock, Timeout  # imported here: `validate` never needs it
 
+        try:
+            self.lock_path = lock_path(self.path)
+        except FileNotFoundError:  # the directory went away since the checks
+            raise self._fail(f"directory {self.given.parent} does not exist") from None
         lock = FileLock(str(self.lock_path), timeout=0)
         try:
             lock.acquire(timeout=0)
