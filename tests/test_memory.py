@@ -80,19 +80,27 @@ CASES = {
 }
 
 
-@pytest.mark.parametrize("case", list(CASES))
+# The cases above where the sticks are implicit grid sticks by default (one grid cloth that cannot tear, the
+# coloured solver), again with the stick arrays.
+EXPLICIT = ["coloured", "tethers", "compliance", "multilevel", "float64", "moving-sphere"]
+
+
+@pytest.mark.parametrize("case", list(CASES) + [f"{c}/explicit" for c in EXPLICIT])
 def test_estimate_matches_the_arrays_allocated(case):
+    case, _, sticks = case.partition("/")
     simulation, cloth, *colliders = CASES[case]
     spec = {"resolution": [24, 31], "size": [1.0, 1.0], "sticks": FAMILIES[-1], **cloth}
     scene = parse_scene({"simulation": simulation, "cloth": [spec], "collider": colliders[0] if colliders else []},
                         file="<test>")
-    sim = Simulator(scene, "cpu", use_graph=False)
+    sim = Simulator(scene, "cpu", use_graph=False, sticks=sticks or "auto")
     sim.step()
+    implicit = scene.simulation.solver == "coloured" and not scene.tears and not sticks
+    assert sim.model.sticks_form == ("implicit" if implicit else "explicit")
     assert sim.precision == ("float64" if "float64" in case else "float32")
     # The only arrays not in the estimate are one-element counters: the tear counter (4 bytes), and the
     # Jacobi CSR's extra row start (4 bytes). A moving sphere's key starts are counted (spheres + 1 of them).
     counters = 4 * (scene.tears + (scene.simulation.solver == "jacobi"))
-    assert simulator_bytes(sim) - estimate(scene).device_bytes == counters
+    assert simulator_bytes(sim) - estimate(scene, sticks or "auto").device_bytes == counters
 
 
 def test_a_scene_too_big_for_the_machine_is_refused_before_allocating():
@@ -111,4 +119,7 @@ def test_device_and_host_limits_are_named():
     with pytest.raises(WarpVerletError, match="this machine has only"):
         check_fits(scene, "cpu", device_free=None, host_free=need.device_bytes + need.host_bytes - 1)
     assert check_fits(scene, "cpu", device_free=None, host_free=need.device_bytes + need.host_bytes) == need
-    assert np.isclose(need.device_bytes, 64 * 64 * 40 + 2 * 64 * 63 * 16)
+    # Per particle three positions and an inverse mass; implicit grid sticks keep four tables of squared steps
+    # (1 and 2 columns, 1 and 2 rows apart) where the explicit ones keep ends, rest and weight per stick.
+    assert need.device_bytes == 64 * 64 * 40 + (63 + 62 + 63 + 62) * 8
+    assert estimate(scene, "explicit").device_bytes == 64 * 64 * 40 + 2 * 64 * 63 * 16

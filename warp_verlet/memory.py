@@ -38,10 +38,11 @@ def gib(n: float) -> str:
     return f"{n / (1 << 30):.2f} GiB"
 
 
-def estimate(scene: Scene) -> MemoryNeed:
+def estimate(scene: Scene, sticks: str = "auto") -> MemoryNeed:
+    """``sticks``: the sticks' form the simulator is asked for ("auto", "explicit", "implicit")."""
     from .stages import Need, device_bytes
 
-    need = Need.of(scene)
+    need = Need.of(scene, sticks)
     return MemoryNeed(
         particles=need.particles,
         sticks=need.sticks,
@@ -66,9 +67,10 @@ def available_host_bytes() -> int | None:
         return None
 
 
-def check_fits(scene: Scene, device_name: str, device_free: int | None, host_free: int | None) -> MemoryNeed:
+def check_fits(scene: Scene, device_name: str, device_free: int | None, host_free: int | None,
+               sticks: str = "auto") -> MemoryNeed:
     """Raise one clear error when the scene cannot fit; ``device_free`` None means the device is the host."""
-    need = estimate(scene)
+    need = estimate(scene, sticks)
     host_need = need.host_bytes + (need.device_bytes if device_free is None else 0)
     what = f"{scene.source}: {need.particles:,} particles and {need.sticks:,} sticks need {need.describe()}"
     if device_free is not None and need.device_bytes > device_free:

@@ -28,7 +28,8 @@ from .scene import Scene
 from .stages import Need
 from .faces import edge_faces
 from .mesh_cloth import STRUCTURAL
-from .topology import ClothTopology, build_cloth
+from .topology import (BEND_H, BEND_V, FAMILY_OF_CLASS, SHEAR_ANTI, SHEAR_DIAG, STRUCT_H, STRUCT_V, ClothTopology,
+                       build_cloth)
 
 
 @dataclass(frozen=True)
@@ -63,6 +64,123 @@ class DeviceLevel:
     weights: wp.array  # (C,) vec4 float32
 
 
+def stick_form(sticks: str, colouring: str) -> str:
+    """The sticks' form a Model gets: implicit grid sticks follow the analytic colouring's order, so asking for
+    Warp's graph colouring makes "auto" explicit (and "implicit" an error)."""
+    if colouring == "graph" and sticks == "implicit":
+        raise ArgumentError("sticks='implicit' projects in the analytic grid colouring's order; "
+                            "colouring='graph' needs sticks='explicit' or 'auto'")
+    return "explicit" if colouring == "graph" and sticks == "auto" else sticks
+
+
+def grid_axes(topology: ClothTopology) -> tuple[np.ndarray, np.ndarray]:
+    """A grid's rest coordinates along its columns (x, per column) and along its rows (y for a vertical cloth,
+    z for a horizontal one, per row), as float64 of the float32 positions. Checks that every particle's
+    position is (x of its column, that row coordinate of its row, one constant), which the implicit sticks'
+    rest lengths rely on."""
+    rows, cols = topology.rows, topology.cols
+    p = topology.positions.reshape(rows, cols, 3).astype(np.float64)
+    along_rows = 1 if np.ptp(p[:, 0, 1]) > 0 or np.ptp(p[:, 0, 2]) == 0 else 2
+    fixed = 3 - along_rows
+    x, row = p[0, :, 0], p[:, 0, along_rows]
+    if not (np.array_equal(p[..., 0], np.broadcast_to(x, (rows, cols)))
+            and np.array_equal(p[..., along_rows], np.broadcast_to(row[:, None], (rows, cols)))
+            and (p[..., fixed] == p[0, 0, fixed]).all()):
+        raise AssertionError(f"cloth {topology.name!r}: grid positions are not a uniform lattice")
+    return x, row
+
+
+def squared_steps(axis: np.ndarray, step: int) -> np.ndarray:
+    """(axis[k + step] - axis[k])^2 in float64, rounded as numpy rounds the explicit rest lengths' squares."""
+    return np.square(axis[step:] - axis[:-step]) if len(axis) > step else np.zeros(0)
+
+
+@dataclass(frozen=True)
+class GridColourDevice:
+    """One colour of implicit grid sticks: the kernel's GridColour, its stick count, the squared-step tables it
+    reads, its family's compliance (0: rigid) and where its sticks' tensions start in the solver's scratch."""
+
+    layout: object  # kernels.grid_relax.GridColour
+    count: int
+    col_sq: wp.array
+    row_sq: wp.array
+    compliance: float
+    tension_first: int
+
+
+# Per grid class (topology's order): (dr, dc, first column, parity along "row" or "col", q).
+GRID_DIRECTIONS = {
+    STRUCT_H: (0, 1, 0, "col", 1), STRUCT_V: (1, 0, 0, "row", 1),
+    SHEAR_DIAG: (1, 1, 0, "row", 1), SHEAR_ANTI: (1, -1, 1, "row", 1),
+    BEND_H: (0, 2, 0, "col", 2), BEND_V: (2, 0, 0, "row", 2),
+}
+
+
+class GridDevice:
+    """The implicit grid sticks of one grid cloth: its colours in the analytic colouring's order (class, then
+    parity: warp_verlet/colouring.grid_colouring) and the squared-step tables (per column for 1 and 2 columns
+    apart, per row for 1 and 2 rows apart, float64) their rest lengths come from."""
+
+    def __init__(self, slot: "ClothSlot", spec, device):
+        from warp_verlet.kernels.grid_relax import GridColour
+
+        top = slot.topology
+        rows, cols = top.rows, top.cols
+        x, row = grid_axes(top)
+        tables = {name: wp.array(values, dtype=wp.float64, device=device) for name, values in (
+            ("col1", squared_steps(x, 1)), ("col2", squared_steps(x, 2)),
+            ("row1", squared_steps(row, 1)), ("row2", squared_steps(row, 2)))}
+        self.col_sq1, self.col_sq2, self.row_sq1, self.row_sq2 = (tables[k] for k in ("col1", "col2", "row1", "row2"))
+        colours, soft = [], 0
+        for cls in sorted(GRID_DIRECTIONS):
+            family = FAMILY_OF_CLASS[cls]
+            if family not in spec.sticks:
+                continue
+            dr, dc, col_first, parity_axis, q = GRID_DIRECTIONS[cls]
+            row_span, col_span = rows - dr, cols - max(dc, 0) - col_first
+            if row_span <= 0 or col_span <= 0:
+                continue
+            compliance = float(spec.compliance.get(family, 0.0))
+            for parity in (0, 1):
+                along = row_span if parity_axis == "row" else col_span
+                kept = int(np.count_nonzero((np.arange(along) // q) % 2 == parity))
+                n_rows, n_cols = (kept, col_span) if parity_axis == "row" else (row_span, kept)
+                if n_rows * n_cols == 0:
+                    continue
+                g = GridColour()
+                g.first_particle, g.grid_cols, g.cols = slot.first, cols, n_cols
+                g.row_first, g.col_first = 0, col_first
+                g.row_q, g.col_q = (q, 0) if parity_axis == "row" else (0, q)
+                g.parity, g.dr, g.dc = parity, dr, dc
+                g.use_col, g.col_shift = int(dc != 0), -1 if dc < 0 else 0
+                g.use_row, g.row_shift = int(dr != 0), 0
+                col_sq = self.col_sq2 if abs(dc) == 2 else self.col_sq1
+                row_sq = self.row_sq2 if dr == 2 else self.row_sq1
+                colours.append(GridColourDevice(g, n_rows * n_cols, col_sq, row_sq, compliance,
+                                                soft if compliance > 0.0 else 0))
+                soft += n_rows * n_cols if compliance > 0.0 else 0
+        self.colours: tuple[GridColourDevice, ...] = tuple(colours)
+        self.soft_sticks = soft
+
+
+class GridTethersDevice:
+    """Implicit tethers of one grid cloth: its pins (global indices, in the cloth's pin order) and, per pin, the
+    squared column and row differences of the rest grid to it (float64), from which each free particle finds
+    its nearest ``tethers`` pins and their lengths (times ``scale``) in the kernel."""
+
+    def __init__(self, slot: "ClothSlot", spec, tethers: int, device):
+        top = slot.topology
+        x, row = grid_axes(top)
+        pinned = np.asarray(top.pinned, np.int64)
+        pin_row, pin_col = pinned // top.cols, pinned % top.cols
+        self.first_particle, self.cols, self.particles = slot.first, top.cols, top.particle_count
+        self.tethers = min(tethers, len(pinned))
+        self.scale = float(spec.tether_scale)
+        self.pins = wp.array((pinned + slot.first).astype(np.int32), dtype=int, device=device)
+        self.pin_col_sq = wp.array2d(np.square(x[None, :] - x[pin_col][:, None]), dtype=wp.float64, device=device)
+        self.pin_row_sq = wp.array2d(np.square(row[None, :] - row[pin_row][:, None]), dtype=wp.float64, device=device)
+
+
 class Model:
     """Device arrays (read by the kernels, never written) and the host copies the metrics need.
 
@@ -83,14 +201,18 @@ class Model:
     DeviceLevel per level, coarsest first.
     """
 
-    def __init__(self, scene: Scene, device, colouring: str = "auto"):
+    def __init__(self, scene: Scene, device, colouring: str = "auto", sticks: str = "auto"):
         """``colouring``: "auto" (analytic when every cloth is a grid, else Warp's graph colouring), "grid"
-        (grids only) or "graph"."""
+        (grids only) or "graph". ``sticks``: "auto" (implicit grid sticks where the scene allows them, see
+        stages.implicit_grid_obstacle, and the colouring is the analytic one), "explicit" or "implicit"."""
         if colouring not in ("auto", "grid", "graph"):
             raise ArgumentError(f"colouring must be 'auto', 'grid' or 'graph', got {colouring!r}")
+        sticks = stick_form(sticks, colouring)
         self.device = device
         self.solver = scene.simulation.solver
-        self.precision = Need.of(scene).precision
+        need = Need.of(scene, sticks)
+        self.precision = need.precision
+        self.sticks_form = "implicit" if need.implicit_grid else "explicit"
         double = self.precision == "float64"
         self.position_dtype = wp.vec3d if double else wp.vec3
         self.position_scalar = wp.float64 if double else wp.float32
@@ -139,11 +261,17 @@ class Model:
             family, owner, tear_length = family[order], owner[order], tear_length[order]
             sizes = self.colouring.sizes
             self.colour_ranges = [(int(a), int(n)) for a, n in zip(np.r_[0, np.cumsum(sizes)[:-1]], sizes) if n > 0]
-            self.stick_ends = wp.array(sticks, dtype=wp.vec2i, device=device)
-            self.stick_rest = wp.array(rest, dtype=float, device=device)
-            self.stick_weight = wp.array(np.ones(len(sticks), np.float32), dtype=float, device=device)
-            if self.compliant:
-                self.stick_compliance = wp.array(compliance, dtype=float, device=device)
+            if need.implicit_grid:  # the sticks are computed from the grid: no stick arrays on the device
+                self.grid = GridDevice(self.cloths[0], scene.cloths[0], device)
+                self._hold(self.grid, "grid")
+                if [c.count for c in self.grid.colours] != [n for _, n in self.colour_ranges]:
+                    raise AssertionError("implicit grid colours differ from the analytic colouring")
+            else:
+                self.stick_ends = wp.array(sticks, dtype=wp.vec2i, device=device)
+                self.stick_rest = wp.array(rest, dtype=float, device=device)
+                self.stick_weight = wp.array(np.ones(len(sticks), np.float32), dtype=float, device=device)
+                if self.compliant:
+                    self.stick_compliance = wp.array(compliance, dtype=float, device=device)
         else:
             self.colouring = None
             self.colour_ranges = []
@@ -159,12 +287,22 @@ class Model:
         self.colliders = ColliderModel(scene, device)
         self.levels = self._build_levels(scene, device) if scene.simulation.multilevel else []
         self.tether_table: TetherTable | None = build_tethers(self.cloths, scene.cloths, scene.tethers_per_particle)
-        if self.tether_table is not None:
+        if need.grid_pins:  # computed in every sweep from the grid: the table stays on the host
+            self.grid_tethers = GridTethersDevice(self.cloths[0], scene.cloths[0], scene.tethers_per_particle, device)
+            self._hold(self.grid_tethers, "grid_tethers")
+        elif self.tether_table is not None:
             table = self.tether_table
             self.tether_particle = wp.array(table.particle, dtype=int, device=device)
             self.tether_pin = wp.array2d(table.pin, dtype=int, device=device)
             self.tether_length = wp.array2d(table.length, dtype=float, device=device)
         self._frozen = True
+
+    def _hold(self, part, prefix: str) -> None:
+        """Name ``part``'s device arrays on the Model too (``prefix_name``), where whatever lists the Model's
+        arrays (the memory test, the benchmarks' byte counts) finds them."""
+        for name, value in vars(part).items():
+            if isinstance(value, wp.array):
+                setattr(self, f"{prefix}_{name}", value)
 
     def _build_levels(self, scene: Scene, device) -> list[DeviceLevel]:
         per_cloth = [grid_hierarchy(s.topology.rows, s.topology.cols, s.topology.positions, s.first) for s in self.cloths]

@@ -78,17 +78,23 @@ class Simulator:
     """
 
     def __init__(self, scene: Scene, device: str | None = None, colouring: str = "auto", use_graph: bool = True,
-                 threads: int | None = None):
+                 threads: int | None = None, sticks: str = "auto"):
+        """``sticks``: "auto" computes a grid cloth's sticks in the kernels where the scene allows it (one grid
+        cloth that cannot tear, the coloured solver: stages.implicit_grid_obstacle) and keeps stick arrays
+        otherwise; "explicit" always keeps them; "implicit" insists. ``constraint_sets`` says what was chosen."""
         self.scene = scene
         self.settings = scene.simulation
         self.device = resolve_device(device)
         # Refuse a scene that cannot fit before allocating any of it.
+        from .model import stick_form
+
         self.memory = check_fits(scene, str(self.device), self.device.free_memory if self.device.is_cuda else None,
-                                 available_host_bytes())
+                                 available_host_bytes(), stick_form(sticks, colouring))
         with wp.ScopedDevice(self.device):
-            self.model = Model(scene, self.device, colouring)
+            self.model = Model(scene, self.device, colouring, sticks)
             self.state = State(self.model)
-        self.solver = VerletSolver(self.model, self.settings, Need.of(scene), threads)
+        self._sticks = self.model.sticks_form
+        self.solver = VerletSolver(self.model, self.settings, Need.of(scene, self._sticks), threads)
         self.threads = self.solver.threads
         self.min_dt = self.solver.min_dt
         self.precision = self.model.precision  # "float32" or "float64": the scene's precision, "auto" resolved
@@ -145,6 +151,14 @@ class Simulator:
         scene uses (the table in warp_verlet/stages.py). ``bench/throughput.py`` times them one by one."""
         state = self.state
         return [(name, lambda dt, run=run: run(state, dt)) for name, run in self.solver.bind(state)]
+
+    @property
+    def constraint_sets(self) -> tuple[str, ...]:
+        """The constraint sets a sweep projects, in order (stages.CONSTRAINT_SETS): "grid sticks" and "grid
+        tethers" where they are computed from the grid, "sticks" and "tethers" where they are arrays."""
+        if "relax" not in self.solver.stage_names:
+            return ()
+        return tuple(c.name for c in CONSTRAINT_SETS if c.needed(self.solver.need))
 
     def reset(self) -> None:
         """Back to the state the simulator started from (rest positions, at rest, nothing torn)."""
@@ -259,7 +273,7 @@ class Simulator:
                              "(advance()'s on_frame, or after finish_frame())")
         settings = replace(self.settings, **changes)
         scene = replace(self.scene, simulation=settings)
-        need = Need.of(scene)
+        need = Need.of(scene, self._sticks)
         if need.precision != self.model.precision:
             raise ArgumentError(f"these settings need {need.precision} positions and this model holds "
                                 f"{self.model.precision}: build a new Simulator")

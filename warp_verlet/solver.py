@@ -37,6 +37,8 @@ class VerletSolver:
         if need.precision != model.precision:
             raise ArgumentError(f"need.precision = {need.precision!r} but the model's positions are {model.precision}")
         self.precision = model.precision
+        if need.implicit_grid != (model.sticks_form == "implicit"):
+            raise ArgumentError(f"need.implicit_grid = {need.implicit_grid} but the model's sticks are {model.sticks_form}")
         accel = np.add(settings.gravity, settings.wind)
         self.accel = model.position_dtype(*accel)  # in the positions' type, as every factor of the step
         self.accel_magnitude = acceleration(settings)

@@ -51,15 +51,25 @@ class Need:
     coarse_sticks: int = 0  # multilevel: coarse sticks over all levels
     coarse_children: int = 0  # multilevel: particles moved by interpolation, over all levels
     precision: str = "float32"  # the positions' float type, resolved ("auto" never appears here)
+    grid_rows: int = 0  # implicit grid sticks: the cloth's rows and columns (0: the sticks are arrays)
+    grid_cols: int = 0
+    soft_sticks: int = 0  # implicit grid sticks of families with a compliance (each keeps an XPBD tension)
+    grid_pins: int = 0  # implicit grid tethers: the cloth's pins (0: the tethers are arrays)
 
     @property
     def position_bytes(self) -> int:
         """Bytes of one position (a vec3 of the precision's float)."""
         return VEC3D if self.precision == "float64" else VEC3
 
+    @property
+    def implicit_grid(self) -> bool:
+        """Whether the sticks are implicit grid sticks (computed from the grid, no stick arrays)."""
+        return self.grid_rows > 0
+
     @classmethod
-    def of(cls, scene: "Scene") -> "Need":
-        """The scene's need, with ``simulation.precision`` resolved (warp_verlet/precision.py)."""
+    def of(cls, scene: "Scene", sticks: str = "auto") -> "Need":
+        """The scene's need, with ``simulation.precision`` resolved (warp_verlet/precision.py) and the sticks'
+        form chosen (``sticks``: "auto", "explicit" or "implicit"; see :func:`implicit_grid_obstacle`)."""
         from dataclasses import replace
 
         from .multilevel import hierarchy_counts  # counts from the grid's size, without building anything
@@ -78,7 +88,55 @@ class Need:
             tethered=scene.tethered_particles, tethers_per_particle=scene.tethers_per_particle,
             coarse_sticks=coarse[0], coarse_children=coarse[1],
         )
+        need = replace(need, **grid_counts(scene, sticks))
         return replace(need, precision=resolve(scene, relaxes=RELAX.needed(need)))
+
+
+STICK_FORMS = ("auto", "explicit", "implicit")
+MAX_GRID_TETHER_PINS = 8
+"""Implicit tethers find each particle's nearest pins in every sweep, among all the cloth's pins: above this
+many pins the tether table (kernels/tether.py) serves instead."""
+
+
+def implicit_grid_obstacle(scene: "Scene") -> str | None:
+    """Why the scene's sticks cannot be implicit grid sticks, or None when they can: one grid cloth (whose
+    particles lie on a uniform lattice), relaxed by the coloured solver, that cannot tear."""
+    from .topology import stick_count
+
+    if scene.simulation.solver != "coloured":
+        return "the Jacobi solver gathers each particle's sticks from a neighbour list"
+    if len(scene.cloths) != 1:
+        return "the scene has several cloths"
+    cloth = scene.cloths[0]
+    if cloth.mesh is not None:
+        return "the cloth is a mesh"
+    if scene.tears:
+        return "the cloth can tear (the tear kernel reads each stick's ends and weight)"
+    if stick_count(cloth) == 0:
+        return "the cloth has no sticks"
+    return None
+
+
+def grid_counts(scene: "Scene", sticks: str) -> dict:
+    """Need's implicit-grid fields: all 0 when the sticks are arrays ("explicit", or "auto" where
+    :func:`implicit_grid_obstacle` names one); "implicit" where one is named raises ArgumentError."""
+    from .errors import ArgumentError
+
+    if sticks not in STICK_FORMS:
+        raise ArgumentError(f"sticks must be one of {', '.join(STICK_FORMS)}, got {sticks!r}")
+    obstacle = implicit_grid_obstacle(scene)
+    if sticks == "implicit" and obstacle is not None:
+        raise ArgumentError(f"sticks = 'implicit' needs one grid cloth that cannot tear and the coloured solver, "
+                            f"but {obstacle}")
+    if sticks == "explicit" or obstacle is not None:
+        return {}
+    cloth = scene.cloths[0]
+    r, c = cloth.resolution
+    per_family = {"structural": r * (c - 1) + (r - 1) * c, "shear": 2 * (r - 1) * (c - 1),
+                  "bend": r * max(c - 2, 0) + max(r - 2, 0) * c}
+    soft = sum(per_family[f] for f in cloth.sticks if cloth.compliance.get(f, 0.0) > 0.0)
+    pins = cloth.pin_count if cloth.uses_tethers and 0 < cloth.pin_count <= MAX_GRID_TETHER_PINS else 0
+    return {"grid_rows": r, "grid_cols": c, "soft_sticks": soft, "grid_pins": pins}
 
 
 @dataclass(frozen=True)
@@ -258,7 +316,7 @@ class Sticks:
     name = "sticks"
 
     def needed(self, need: Need) -> bool:
-        return need.sticks > 0
+        return need.sticks > 0 and not need.implicit_grid
 
     def device_bytes(self, need: Need) -> int:
         if need.solver == "coloured":
@@ -355,7 +413,7 @@ class Tethers:
     name = "tethers"
 
     def needed(self, need: Need) -> bool:
-        return need.tethered > 0
+        return need.tethered > 0 and need.grid_pins == 0
 
     def device_bytes(self, need: Need) -> int:
         per_particle = INT + need.tethers_per_particle * (INT + FLOAT)  # particle; pin and length per tether
@@ -383,7 +441,82 @@ class Tethers:
         state.tether_length.assign(cut_tethers(model.tether_table, model.particle_count, model.host_sticks[~torn]))
 
 
-CONSTRAINT_SETS = (Multilevel(), Tethers(), Sticks())
+class GridTethers:
+    """Tethers of a grid cloth with few pins, computed (kernels/grid_relax.py): each free particle finds its
+    nearest pins and their rest-pose distances from its grid coordinates, so a sweep reads no tether table.
+    One launch per sweep over the cloth's particles (pins skip), before the sticks, as Tethers."""
+
+    name = "grid tethers"
+
+    def needed(self, need: Need) -> bool:
+        return need.tethered > 0 and need.grid_pins > 0
+
+    def device_bytes(self, need: Need) -> int:
+        # the pins, and per pin the squared column and row differences to it (float64)
+        return need.grid_pins * (INT + (need.grid_cols + need.grid_rows) * FLOAT64)
+
+    def bind(self, model: "Model", state: "State", solver) -> Bound:
+        import warp as wp
+
+        from warp_verlet.kernels.grid_relax import pull_grid_tethers
+
+        t, x = model.grid_tethers, state.particle_q
+
+        def make(f, count):
+            return recorded(pull_grid_tethers, count, [x, model.inv_mass, t.first_particle, t.cols, t.pins,
+                                                       t.pin_col_sq, t.pin_row_sq, t.tethers,
+                                                       wp.float64(t.scale), f])
+        return Bound(None, [split_tasks(make, 0, t.particles, solver.threads)])
+
+
+class GridSticks:
+    """Implicit grid sticks (kernels/grid_relax.py): one launch per colour of the analytic grid colouring, in
+    its order, each stick's ends and rest length computed from the thread index and the grid; the same
+    positions as Sticks bit for bit. XPBD for the colours of a soft family."""
+
+    name = "grid sticks"
+
+    def needed(self, need: Need) -> bool:
+        return need.sticks > 0 and need.implicit_grid
+
+    def device_bytes(self, need: Need) -> int:
+        r, c = need.grid_rows, need.grid_cols
+        tables = (max(c - 1, 0) + max(c - 2, 0) + max(r - 1, 0) + max(r - 2, 0)) * FLOAT64  # squared steps
+        return tables + need.soft_sticks * FLOAT  # a tension per soft stick (solver scratch)
+
+    def bind(self, model: "Model", state: "State", solver) -> Bound:
+        from warp_verlet.kernels.grid_relax import relax_grid_colour, relax_grid_colour_compliant
+
+        g, x, threads = model.grid, state.particle_q, solver.threads
+        tension = solver.scratch("grid_tension", g.soft_sticks, float) if g.soft_sticks else None
+        phases, soft_launches = [], []
+        for colour in g.colours:
+            if colour.compliance > 0.0:
+                def make(f, n, colour=colour):
+                    return recorded(relax_grid_colour_compliant, n,
+                                    [x, model.inv_mass, colour.layout, colour.col_sq, colour.row_sq,
+                                     colour.compliance, 0.0, f, colour.tension_first], [tension])
+            else:
+                def make(f, n, colour=colour):
+                    return recorded(relax_grid_colour, n, [x, model.inv_mass, colour.layout, colour.col_sq,
+                                                           colour.row_sq, f])
+            phase = split_tasks(make, 0, colour.count, threads)
+            if colour.compliance > 0.0:
+                soft_launches += [task.launch for task in phase if task is not None]
+            phases.append(phase)
+        if tension is None:
+            return Bound(None, phases)
+
+        def prepare(state: "State", dt: float) -> None:
+            inv_dt2 = 1.0 / (dt * dt)
+            for launch in soft_launches:
+                launch.set_param_by_name("inv_dt2", inv_dt2)
+            tension.zero_()
+
+        return Bound(prepare, phases)
+
+
+CONSTRAINT_SETS = (Multilevel(), Tethers(), GridTethers(), Sticks(), GridSticks())
 """Constraint sets in the order a sweep projects them."""
 
 RELAX = Relax()

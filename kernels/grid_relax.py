@@ -1,0 +1,195 @@
+"""Implicit grid sticks and tethers: on a uniform grid cloth, a stick's two ends follow from its thread index
+and its colour, and its rest length from the grid's coordinates, so a sweep reads and writes only positions
+and inverse masses (which a GPU's L2 can hold) instead of streaming every stick's ends, rest length and
+weight from memory.
+
+A colour is one (direction, parity) of the analytic grid colouring (warp_verlet/colouring.py): its sticks run
+(r, c) -> (r + dr, c + dc) for anchors in a block of rows and columns, where one axis keeps only the anchors
+whose ``(index // q) % 2`` is the colour's parity (q = 1 for neighbours, 2 for a bend stick, which spans two
+cells). Thread k of the colour takes the k-th anchor in row-major order, the order the explicit arrays hold
+the colour's sticks in.
+
+Rest lengths are computed exactly as the explicit path computes them on the host (warp_verlet/topology.py):
+the float64 norm of the difference of two float32 rest positions, rounded to float32. A grid's x depends on
+the column alone and its other coordinate on the row alone, so the squared differences are tabulated per
+column and per row in float64 (rounded as numpy rounds them) and the kernel adds one pair and takes the root:
+an addition, a square root and a rounding, which leave no room for a fused multiply-add to change a bit.
+The projection is ``stick_correction`` (kernels/relax.py), the explicit kernels' own arithmetic, so the two
+paths give the same positions bit for bit.
+"""
+
+from typing import Any
+
+import warp as wp
+
+from .positions import for_positions, scaled
+from .relax import MIN_LENGTH, stick_correction
+
+
+@wp.func
+def anchor_index(k: int, q: int, parity: int):
+    """The k-th index along an axis: every index when q is 0, else those whose (index // q) % 2 is ``parity``."""
+    if q == 0:
+        return k
+    return 2 * q * (k // q) + parity * q + k % q
+
+
+@wp.func
+def grid_rest(col_sq: wp.array(dtype=wp.float64), col_at: int, row_sq: wp.array(dtype=wp.float64), row_at: int):
+    """float32 rest length from a squared column difference and a squared row difference (index -1: none)."""
+    a = wp.float64(0.0)
+    b = wp.float64(0.0)
+    if col_at >= 0:
+        a = col_sq[col_at]
+    if row_at >= 0:
+        b = row_sq[row_at]
+    return wp.float32(wp.sqrt(a + b))
+
+
+@wp.struct
+class GridColour:
+    """One colour of one grid cloth: anchors (r, c) = (anchor_index(k_r, row_q, parity) + row_first,
+    anchor_index(k_c, col_q, parity) + col_first) for k_r < rows and k_c < ``cols``; each stick joins (r, c) to
+    (r + dr, c + dc). ``col_shift`` / ``row_shift`` say which entry of the squared-difference tables the stick
+    uses (c + col_shift, r + row_shift); ``use_col`` / ``use_row`` is 0 when the stick does not cross that axis."""
+
+    first_particle: int
+    grid_cols: int  # particles per row
+    cols: int  # anchors per row in this colour
+    row_first: int
+    col_first: int
+    row_q: int
+    col_q: int
+    parity: int
+    dr: int
+    dc: int
+    use_col: int
+    col_shift: int
+    use_row: int
+    row_shift: int
+
+
+@wp.func
+def colour_stick(g: GridColour, k: int):
+    """Particles i, j and the table entries (column, row; -1: none) of the colour's k-th stick."""
+    r = anchor_index(k // g.cols, g.row_q, g.parity) + g.row_first
+    c = anchor_index(k % g.cols, g.col_q, g.parity) + g.col_first
+    i = g.first_particle + r * g.grid_cols + c
+    j = i + g.dr * g.grid_cols + g.dc
+    col_at = -1
+    row_at = -1
+    if g.use_col != 0:
+        col_at = c + g.col_shift
+    if g.use_row != 0:
+        row_at = r + g.row_shift
+    return i, j, col_at, row_at
+
+
+@wp.kernel
+def relax_grid_colour(
+    x: wp.array(dtype=Any),
+    inv_mass: wp.array(dtype=float),
+    g: GridColour,
+    col_sq: wp.array(dtype=wp.float64),
+    row_sq: wp.array(dtype=wp.float64),
+    first: int,
+):
+    """Gauss-Seidel over one colour of implicit grid sticks (relax_colour with ends and rest computed)."""
+    i, j, col_at, row_at = colour_stick(g, first + wp.tid())
+    rest = grid_rest(col_sq, col_at, row_sq, row_at)
+    wi = inv_mass[i]
+    wj = inv_mass[j]
+    xi = x[i]
+    xj = x[j]
+    c = stick_correction(xi, xj, wi, wj, rest, 1.0)
+    x[i] = xi + scaled(c, wi)
+    x[j] = xj - scaled(c, wj)
+
+
+@wp.kernel
+def relax_grid_colour_compliant(
+    x: wp.array(dtype=Any),
+    inv_mass: wp.array(dtype=float),
+    g: GridColour,
+    col_sq: wp.array(dtype=wp.float64),
+    row_sq: wp.array(dtype=wp.float64),
+    compliance: float,
+    inv_dt2: float,
+    first: int,
+    tension_first: int,
+    tension: wp.array(dtype=float),
+):
+    """XPBD over one colour of implicit grid sticks (relax_colour_compliant with ends and rest computed, one
+    compliance for the colour's family); ``tension`` holds the soft colours' sticks from ``tension_first``."""
+    k = first + wp.tid()
+    i, j, col_at, row_at = colour_stick(g, k)
+    rest = grid_rest(col_sq, col_at, row_sq, row_at)
+    wi = inv_mass[i]
+    wj = inv_mass[j]
+    xi = x[i]
+    xj = x[j]
+    d = xj - xi
+    length = wp.length(d)
+    w = type(length)(wi) + type(length)(wj)
+    if w == type(length)(0.0) or length < type(length)(MIN_LENGTH):
+        return
+    alpha = type(length)(compliance) * type(length)(inv_dt2)
+    mu = type(length)(tension[tension_first + k])
+    # The operations of relax_colour_compliant, in its order (its weight is 1 on a cloth that cannot tear).
+    error = type(length)(1.0) * (length - type(length)(rest) - alpha * mu)
+    tension[tension_first + k] = float(mu + error / (w + alpha))
+    c = d * (error / (length * (w + alpha)))
+    x[i] = xi + scaled(c, wi)
+    x[j] = xj - scaled(c, wj)
+
+
+@wp.kernel
+def pull_grid_tethers(
+    x: wp.array(dtype=Any),
+    inv_mass: wp.array(dtype=float),
+    first_particle: int,
+    grid_cols: int,
+    pins: wp.array(dtype=int),
+    pin_col_sq: wp.array2d(dtype=wp.float64),
+    pin_row_sq: wp.array2d(dtype=wp.float64),
+    tethers: int,
+    scale: wp.float64,
+    first: int,
+):
+    """pull_tethers for a grid cloth's free particle ``first + tid``, whose tethers are computed: its
+    ``tethers`` nearest pins (ties to the lower pin, as warp_verlet/tethers.nearest_pins chooses them) at
+    their rest-pose distances times ``scale``, from the squared column and row differences to each pin
+    (pin_col_sq[pin, column], pin_row_sq[pin, row]), rounded to float32 as the tether table is."""
+    local = first + wp.tid()
+    if inv_mass[first_particle + local] == 0.0:
+        return
+    r = local // grid_cols
+    c = local - r * grid_cols
+    p = first_particle + local
+    xp = x[p]
+    last_distance = wp.float64(-1.0)
+    last_pin = int(-1)
+    for _k in range(tethers):
+        # The next pin in (distance, index) order after the last one taken.
+        best = int(-1)
+        best_distance = wp.float64(0.0)
+        for n in range(pins.shape[0]):
+            rest_distance = wp.sqrt(pin_col_sq[n, c] + pin_row_sq[n, r])
+            later = rest_distance > last_distance or (rest_distance == last_distance and n > last_pin)
+            if later and (best < 0 or rest_distance < best_distance):
+                best = n
+                best_distance = rest_distance
+        last_distance = best_distance
+        last_pin = best
+        a = pins[best]
+        d = xp - x[a]
+        distance = wp.length(d)
+        limit = type(distance)(wp.float32(best_distance * scale))
+        if distance > limit:
+            xp = x[a] + d * (limit / distance)
+    x[p] = xp
+
+
+for_positions(relax_grid_colour, arrays=("x",))
+for_positions(relax_grid_colour_compliant, arrays=("x",))
+for_positions(pull_grid_tethers, arrays=("x",))
