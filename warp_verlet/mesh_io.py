@@ -11,11 +11,14 @@ trimesh triangulates every polygon as it loads (its OBJ and PLY readers split qu
 triangles), so a mesh read through it is made of triangles and gets no shear sticks. USD keeps the faces as
 authored, quads and n-gons included.
 
-Only the reader a scene needs is imported: trimesh for mesh files, pxr for USD.
+Only the reader a scene needs is imported: trimesh for mesh files, pxr for USD. A reader may need a package
+that is not installed (trimesh reads an OBJ with UVs through Pillow); that is said as such, naming the package
+to install, not as a mesh that cannot be read.
 """
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -45,10 +48,38 @@ def apply(matrix: np.ndarray, points: np.ndarray) -> np.ndarray:
     return points @ matrix[:3, :3].T + matrix[:3, 3]
 
 
+# The package to install for a module whose import name differs from its name on PyPI.
+PACKAGE_OF_MODULE = {"PIL": "Pillow", "pxr": "usd-core", "yaml": "PyYAML", "collada": "pycollada",
+                     "skimage": "scikit-image", "sklearn": "scikit-learn"}
+# The module a ModuleNotFoundError names: trimesh keeps a failed optional import and raises it again when a
+# loader needs the module, re-created from its message alone, so ``exc.name`` is None there.
+_MISSING_MODULE = re.compile(r"No module named '([^']+)'|import of (\S+) halted")
+
+
+def missing_package(path: Path, exc: ModuleNotFoundError) -> MeshError:
+    """The error for a reader that needs a package that is not installed: the package and how to install it."""
+    module = exc.name
+    if not module:
+        found = _MISSING_MODULE.search(str(exc))
+        module = next((m for m in found.groups() if m), None) if found else None
+    if not module:
+        return MeshError(f"{path}: reading it needs a Python package that is not installed ({exc})")
+    package = PACKAGE_OF_MODULE.get(module.split(".")[0], module.split(".")[0])
+    return MeshError(f"reading {path.name} needs the Python package {package}, which is not installed "
+                     f"(pip install {package.lower()})")
+
+
 def read_mesh(path: Path, prim: str | None, transform: np.ndarray, named: tuple[tuple[str, str], ...] = ()) -> SourceMesh:
     """The mesh at ``path`` (a USD ``prim``, which USD files need and other formats refuse), moved by
     ``transform`` into the scene's frame. ``named``: ("primvar" or "subset", name) vertex sets to look up
-    for pins (USD only)."""
+    for pins (USD only). A package the reader needs and cannot import is a MeshError naming the package."""
+    try:
+        return _read_mesh(path, prim, transform, named)
+    except ModuleNotFoundError as exc:
+        raise missing_package(path, exc) from None
+
+
+def _read_mesh(path: Path, prim: str | None, transform: np.ndarray, named: tuple[tuple[str, str], ...]) -> SourceMesh:
     is_usd = path.suffix.lower() in USD_SUFFIXES
     if not path.is_file():
         raise MeshError(f"{path}: no such file" if not path.exists() else f"{path}: not a file")
@@ -75,6 +106,8 @@ def _read_trimesh(path: Path, transform: np.ndarray) -> SourceMesh:
         # process=False and maintain_order: the vertices and faces as the file has them, nothing merged or
         # reordered, so the cache lines up with the file (welding is ours, and keeps the vertex order).
         loaded = trimesh.load(str(path), process=False, maintain_order=True, force="mesh")
+    except ModuleNotFoundError:
+        raise  # a package the loader needs, not a damaged file: read_mesh names it
     except Exception as exc:  # trimesh raises many types for a damaged file; all mean "cannot read"
         raise MeshError(f"{path}: cannot read the mesh ({type(exc).__name__}: {exc})") from None
     points = np.asarray(getattr(loaded, "vertices", np.zeros((0, 3))), np.float64).reshape(-1, 3)
