@@ -340,3 +340,41 @@ def test_no_builtin_exception_is_raised_on_purpose_anywhere_in_the_package():
                 if name in builtin and name not in allowed:
                     found.append(f"{path.name}:{node.lineno} raises {name}")
     assert not found, found
+
+
+def test_kernel_loading_is_timed_apart_from_the_frames(scene_file, monkeypatch):
+    # Warp loads a module at its first launch, compiling it when its kernel cache lacks it (seconds). The run
+    # loads them all before its clock starts: none may load while frames are stepped, and the summary reports
+    # the start-up on its own line.
+    import warp as wp
+
+    from warp_verlet import runner
+    from warp_verlet.scene import load_scene
+
+    import warp_verlet.kernels.relax  # noqa: F401  (imported by the first step otherwise, unloaded here)
+    import warp_verlet.simulator  # noqa: F401
+
+    kernels = [name for name in sys.modules if name.startswith("warp_verlet.kernels.")]
+    for name in kernels:
+        wp.get_module(name).unload()  # as in a fresh process: the run must load each module again
+    module_type = type(wp.get_module(kernels[0]))
+    loads, stepping = [], []
+    real_load, real_loop = module_type.load, runner._step_loop
+
+    def load(self, device, *args, **kwargs):
+        if not self.execs:  # Warp's loaded executables of this module: none until it is loaded
+            loads.append((self.name, bool(stepping)))
+        return real_load(self, device, *args, **kwargs)
+
+    def step_loop(*args, **kwargs):
+        stepping.append(True)
+        return real_loop(*args, **kwargs)
+
+    monkeypatch.setattr(module_type, "load", load)
+    monkeypatch.setattr(runner, "_step_loop", step_loop)
+    summary = runner.run_scene(load_scene(scene_file), device="cpu")
+    assert stepping and {"warp_verlet.kernels.relax", "warp_verlet.kernels.integrate"} <= {n for n, _ in loads}
+    assert [name for name, during in loads if during] == []
+    assert 0.0 < summary.kernel_seconds <= summary.startup_seconds
+    startup = next(line for line in summary.format().splitlines() if line.startswith("startup"))
+    assert f"{summary.startup_seconds:.3f} s" in startup and "not in the wall time" in startup
