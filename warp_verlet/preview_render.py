@@ -36,6 +36,9 @@ MARGIN = 0.06  # the fraction of the panel's half-size left free around the clot
 # Content closer to the cloth than this many cloth sizes (its bounding box's diagonal) is framed with it: a
 # sphere the cloth lies on, but not a collider it left far behind.
 NEARBY = 0.5
+# A part of a cloth holding less than this share of its area, on one side of the rest and far from it, is left
+# out of the framing (see _bulk).
+SLIVER_AREA, BULK_GROWTH = 0.08, 0.5
 PLANE_PAD = 0.15  # the ground drawn beyond the framed content, as a fraction of the content's largest side
 ROPE_RADIUS_PX = 1.0  # a rope is drawn as a tube this many pixels thick on each side of its axis
 ROPE_SIDES = 6
@@ -217,12 +220,39 @@ def _box(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return points.min(axis=0), points.max(axis=0)
 
 
+def _bulk(mesh: TriangleMesh, up_axis: str) -> np.ndarray:
+    """The drawn points of a cloth that the camera frames: all of them, except slivers far from where most of
+    its area is. A flag torn from its pole leaves a thin strip at the pins; framing the strip and the flag
+    together would make the flag small again. The bulk is the box, on the image's axes, holding the middle
+    ``1 - 2 * SLIVER_AREA`` of the area; every point within ``BULK_GROWTH`` of its size of that box is kept, so
+    an untorn cloth is framed whole."""
+    points = mesh.points.astype(np.float64)
+    corners = points[mesh.triangles]
+    area = np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
+    used = points[np.unique(mesh.triangles)]
+    if area.sum() <= 0:
+        return used
+    towards_eye = view_direction(up_axis)
+    right = np.cross(up_vector(up_axis), towards_eye)
+    right /= np.linalg.norm(right)
+    axes = np.stack([right, np.cross(towards_eye, right)], axis=1)  # the image's horizontal and vertical
+    centroid = corners.mean(axis=1) @ axes
+    order = np.argsort(centroid, axis=0)
+    cumulative = np.cumsum(area[order], axis=0) / area.sum()
+    lo = centroid[order[np.argmax(cumulative >= SLIVER_AREA, axis=0), [0, 1]], [0, 1]]
+    hi = centroid[order[np.argmax(cumulative >= 1 - SLIVER_AREA, axis=0), [0, 1]], [0, 1]]
+    reach = BULK_GROWTH * (hi - lo).max()
+    projected = used @ axes
+    keep = np.all((projected >= lo - reach) & (projected <= hi + reach), axis=1)
+    return used[keep]
+
+
 def frame_panel(geometry: FrameGeometry, up_axis: str, width: int, height: int) -> Panel:
     """The panel of one frame: its cloths and ropes framed as large as the panel allows (the camera follows
     them, however far they travelled), with the spheres near them; planes clipped to that content."""
     max_quads = max(width, height)  # about one grid cell per pixel: smooth hems, and no more work than that
     cloths = [cloth_mesh(c, max_quads) for c in geometry.cloth_frames]
-    subject = [m.points[np.unique(m.triangles)] for m in cloths if len(m.triangles)]  # torn-away pieces too
+    subject = [_bulk(m, up_axis) for m in cloths if len(m.triangles)]
     subject += [np.asarray(r, np.float64) for r in geometry.ropes if len(r)]
     spheres = list(geometry.spheres)
     if subject:
