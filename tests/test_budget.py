@@ -90,3 +90,42 @@ def test_reset_starts_the_budget_over():
     assert sim.substeps > 4
     sim.reset()
     assert sim.substeps == 4 and not sim.budget.frames_at
+
+
+def test_the_report_names_the_cap_that_bound_the_budget_and_what_lifts_it():
+    from warp_verlet.budget import FLOAT32_FLOOR, MAX_SUBSTEPS
+
+    for capped_by in (MAX_SUBSTEPS, FLOAT32_FLOOR):
+        b = Budget(target=0.01, substeps=32, max_substeps=32, capped_by=capped_by)
+        b.observe(0.02)
+        report = b.report()
+        assert "over the target on 1 frames at 32 substeps" in report
+        if capped_by == MAX_SUBSTEPS:
+            assert "the scene's max_substeps: raise max_substeps above 32" in report and "float64" not in report
+        else:
+            assert "the float32 floor on dt" in report and 'set precision = "float64"' in report
+            assert "max_substeps" not in report
+
+
+@pytest.mark.parametrize("simulation, capped_by", [
+    ({}, "float32 floor"),  # max_substeps 1024; float32 at 60 fps allows about 75 (docs/scenes.md)
+    ({"max_substeps": 16}, "max_substeps"),
+    ({"precision": "float64"}, "max_substeps"),  # the floor lies 2^29 lower in |a| dt^2
+])
+def test_the_simulator_tells_the_budget_which_cap_binds(simulation, capped_by):
+    sim = Simulator(scene(0.01, n=8, **simulation), "cpu")
+    assert sim.budget.capped_by == capped_by
+    floor = int(1.0 / (sim.settings.fps * sim.min_dt))
+    assert sim.budget.max_substeps == min(sim.settings.max_substeps, floor)
+    assert (floor < sim.settings.max_substeps) == (capped_by == "float32 floor")
+
+
+def test_the_budget_starts_at_the_default_substeps_as_docs_say():
+    # A scene with target_stretch may not give substeps, so its budget starts at the default: 4
+    # (docs/scenes.md, "A budget from a target stretch"), the step a scene without a target takes.
+    from warp_verlet.scene import SimulationSettings
+
+    sim = Simulator(scene(0.5, n=8), "cpu")
+    assert SimulationSettings().substeps == 4 and sim.substeps == 4
+    sim.step_frame()
+    assert sim.state.steps == 4 and dict(sim.budget.frames_at) == {4: 1}

@@ -12,7 +12,12 @@ the budget doubles or halves the substeps of the next frame from the RMS structu
   precision is resolved from the scene's starting budget; ``precision = "float64"`` lifts the floor), never
   below 1.
 
-It reports what it chose: how many frames ran at each substep count, and the last stretch against the target.
+It starts at the scene's ``substeps``: 4, the default, since a scene with a target gives none (a live session
+that turns a target on starts from the substeps it runs at). The same start as a scene without a target means
+the same first step, and "auto" precision is resolved from that step.
+
+It reports what it chose: how many frames ran at each substep count, the last stretch against the target and,
+when the target was missed at the cap, which cap it was and what lifts it.
 """
 
 from __future__ import annotations
@@ -21,13 +26,16 @@ from collections import Counter
 from dataclasses import dataclass, field
 
 CALM_FRAMES = 10
+MAX_SUBSTEPS = "max_substeps"  # what capped the budget: the scene's key ...
+FLOAT32_FLOOR = "float32 floor"  # ... or the float32 floor on dt (simulator.Simulator._new_budget)
 
 
 @dataclass
 class Budget:
     target: float  # RMS structural stretch to stay under (a fraction: 0.01 is 1%)
     substeps: int  # for the next frame
-    max_substeps: int
+    max_substeps: int  # the cap: the scene's max_substeps, or fewer where the float32 floor on dt is lower
+    capped_by: str = MAX_SUBSTEPS  # which of the two max_substeps is: MAX_SUBSTEPS or FLOAT32_FLOOR
     calm_frames: int = CALM_FRAMES
     frames_at: Counter = field(default_factory=Counter)  # substeps -> frames run with it
     last_rms: float | None = None
@@ -58,7 +66,11 @@ class Budget:
         last = f"{self.last_rms:.3%}" if self.last_rms is not None else "-"
         line = f"target rms {self.target:.3%}: substeps {chosen} (substeps x frames); last frame rms {last}"
         if self.over_at_max:
-            line += (f"; over the target on {self.over_at_max} frames at the most substeps allowed "
-                     f"({self.max_substeps}): raise max_substeps or iterations, or set precision = \"float64\" "
-                     "when the cap is the float32 floor on dt")
+            line += f"; over the target on {self.over_at_max} frames at {self.max_substeps} substeps, "
+            if self.capped_by == FLOAT32_FLOOR:
+                line += ("the most the float32 floor on dt allows (a shorter step's gravity would be lost to "
+                         "rounding): set precision = \"float64\" to go past it, or raise iterations")
+            else:
+                line += (f"the scene's max_substeps: raise max_substeps above {self.max_substeps}, or raise "
+                         "iterations")
         return line

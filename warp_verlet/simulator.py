@@ -32,7 +32,7 @@ from .memory import available_host_bytes, check_fits
 from .model import Model
 from .scene import Scene
 from .solver import VerletSolver
-from .budget import Budget
+from .budget import FLOAT32_FLOOR, MAX_SUBSTEPS, Budget
 from .stages import CONSTRAINT_SETS, Need
 from .state import State
 from .warp_setup import ensure_kernel_cache
@@ -120,7 +120,8 @@ class Simulator:
             return None
         floor = int(1.0 / (self.settings.fps * self.min_dt)) if self.min_dt > 0 else self.settings.max_substeps
         return Budget(self.settings.target_stretch, self.settings.substeps,
-                      max(1, min(self.settings.max_substeps, floor)))
+                      max(1, min(self.settings.max_substeps, floor)),
+                      FLOAT32_FLOOR if floor < self.settings.max_substeps else MAX_SUBSTEPS)
 
     @property
     def substeps(self) -> int:
