@@ -50,3 +50,84 @@ def structural_stretch(x: wp.array(dtype=Any), ends: wp.array(dtype=wp.vec2i), r
 
 for_positions(gather_drawn, arrays=("x", "x_inertial", "dq"))
 for_positions(structural_stretch, arrays=("x",))
+
+
+@wp.func
+def squared_stretch(a: Any, b: Any, rest: float):
+    """((|b - a| - L) / L)^2 in float64, as ``Model.structural_stretch`` computes it on the host."""
+    dx = wp.float64(b[0]) - wp.float64(a[0])
+    dy = wp.float64(b[1]) - wp.float64(a[1])
+    dz = wp.float64(b[2]) - wp.float64(a[2])
+    r = wp.float64(rest)
+    s = (wp.sqrt(dx * dx + dy * dy + dz * dz) - r) / r
+    return s * s
+
+
+@wp.kernel
+def grid_row_stretch(x: wp.array(dtype=Any), first_particle: int, rows: int, cols: int,
+                     col_sq: wp.array(dtype=wp.float64), row_sq: wp.array(dtype=wp.float64),
+                     sums: wp.array(dtype=wp.float64), counts: wp.array(dtype=int)):
+    """Row r of a grid cloth that cannot tear: the squared stretch of its structural sticks, (r, c)-(r, c+1) and
+    (r, c)-(r+1, c), summed in column order (a fixed order: the same sum on every run), rest lengths from the
+    implicit sticks' squared steps (kernels/grid_relax.py)."""
+    r = wp.tid()
+    total = wp.float64(0.0)
+    n = int(0)
+    row = first_particle + r * cols
+    for c in range(cols):
+        a = x[row + c]
+        if c + 1 < cols:
+            total += squared_stretch(a, x[row + c + 1], wp.float32(wp.sqrt(col_sq[c])))
+            n += 1
+        if r + 1 < rows:
+            total += squared_stretch(a, x[row + cols + c], wp.float32(wp.sqrt(row_sq[r])))
+            n += 1
+    sums[r] = total
+    counts[r] = n
+
+
+@wp.kernel
+def chunk_stretch(x: wp.array(dtype=Any), ends: wp.array(dtype=wp.vec2i), rest: wp.array(dtype=float),
+                  weight_entry: wp.array(dtype=int), weight: wp.array(dtype=float), chunk: int,
+                  sums: wp.array(dtype=wp.float64), counts: wp.array(dtype=int)):
+    """Structural sticks t * chunk .. (t + 1) * chunk - 1 (of a list of them): their squared stretch summed in
+    order, torn ones left out (``weight`` empty: none can tear)."""
+    t = wp.tid()
+    total = wp.float64(0.0)
+    n = int(0)
+    for i in range(t * chunk, wp.min((t + 1) * chunk, ends.shape[0])):
+        holds = True
+        if weight.shape[0] > 0:
+            holds = weight[weight_entry[i]] != 0.0
+        if holds:
+            total += squared_stretch(x[ends[i][0]], x[ends[i][1]], rest[i])
+            n += 1
+    sums[t] = total
+    counts[t] = n
+
+
+@wp.kernel
+def sum_chunks(sums: wp.array(dtype=wp.float64), counts: wp.array(dtype=int), chunk: int,
+               out_sums: wp.array(dtype=wp.float64), out_counts: wp.array(dtype=int)):
+    """Partial sums t * chunk .. (t + 1) * chunk - 1 added in order: one level of a reduction whose order is
+    fixed, so that its result is the same on every run (atomics would add in the order threads arrive)."""
+    t = wp.tid()
+    total = wp.float64(0.0)
+    n = int(0)
+    for i in range(t * chunk, wp.min((t + 1) * chunk, sums.shape[0])):
+        total += sums[i]
+        n += counts[i]
+    out_sums[t] = total
+    out_counts[t] = n
+
+
+@wp.kernel
+def finish_rms(sums: wp.array(dtype=wp.float64), counts: wp.array(dtype=int), rms: wp.array(dtype=wp.float64)):
+    """The RMS from the last partial sum and count (0 where nothing was counted)."""
+    rms[0] = wp.float64(0.0)
+    if counts[0] > 0:
+        rms[0] = wp.sqrt(sums[0] / wp.float64(counts[0]))
+
+
+for_positions(grid_row_stretch, arrays=("x",))
+for_positions(chunk_stretch, arrays=("x",))

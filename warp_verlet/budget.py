@@ -42,10 +42,15 @@ class Budget:
     over_at_max: int = 0  # frames over the target with no substeps left to add
     _calm: int = 0
 
-    def observe(self, rms: float) -> None:
-        """The RMS stretch at the end of a frame run at ``substeps``; sets ``substeps`` for the next one."""
-        self.frames_at[self.substeps] += 1
+    def observe(self, rms: float, substeps: int | None = None) -> None:
+        """The RMS stretch at the end of a frame run at ``substeps`` (default: the current ones); sets
+        ``substeps`` for the next one. A frame run at other substeps (its stretch read a frame late, after the
+        budget had moved) is counted but decides nothing: the budget already acted on the frame before it."""
+        ran = self.substeps if substeps is None else substeps
+        self.frames_at[ran] += 1
         self.last_rms = rms
+        if ran != self.substeps:
+            return
         if rms > self.target:
             self._calm = 0
             if self.substeps * 2 <= self.max_substeps:

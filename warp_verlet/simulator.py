@@ -67,6 +67,79 @@ class StretchStats:
         return cls(float(values.max()), float(np.sqrt(np.mean(values * values))))
 
 
+class StretchReadback:
+    """The RMS structural stretch for the target_stretch budget, reduced on the device in a fixed order
+    (kernels/readback.py: per grid row, or per chunk of structural sticks, then partial sums of partial sums),
+    so that one float64 crosses to the host and the same positions always give the same number. On CUDA the
+    number is copied into pinned host memory behind an event and read at the next frame boundary, a frame late,
+    so that the host never waits for the device; on the CPU the launches are synchronous and it is read at once.
+    A grid with implicit sticks needs no arrays but the partial sums; other cloths upload their structural
+    sticks once."""
+
+    STICKS_PER_THREAD = 256
+    SUMS_PER_THREAD = 32
+
+    def __init__(self, model: Model, device):
+        from warp_verlet.kernels.positions import instance
+        from warp_verlet.kernels.readback import chunk_stretch, grid_row_stretch
+
+        self.device = device
+        with wp.ScopedDevice(device):
+            if model.sticks_form == "implicit":
+                top, g = model.cloths[0].topology, model.grid
+                count = top.rows
+                kernel = instance(grid_row_stretch, model.position_dtype)
+                self._inputs = [model.cloths[0].first, top.rows, top.cols, g.col_sq1, g.row_sq1]
+                self._weight_at = None
+            else:
+                chosen = np.flatnonzero(model.structural)
+                entry = np.zeros(model.stick_count, np.int32)
+                if model.tears:  # the weight entry that says whether a stick is torn
+                    entry[model._tear_entry_stick] = np.arange(len(model._tear_entry_stick), dtype=np.int32)
+                chunk = self.STICKS_PER_THREAD
+                count = max(1, -(-len(chosen) // chunk))
+                kernel = instance(chunk_stretch, model.position_dtype)
+                self._inputs = [wp.array(model.host_sticks[chosen].astype(np.int32), dtype=wp.vec2i),
+                                wp.array(model.host_rest[chosen].astype(np.float32), dtype=float),
+                                wp.array(entry[chosen], dtype=int),
+                                wp.empty(0, dtype=float),  # the State's live weights where a cloth can tear
+                                chunk]
+                self._weight_at = 3
+            self._first = (kernel, count)
+            self._tears = model.tears
+            levels = [(wp.empty(count, dtype=wp.float64), wp.empty(count, dtype=int))]
+            while count > 1:
+                count = -(-count // self.SUMS_PER_THREAD)
+                levels.append((wp.empty(count, dtype=wp.float64), wp.empty(count, dtype=int)))
+            self._levels = levels
+            self._rms = wp.empty(1, dtype=wp.float64)
+            self._host = wp.empty(1, dtype=wp.float64, device="cpu", pinned=device.is_cuda)
+        self._event = None
+
+    def launch(self, state: State) -> None:
+        """Reduce ``state``'s stretch and start its copy to the host."""
+        from warp_verlet.kernels.readback import finish_rms, sum_chunks
+
+        kernel, count = self._first
+        inputs = list(self._inputs)
+        if self._weight_at is not None and self._tears:
+            inputs[self._weight_at] = state.stick_weight
+        with wp.ScopedDevice(self.device):
+            wp.launch(kernel, count, inputs=[state.particle_q, *inputs], outputs=list(self._levels[0]))
+            for (sums, counts), (out_sums, out_counts) in zip(self._levels, self._levels[1:]):
+                wp.launch(sum_chunks, out_sums.shape[0], inputs=[sums, counts, self.SUMS_PER_THREAD],
+                          outputs=[out_sums, out_counts])
+            wp.launch(finish_rms, 1, inputs=list(self._levels[-1]), outputs=[self._rms])
+            wp.copy(self._host, self._rms)
+            self._event = wp.record_event() if self.device.is_cuda else None
+
+    def read(self) -> float:
+        """The last launched reduction's RMS (waits for it on CUDA, which a frame later costs nothing)."""
+        if self._event is not None:
+            wp.synchronize_event(self._event)
+        return float(self._host.numpy()[0])
+
+
 class Simulator:
     """One scene on one device: the friendly driver over a :class:`Model`, one :class:`State` and a
     :class:`VerletSolver`.
@@ -107,6 +180,8 @@ class Simulator:
         self._substep_in_frame = 0  # substeps advance() has taken since the last frame boundary
         self.clamped_seconds = 0.0  # what the last advance() dropped from its bank (a stall)
         self.budget = self._new_budget()
+        self._readback: StretchReadback | None = None  # the budget's stretch, reduced on the device
+        self._pending_substeps: int | None = None  # a frame whose stretch is on its way to the host (CUDA)
         # A frame's substeps are captured once and replayed: a CUDA graph, or on the CPU Warp's own capture
         # (replayed in C++: 2.4 -> 1.2 ms per frame at 32^2, bit-identical). Threaded relaxation needs its
         # launches issued from Python, so it is not captured.
@@ -169,6 +244,7 @@ class Simulator:
         self._accumulator = 0.0
         self._substep_in_frame = 0
         self.budget = self._new_budget()
+        self._pending_substeps = None
 
     # ------------------------------------------------------------------ stepping
     def step(self, dt: float | None = None) -> None:
@@ -259,9 +335,29 @@ class Simulator:
         return self._substep_in_frame == 0
 
     def _end_frame(self) -> None:
+        """At a frame boundary: the budget observes a frame's stretch, reduced on the device. On CUDA it reads the
+        previous frame's (whose copy has long arrived) and queues this one's, so the host never waits for the
+        device; the budget ignores a late observation of a frame run at other substeps than it now chooses."""
         self._substep_in_frame = 0
-        if self.budget is not None:
-            self.budget.observe(self.stretch().rms)
+        if self.budget is None:
+            return
+        if self._readback is None:
+            self._readback = StretchReadback(self.model, self.device)
+        ran = self.substeps
+        if self.device.is_cpu:
+            self._readback.launch(self.state)
+            self.budget.observe(self._readback.read(), ran)
+            return
+        self.settle_budget()
+        self._readback.launch(self.state)
+        self._pending_substeps = ran
+
+    def settle_budget(self) -> None:
+        """Let the budget observe the last frame's stretch now, where it waits to be read a frame late (CUDA): a
+        run's summary calls it before reporting what the budget chose."""
+        if self._pending_substeps is not None and self.budget is not None:
+            self.budget.observe(self._readback.read(), self._pending_substeps)
+        self._pending_substeps = None
 
     def retune(self, **changes) -> None:
         """Change simulation settings that the model does not hold (gravity, wind, damping, substeps,
@@ -286,6 +382,7 @@ class Simulator:
         self.min_dt = solver.min_dt
         self._frame_graphs.clear()  # they replay the old solver's launches
         if changes.keys() & {"target_stretch", "substeps", "max_substeps"}:
+            self.settle_budget()
             self.budget = self._new_budget()
 
     def take_state(self, other: "Simulator") -> None:
