@@ -177,3 +177,20 @@ def test_validate_and_run_print_the_warnings_and_still_succeed(tmp_path, monkeyp
     (tmp_path / "fine.toml").write_text(TRAP.replace("tethers = true", "tethers = false"))
     assert main(["validate", "fine.toml"]) == 0
     assert "warning" not in capsys.readouterr().err
+
+
+def test_a_run_that_has_not_converged_names_the_cloth_and_what_helps_it(tmp_path):
+    # Not predictable without running (how far a frame's sweeps carry a correction against the load), so the
+    # run says it: one sweep of one substep a frame cannot hold a 32 x 32 grid from two corners under 3 g.
+    s = parse_scene({"simulation": {"fps": 30, "frames": 15, "substeps": 1, "iterations": 1,
+                                    "gravity": [0.0, -30.0, 0.0]},
+                     "cloth": [{"name": "small", "resolution": [3, 3], "size": [0.2, 0.2], "origin": [2.0, 1.0, 0.0],
+                                "pins": ["top-edge"]},
+                               {"name": "big", "resolution": [32, 32], "size": [1.0, 1.0], "origin": [0.0, 1.0, 0.0],
+                                "pins": ["top-left", "top-right"], "tethers": False}]}, "<unconverged>")
+    summary = runner.run_scene(s, tmp_path / "c.usdc", device="cpu")
+    assert summary.stretch_max > runner.UNCONVERGED_STRETCH
+    (warning,) = [line for line in summary.format().splitlines() if line.startswith("warning")]
+    assert "has not converged in cloth 'big' (a 32 x 32 grid) at 1 substeps x 1 iterations a frame" in warning
+    for fix in ("more substeps", "target_stretch", "tethers = true", "multilevel = true", "30 m/s^2"):
+        assert fix in warning

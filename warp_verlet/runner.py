@@ -49,6 +49,7 @@ class RunSummary:
     budget: str | None = None  # what a target_stretch budget chose (warp_verlet/budget.py)
     notes: tuple[str, ...] = ()  # what the run noticed about its output (leftovers of an earlier run removed)
     startup_seconds: float = 0.0  # before the first frame: the model built and the kernels loaded (not in wall)
+    unconverged: str | None = None  # where the stretch check failed, and what to change (unconverged_advice)
     kernel_seconds: float = 0.0  # of which Warp's kernel modules, compiled or loaded from its kernel cache
 
     def format(self) -> str:
@@ -75,9 +76,8 @@ class RunSummary:
         if self.stretch_max > UNCONVERGED_STRETCH:
             lines.append(
                 f"warning          the sticks are far from satisfied (a structural stick at {1 + self.stretch_max:.3g} x "
-                "its rest length): the relaxation has not converged. Pins out of each other's reach, too few "
-                "iterations or substeps for this grid size, or too large a load; see the README's "
-                "work-precision section")
+                "its rest length): the relaxation has not converged"
+                + (f" {self.unconverged}" if self.unconverged else ""))
         return "\n".join(lines)
 
 
@@ -139,6 +139,7 @@ def _simulate(scene: Scene, output: Path, target: CacheOutput, device: str | Non
     wall = time.perf_counter() - start
     points = sim.positions()
     stretch = sim.stretch(points)
+    unconverged = unconverged_advice(scene, sim, points) if stretch.max > UNCONVERGED_STRETCH else None
     colouring = model.colouring
     return RunSummary(
         scene=scene.source, output=output, device=str(sim.device), frames=settings.frames,
@@ -146,8 +147,40 @@ def _simulate(scene: Scene, output: Path, target: CacheOutput, device: str | Non
         colours=model.colour_count, colour_balance=colouring.balance if colouring else 0.0,
         stretch_max=stretch.max, stretch_rms=stretch.rms, torn=sim.torn_count() if model.tears else None,
         threads=sim.threads, budget=sim.budget.report() if sim.budget is not None else None,
-        notes=tuple(target.notes), startup_seconds=startup, kernel_seconds=kernel_seconds,
+        notes=tuple(target.notes), startup_seconds=startup, kernel_seconds=kernel_seconds, unconverged=unconverged,
     )
+
+
+def unconverged_advice(scene: Scene, sim, points: np.ndarray) -> str:
+    """Where the stretch check failed (the cloth of the longest structural stick) and what would help that
+    cloth, from what the scene already has. Whether a budget converges depends on the run (how far the sweeps
+    of a frame carry a correction against the load), so this is said after it, not predicted."""
+    model = sim.model
+    torn = sim.torn_sticks() if model.tears else None
+    keep = np.flatnonzero(model.structural if torn is None else model.structural & ~torn)
+    worst = keep[int(np.argmax(model.structural_stretch(points, torn)))]
+    particle = int(model.host_sticks[worst, 0])
+    index = next(i for i, s in enumerate(model.cloths) if s.first <= particle < s.first + s.count)
+    spec, settings = scene.cloths[index], sim.settings
+    shape = f"a {spec.resolution[0]} x {spec.resolution[1]} grid" if spec.mesh is None else \
+        f"a mesh of {spec.particle_count} particles"
+    load = float(np.linalg.norm(np.add(settings.gravity, settings.wind)))
+    fixes = []
+    if settings.iterations == 0:
+        fixes.append("iterations (0 relaxes no stick)")
+    elif settings.target_stretch is None:
+        fixes.append("more substeps (smaller steps converge more per sweep than more iterations do), or "
+                     "target_stretch to choose them")
+    else:
+        fixes.append("a higher max_substeps (see the budget line)")
+    if spec.pin_count and not spec.uses_tethers:
+        fixes.append("tethers = true (with a tether_scale above its tear_threshold)" if spec.tear_threshold
+                     else "tethers = true")
+    if spec.mesh is None and spec.tear_threshold is None and not settings.multilevel:
+        fixes.append("multilevel = true")
+    fixes.append(f"or a lighter load (gravity + wind: {load:.3g} m/s^2)")
+    return (f"in cloth '{spec.name}' ({shape}) at {sim.substeps} substeps x {settings.iterations} iterations a "
+            f"frame; what helps: {'; '.join(fixes)}")
 
 
 def load_kernels(sim) -> float:
