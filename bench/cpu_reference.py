@@ -8,7 +8,11 @@ state: ``--warm-up`` frames (Warp compiles its kernels there), then ``--repeats`
 frames; the median batch gives ms/frame, and stick projections/s = sticks x substeps x iterations / (s/frame).
 
 - warp coloured, 1 thread: the full simulator, ``Simulator(scene, "cpu", threads=1).step_frame()`` (coloured
-  Gauss-Seidel), the like-for-like peer of the single-threaded C.
+  Gauss-Seidel, every stick's ends, rest length and weight read from arrays), the like-for-like peer of the
+  single-threaded C.
+- warp coloured, implicit grid sticks, 1 thread (with ``--implicit``): the same with ``sticks="implicit"``, each
+  stick's ends and rest length computed from the grid (kernels/grid_relax.py); its positions must equal the
+  stick arrays' run bit for bit.
 - warp coloured, N threads: the same with the relaxation cut over N threads (``--threads N``; by default
   what the simulator picks by itself for this grid on this machine, and no such row when that is 1); its
   positions must equal the 1-thread run's bit for bit.
@@ -86,7 +90,7 @@ class CCloth:
             raise ValueError("the C reference has no colliders")
         s = scene.simulation
         coloured = dataclasses.replace(scene, simulation=dataclasses.replace(s, solver="coloured"))
-        m = Simulator(coloured, device="cpu").model
+        m = Simulator(coloured, device="cpu", sticks="explicit").model  # the stick arrays the C code reads
         self.lib, self.n, self.stick_count = lib, m.particle_count, m.stick_count
         self.substeps, self.iterations = s.substeps, s.iterations
         self.x = np.ascontiguousarray(m.rest_positions, dtype=np.float32)
@@ -117,7 +121,8 @@ class CCloth:
 # ---------------------------------------------------------------- the contenders, timed
 
 def run(size: int = 256, frames: int = 10, repeats: int = 3, warm_up: int = 2, numpy_frames: int = 2,
-        substeps: int = 4, iterations: int = 8, with_c: bool = True, threads: int | None = None, log=print) -> dict:
+        substeps: int = 4, iterations: int = 8, with_c: bool = True, threads: int | None = None,
+        implicit: bool = False, log=print) -> dict:
     """Measure every contender; returns {"rows": [...], "check": {...} or None, "compiler": str or None}."""
     scene = hanging_cloth(size, substeps, iterations)
     jacobi = hanging_cloth(size, substeps, iterations, "jacobi")
@@ -141,6 +146,12 @@ def run(size: int = 256, frames: int = 10, repeats: int = 3, warm_up: int = 2, n
             times = time_frames(sim, frames, repeats, warm_up)
             record(name, times, sim.model.stick_count, frames * repeats)
             finals[name] = (sim, sim.positions())
+    implicit_identical = None
+    if implicit:
+        name = "warp coloured, implicit grid sticks, 1 thread"
+        sim = Simulator(scene, device="cpu", threads=1, sticks="implicit")
+        record(name, time_frames(sim, frames, repeats, warm_up), sim.model.stick_count, frames * repeats)
+        implicit_identical = np.array_equal(sim.positions(), finals["warp coloured, 1 thread"][1])
     threaded_identical = all(
         np.array_equal(finals[f"warp {solver}, 1 thread"][1], finals[f"warp {solver}, {threads} threads"][1])
         for solver in ("coloured", "jacobi")) if threads > 1 else None
@@ -170,7 +181,7 @@ def run(size: int = 256, frames: int = 10, repeats: int = 3, warm_up: int = 2, n
                  "rms_diff": float(np.sqrt(np.mean(dist**2))), "cloth_size": cloth_size(scene),
                  "stretch_rms_warp": sim.stretch(xw).rms, "stretch_rms_c": sim.stretch(xc).rms}
     return {"rows": rows, "check": check, "compiler": compiler, "threaded_identical": threaded_identical,
-            "threads": threads}
+            "threads": threads, "implicit_identical": implicit_identical}
 
 
 def ratios(rows: list[dict]) -> dict[str, float]:
@@ -181,6 +192,9 @@ def ratios(rows: list[dict]) -> dict[str, float]:
     out = {}
     if "C (1 thread)" in rate:
         out["C / warp coloured, 1 thread"] = rate["C (1 thread)"] / rate["warp coloured, 1 thread"]
+        implicit = "warp coloured, implicit grid sticks, 1 thread"
+        if implicit in rate:
+            out[f"C / {implicit}"] = rate["C (1 thread)"] / rate[implicit]
     for name in warp:
         solver = "coloured" if "coloured" in name else "jacobi"
         out[f"{name} / numpy {solver}"] = rate[name] / rate[f"numpy {solver}"]
@@ -208,6 +222,9 @@ def write(res: dict, out: Path, size: int, argv: list[str], tolerance: float) ->
                   f"at most {c['max_diff']:.2e} m (RMS {c['rms_diff']:.2e} m), {verdict} the tolerance "
                   f"{tolerance:g} x cloth size; RMS structural stretch Warp {c['stretch_rms_warp']:.4e}, "
                   f"C {c['stretch_rms_c']:.4e}."]
+    if res.get("implicit_identical") is not None:
+        lines += ["", "Implicit grid sticks: the run computing every stick from the grid ended bit-identical to the "
+                  f"stick arrays' run: {'yes' if res['implicit_identical'] else 'NO'}."]
     if res["threaded_identical"] is not None:
         lines += ["", f"Threads: the {res['threads']}-thread runs ended bit-identical to the 1-thread runs: "
                   f"{'yes' if res['threaded_identical'] else 'NO'}."]
@@ -230,6 +247,8 @@ def main(argv=None) -> int:
     p.add_argument("--threads", type=int, default=None,
                    help="threads of the threaded Warp rows (default: the simulator's choice; usable cores here: "
                         f"{usable_cores()})")
+    p.add_argument("--implicit", action="store_true",
+                   help="also time the coloured simulator with implicit grid sticks (sticks='implicit')")
     p.add_argument("--tolerance", type=float, default=1e-4,
                    help="largest Warp-C particle distance accepted, as a fraction of the cloth size")
     p.add_argument("--out", type=Path, default=HERE / "results" / "cpu_reference")
@@ -237,11 +256,14 @@ def main(argv=None) -> int:
     quiet_warp()
     print(f"{args.size}x{args.size} hanging cloth, {args.substeps} x {args.iterations}:", flush=True)
     res = run(args.size, args.frames, args.repeats, args.warm_up, args.numpy_frames, args.substeps, args.iterations,
-              with_c=not args.no_c, threads=args.threads)
+              with_c=not args.no_c, threads=args.threads, implicit=args.implicit)
     print(write(res, args.out, args.size, ["bench.cpu_reference", *argv], args.tolerance))
     c = res["check"]
     if c and c["max_diff"] > args.tolerance * c["cloth_size"]:
         print("error: the C reference and Warp disagree beyond the tolerance", file=sys.stderr)
+        return 1
+    if res["implicit_identical"] is False:
+        print("error: the implicit grid sticks' run differs from the stick arrays' run", file=sys.stderr)
         return 1
     if res["threaded_identical"] is False:
         print("error: the threaded Warp runs differ from the 1-thread runs", file=sys.stderr)

@@ -80,12 +80,12 @@ CASES = {
 }
 
 
-# The cases above where the sticks are implicit grid sticks by default (one grid cloth that cannot tear, the
-# coloured solver), again with the stick arrays.
-EXPLICIT = ["coloured", "tethers", "compliance", "multilevel", "float64", "moving-sphere"]
+# The cases above that allow implicit grid sticks (one grid cloth that cannot tear, the coloured solver), again
+# with them ("auto" keeps stick arrays on the CPU).
+IMPLICIT = ["coloured", "tethers", "compliance", "multilevel", "float64", "moving-sphere", "planes"]
 
 
-@pytest.mark.parametrize("case", list(CASES) + [f"{c}/explicit" for c in EXPLICIT])
+@pytest.mark.parametrize("case", list(CASES) + [f"{c}/implicit" for c in IMPLICIT])
 def test_estimate_matches_the_arrays_allocated(case):
     case, _, sticks = case.partition("/")
     simulation, cloth, *colliders = CASES[case]
@@ -94,13 +94,12 @@ def test_estimate_matches_the_arrays_allocated(case):
                         file="<test>")
     sim = Simulator(scene, "cpu", use_graph=False, sticks=sticks or "auto")
     sim.step()
-    implicit = scene.simulation.solver == "coloured" and not scene.tears and not sticks
-    assert sim.model.sticks_form == ("implicit" if implicit else "explicit")
+    assert sim.model.sticks_form == (sticks or "explicit")
     assert sim.precision == ("float64" if "float64" in case else "float32")
     # The only arrays not in the estimate are one-element counters: the tear counter (4 bytes), and the
     # Jacobi CSR's extra row start (4 bytes). A moving sphere's key starts are counted (spheres + 1 of them).
     counters = 4 * (scene.tears + (scene.simulation.solver == "jacobi"))
-    assert simulator_bytes(sim) - estimate(scene, sticks or "auto").device_bytes == counters
+    assert simulator_bytes(sim) - estimate(scene, sim.model.sticks_form).device_bytes == counters
 
 
 def test_a_scene_too_big_for_the_machine_is_refused_before_allocating():
@@ -119,7 +118,7 @@ def test_device_and_host_limits_are_named():
     with pytest.raises(WarpVerletError, match="this machine has only"):
         check_fits(scene, "cpu", device_free=None, host_free=need.device_bytes + need.host_bytes - 1)
     assert check_fits(scene, "cpu", device_free=None, host_free=need.device_bytes + need.host_bytes) == need
-    # Per particle three positions and an inverse mass; implicit grid sticks keep four tables of squared steps
-    # (1 and 2 columns, 1 and 2 rows apart) where the explicit ones keep ends, rest and weight per stick.
-    assert need.device_bytes == 64 * 64 * 40 + (63 + 62 + 63 + 62) * 8
+    # Per particle three positions and an inverse mass; stick arrays keep ends, rest and weight per stick, where
+    # implicit grid sticks keep four tables of squared steps (1 and 2 columns, 1 and 2 rows apart).
     assert estimate(scene, "explicit").device_bytes == 64 * 64 * 40 + 2 * 64 * 63 * 16
+    assert estimate(scene, "implicit").device_bytes == need.device_bytes == 64 * 64 * 40 + (63 + 62 + 63 + 62) * 8

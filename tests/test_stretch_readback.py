@@ -35,7 +35,7 @@ def test_the_device_rms_is_the_host_rms_and_repeats_exactly(case, device):
             file="<test>")
     else:
         scene = make_scene({"substeps": 2}, resolution=[17, 300], pins=["top-left"], sticks=["structural", "bend"])
-    sim = Simulator(scene, device, sticks="explicit" if case == "explicit" else "auto")
+    sim = Simulator(scene, device, sticks="implicit" if case == "implicit" else "auto")
     for _ in range(12):
         sim.step_frame()
     if case == "torn":
@@ -69,7 +69,7 @@ def test_each_substep_count_is_captured_once(monkeypatch):
         return real(self)
 
     monkeypatch.setattr(wp.ScopedCapture, "__enter__", enter)
-    sim = Simulator(budget_scene(0.00002), "cpu", threads=1)
+    sim = Simulator(budget_scene(0.00002), "cpu", threads=1, sticks="implicit")
     for _ in range(40):
         sim.step_frame()
     chosen = set(sim.budget.frames_at)

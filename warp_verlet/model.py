@@ -64,13 +64,19 @@ class DeviceLevel:
     weights: wp.array  # (C,) vec4 float32
 
 
-def stick_form(sticks: str, colouring: str) -> str:
-    """The sticks' form a Model gets: implicit grid sticks follow the analytic colouring's order, so asking for
-    Warp's graph colouring makes "auto" explicit (and "implicit" an error)."""
+def stick_form(sticks: str, colouring: str, device) -> str:
+    """The sticks' form asked of Need.of for a Model on ``device``. "auto" means implicit grid sticks where the
+    scene allows them on a GPU, where a sweep is bound by memory traffic and they save it; on the CPU it means
+    stick arrays, which measured faster there (the arrays stay in its caches, and the computed ends and rest
+    lengths cost integer divisions and a square root per stick; bench/results/implicit_grid). Implicit sticks
+    follow the analytic colouring's order, so Warp's graph colouring makes "auto" explicit (and "implicit" an
+    error)."""
     if colouring == "graph" and sticks == "implicit":
         raise ArgumentError("sticks='implicit' projects in the analytic grid colouring's order; "
                             "colouring='graph' needs sticks='explicit' or 'auto'")
-    return "explicit" if colouring == "graph" and sticks == "auto" else sticks
+    if sticks == "auto" and (colouring == "graph" or device.is_cpu):
+        return "explicit"
+    return sticks
 
 
 def grid_axes(topology: ClothTopology) -> tuple[np.ndarray, np.ndarray]:
@@ -203,11 +209,11 @@ class Model:
 
     def __init__(self, scene: Scene, device, colouring: str = "auto", sticks: str = "auto"):
         """``colouring``: "auto" (analytic when every cloth is a grid, else Warp's graph colouring), "grid"
-        (grids only) or "graph". ``sticks``: "auto" (implicit grid sticks where the scene allows them, see
-        stages.implicit_grid_obstacle, and the colouring is the analytic one), "explicit" or "implicit"."""
+        (grids only) or "graph". ``sticks``: "auto" (implicit grid sticks on a GPU where the scene allows
+        them: stages.implicit_grid_obstacle, :func:`stick_form`), "explicit" or "implicit"."""
         if colouring not in ("auto", "grid", "graph"):
             raise ArgumentError(f"colouring must be 'auto', 'grid' or 'graph', got {colouring!r}")
-        sticks = stick_form(sticks, colouring)
+        sticks = stick_form(sticks, colouring, device)
         self.device = device
         self.solver = scene.simulation.solver
         need = Need.of(scene, sticks)

@@ -152,9 +152,10 @@ class Simulator:
 
     def __init__(self, scene: Scene, device: str | None = None, colouring: str = "auto", use_graph: bool = True,
                  threads: int | None = None, sticks: str = "auto"):
-        """``sticks``: "auto" computes a grid cloth's sticks in the kernels where the scene allows it (one grid
-        cloth that cannot tear, the coloured solver: stages.implicit_grid_obstacle) and keeps stick arrays
-        otherwise; "explicit" always keeps them; "implicit" insists. ``constraint_sets`` says what was chosen."""
+        """``sticks``: "auto" computes a grid cloth's sticks in the kernels on a GPU where the scene allows it
+        (one grid cloth that cannot tear, the coloured solver: stages.implicit_grid_obstacle) and keeps stick
+        arrays otherwise and on the CPU (model.stick_form says why); "explicit" always keeps them; "implicit"
+        insists. ``constraint_sets`` says what was chosen."""
         self.scene = scene
         self.settings = scene.simulation
         self.device = resolve_device(device)
@@ -162,7 +163,7 @@ class Simulator:
         from .model import stick_form
 
         self.memory = check_fits(scene, str(self.device), self.device.free_memory if self.device.is_cuda else None,
-                                 available_host_bytes(), stick_form(sticks, colouring))
+                                 available_host_bytes(), stick_form(sticks, colouring, self.device))
         with wp.ScopedDevice(self.device):
             self.model = Model(scene, self.device, colouring, sticks)
             self.state = State(self.model)
