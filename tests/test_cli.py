@@ -342,7 +342,8 @@ def test_no_builtin_exception_is_raised_on_purpose_anywhere_in_the_package():
     assert not found, found
 
 
-def test_kernel_loading_is_timed_apart_from_the_frames(scene_file, monkeypatch):
+@pytest.mark.parametrize("budget", [False, True])
+def test_kernel_loading_is_timed_apart_from_the_frames(scene_file, monkeypatch, budget):
     # Warp loads a module at its first launch, compiling it when its kernel cache lacks it (seconds). The run
     # loads them all before its clock starts: none may load while frames are stepped, and the summary reports
     # the start-up on its own line.
@@ -351,8 +352,12 @@ def test_kernel_loading_is_timed_apart_from_the_frames(scene_file, monkeypatch):
     from warp_verlet import runner
     from warp_verlet.scene import load_scene
 
-    import warp_verlet.kernels.relax  # noqa: F401  (imported by the first step otherwise, unloaded here)
+    import warp_verlet.kernels.readback  # noqa: F401  (imported by the first step otherwise, unloaded here)
+    import warp_verlet.kernels.relax  # noqa: F401
     import warp_verlet.simulator  # noqa: F401
+
+    if budget:  # a target_stretch budget reduces the stretch on the device every frame
+        scene_file.write_text(SCENE.replace("substeps = 2\niterations = 4\n", "target_stretch = 0.01\n"))
 
     kernels = [name for name in sys.modules if name.startswith("warp_verlet.kernels.")]
     for name in kernels:
@@ -373,6 +378,7 @@ def test_kernel_loading_is_timed_apart_from_the_frames(scene_file, monkeypatch):
     monkeypatch.setattr(module_type, "load", load)
     monkeypatch.setattr(runner, "_step_loop", step_loop)
     summary = runner.run_scene(load_scene(scene_file), device="cpu")
+    assert (summary.budget is not None) == budget
     assert stepping and {"warp_verlet.kernels.relax", "warp_verlet.kernels.integrate"} <= {n for n, _ in loads}
     assert [name for name, during in loads if during] == []
     assert 0.0 < summary.kernel_seconds <= summary.startup_seconds
