@@ -6,7 +6,10 @@ SceneError escapes. Here, with hypothesis and a small TOML serialiser that write
 ``[[array]]`` headers (checked to round-trip through tomllib first):
 
 - random structured documents, weighted to the real section and key names, raise only SceneError;
-- every known key, given a value of a wrong type, raises SceneError naming that key (or an element of it);
+- every key the loader takes, given a value of a wrong type, raises SceneError naming the file and that key (or an
+  element of it). The keys and the kinds each accepts are not listed here: they are recorded from the loader itself
+  (warp_verlet/scene_keys.recorded_keys) as it loads a scene with every section (a grid cloth, a mesh cloth, a
+  plane, a still and a moving sphere), so a key added to the loader is fuzzed without anyone adding it here;
 - every numeric key, given huge, tiny, negative or zero numbers, either loads with exactly that value inside
   its documented range or raises SceneError naming the key: the loader never accepts an out-of-range value;
 - unknown unicode keys are reported as unknown under their own dotted path; unicode names, choices and pin
@@ -22,6 +25,7 @@ from __future__ import annotations
 import math
 import re
 import sys
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -30,7 +34,8 @@ from hypothesis import strategies as st
 
 from warp_verlet.errors import SceneError
 from warp_verlet.scene import (NAMED_PINS, ClothSpec, OutputSettings, PlaneCollider, Scene, SimulationSettings,
-                               SphereCollider, load_scene)
+                               SphereCollider, load_scene, parse_scene)
+from warp_verlet.scene_keys import Table, real, recorded_keys
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -40,6 +45,7 @@ else:  # pragma: no cover
 SCENES = Path(__file__).resolve().parent.parent / "scenes"
 FUZZ = settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 
+from mesh_files import grid_mesh, triangulated, write_obj  # noqa: E402
 from toml_text import dump  # noqa: E402
 
 
@@ -85,7 +91,8 @@ scalars = st.one_of(
 )
 values = st.recursive(scalars, lambda c: st.lists(c, max_size=3) | st.dictionaries(keys, c, max_size=3), max_leaves=8)
 
-# Wrong-type value pools: each known key accepts one kind; the others are wrong for it.
+# Wrong-type value pools, one per kind of TOML value (the kinds of warp_verlet/scene_keys.py: each parser declares
+# the kinds it accepts; the others are wrong for it).
 KINDS = {
     "bool": st.booleans(),
     "int": st.integers(min_value=-(2**70), max_value=2**70),
@@ -94,23 +101,10 @@ KINDS = {
     "array": st.lists(scalars, max_size=3),
     "table": st.dictionaries(keys, scalars, max_size=3),
 }
-# What each key accepts: number = int or float; vector = array; table; string (choices and names).
-ACCEPTS = {"number": {"int", "float"}, "integer": {"int"}, "string": {"string"}, "array": {"array"},
-           "table": {"table"}, "boolean": {"bool"}}
 
-SIM_KEYS = {"fps": "number", "frames": "integer", "substeps": "integer", "iterations": "integer",
-            "gravity": "array", "wind": "array", "damping": "number", "solver": "string", "max_dt_ratio": "number",
-            "max_frame_time": "number", "position_bound": "number", "precision": "string"}
-OUT_KEYS = {"path": "string", "save_every": "integer", "up_axis": "string", "meters_per_unit": "number",
-            "kind": "string", "torn_faces": "string"}
-CLOTH_KEYS = {"name": "string", "resolution": "array", "size": "array", "origin": "array", "orientation": "string",
-              "mass": "number", "sticks": "array", "compliance": "table", "pins": "array", "tear_threshold": "number",
-              "particle_masses": "array", "tethers": "boolean", "tether_scale": "number"}
-COMPLIANCE_KEYS = {"structural": "number", "shear": "number", "bend": "number"}  # m/N per stick family
-PLANE_KEYS = {"type": "string", "name": "string", "thickness": "number", "friction": "number", "normal": "array",
-              "point": "array", "display_size": "number", "purpose": "string"}
-SPHERE_KEYS = {"type": "string", "name": "string", "thickness": "number", "friction": "number", "radius": "number",
-               "centre": "array", "purpose": "string"}
+
+def kind_of(value) -> str:
+    return {bool: "bool", int: "int", float: "float", str: "string", list: "array", dict: "table"}[type(value)]
 
 
 def full_scene() -> dict:
@@ -134,16 +128,61 @@ def full_scene() -> dict:
     }
 
 
-def known_key_paths() -> list[tuple[str, tuple, str]]:
-    """(dotted key as the loader names it, path into full_scene(), kind) for every known key."""
-    out = [("simulation", ("simulation",), "table"), ("output", ("output",), "table")]
-    out += [(f"simulation.{k}", ("simulation", k), kind) for k, kind in SIM_KEYS.items()]
-    out += [(f"output.{k}", ("output", k), kind) for k, kind in OUT_KEYS.items()]
-    out += [(f"cloth[0].{k}", ("cloth", 0, k), kind) for k, kind in CLOTH_KEYS.items()]
-    out += [(f"cloth[0].compliance.{k}", ("cloth", 0, "compliance", k), kind) for k, kind in COMPLIANCE_KEYS.items()]
-    out += [(f"collider[0].{k}", ("collider", 0, k), kind) for k, kind in PLANE_KEYS.items()]
-    out += [(f"collider[1].{k}", ("collider", 1, k), kind) for k, kind in SPHERE_KEYS.items()]
+# The mesh of the every-key scene's mesh cloth: 2 x 3 vertices, triangles (as trimesh gives them), written once.
+_MESH_DIR = tempfile.TemporaryDirectory(prefix="scene_fuzz_")
+MESH = write_obj(Path(_MESH_DIR.name) / "panel.obj", *(lambda p, f: (p, triangulated(f)))(*grid_mesh(2, 3)))
+
+
+def every_key_scene() -> dict:
+    """full_scene() and the sections it lacks: a mesh cloth with every mesh key (a USD prim aside: an OBJ refuses
+    one), and a moving sphere (``path`` instead of ``centre``)."""
+    doc = full_scene()
+    doc["cloth"].append({"name": "panel", "mesh": str(MESH), "translate": [0.0, 2.0, 0.0], "rotate": [0.0, 90.0, 0.0],
+                         "scale": 0.5, "weld_distance": 1e-6, "pins": [0, {"min": [-9.0, -9.0, -9.0],
+                                                                        "max": [9.0, 2.0, 9.0]}],
+                         "particle_masses": [[5, 0.01]], "mass_distribution": "even", "mass": 0.1,
+                         "sticks": ["structural", "bend"], "compliance": {"bend": 0.5}, "tear_threshold": 3.0,
+                         "tethers": False, "tether_scale": 4.0})
+    doc["collider"].append({"type": "sphere", "name": "swing", "thickness": 0.01, "friction": 0.1, "radius": 0.1,
+                            "path": [[0.0, 0.0, 0.0, 0.0], [1.0, 0.0, 1.0, 0.0]], "purpose": "guide"})
+    return doc
+
+
+def recorded(doc: dict) -> dict[str, frozenset]:
+    """Every key the loader takes from ``doc`` (present or left to its default), with the kinds it accepts."""
+    with recorded_keys() as taken:
+        parse_scene(doc, "every_key.toml", Path(_MESH_DIR.name) / "every_key.toml")
+    return taken
+
+
+EVERY_KEY = recorded(every_key_scene())
+
+
+def path_of(key: str) -> tuple:
+    """The path into a document of a key as the loader names it: "cloth[1].compliance.bend" ->
+    ("cloth", 1, "compliance", "bend")."""
+    return tuple(int(index) if index else name for name, index in re.findall(r"([^.\[\]]+)|\[(\d+)\]", key))
+
+
+def doc_keys(doc: dict, prefix: str = "") -> list[str]:
+    """Every key a document gives, as the loader names it: tables and arrays of tables are walked into."""
+    out = []
+    for name, value in doc.items():
+        key = f"{prefix}.{name}" if prefix else name
+        out.append(key)
+        if isinstance(value, dict):
+            out += doc_keys(value, key)
+        elif isinstance(value, list) and value and all(isinstance(v, dict) for v in value) and name in (
+                "cloth", "collider"):
+            for i, item in enumerate(value):
+                out += doc_keys(item, f"{key}[{i}]")
     return out
+
+
+def known_key_paths() -> list[tuple[str, tuple, frozenset]]:
+    """(dotted key as the loader names it, path into full_scene(), kinds accepted) for every key the loader takes
+    from full_scene(), recorded from the loader."""
+    return [(key, path_of(key), kinds) for key, kinds in sorted(recorded(full_scene()).items())]
 
 
 def put(doc, path: tuple, value) -> None:
@@ -176,7 +215,7 @@ def test_serialiser_writes_headers_and_full_scene_loads(tmp_path):
 # ---------------------------------------------------------------------------------------------- random structure
 
 SECTION = st.sampled_from(["simulation", "output", "cloth", "collider"])
-KNOWN = sorted({*SIM_KEYS, *OUT_KEYS, *CLOTH_KEYS, *COMPLIANCE_KEYS, *PLANE_KEYS, *SPHERE_KEYS, "path", "drag"})
+KNOWN = sorted({path_of(key)[-1] for key in EVERY_KEY if isinstance(path_of(key)[-1], str)} | {"drag"})
 near_keys = st.one_of(st.sampled_from(KNOWN), keys)
 near_tables = st.dictionaries(near_keys, values, max_size=8)
 documents = st.dictionaries(
@@ -200,15 +239,43 @@ def test_random_structured_documents_raise_only_scene_errors(tmp_path, doc):
 # ---------------------------------------------------------------------------------------------- wrong types
 
 
-@pytest.mark.parametrize("key, path, kind", known_key_paths(), ids=[k for k, _, _ in known_key_paths()])
+def test_every_key_a_full_scene_loads_is_recorded_with_the_kinds_it_accepts():
+    """The fuzzed keys are the loader's: the keys a hand-kept table once missed are among them, every key the
+    every-key scene gives was taken by the loader, each declares what it accepts, and the value given is of
+    such a kind."""
+    mesh_keys = ("mesh", "prim", "translate", "rotate", "scale", "weld_distance", "pins", "particle_masses",
+                 "mass_distribution")
+    assert {"simulation.multilevel", "simulation.multilevel_sweeps", "simulation.target_stretch",
+            "simulation.max_substeps", "collider[2].path", *(f"cloth[1].{k}" for k in mesh_keys)} <= set(EVERY_KEY)
+    doc = every_key_scene()
+    assert set(doc_keys(doc)) <= set(EVERY_KEY), set(doc_keys(doc)) - set(EVERY_KEY)
+    assert all(EVERY_KEY.values()), [key for key, kinds in EVERY_KEY.items() if not kinds]
+    for key in doc_keys(doc):
+        value = doc
+        for p in path_of(key):
+            value = value[p]
+        assert kind_of(value) in EVERY_KEY[key], (key, value, EVERY_KEY[key])
+
+
+def test_a_key_taken_by_any_table_is_recorded():
+    """What makes a new key fuzzed: a take() inside recorded_keys() records it with its parser's kinds (and nothing
+    is recorded outside one)."""
+    Table("new.toml", "simulation", {}).take("brand_new", real(0.0), 1.0)
+    with recorded_keys() as taken:
+        Table("new.toml", "simulation", {"brand_new": 2.0}).take("brand_new", real(0.0), 1.0)
+    assert taken == {"simulation.brand_new": frozenset({"int", "float"})}
+
+
+@pytest.mark.parametrize("key", sorted(EVERY_KEY))
 @settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(data=st.data())
-def test_wrong_type_for_every_known_key(tmp_path, key, path, kind, data):
-    wrong = [k for k in KINDS if k not in ACCEPTS[kind]]
-    value = data.draw(st.sampled_from(wrong).flatmap(lambda k: KINDS[k]), label="value")
-    doc = full_scene()
-    put(doc, path, value)
+def test_wrong_type_for_every_key_names_the_file_and_the_key(tmp_path, key, data):
+    wrong = [kind for kind in KINDS if kind not in EVERY_KEY[key]]
+    value = data.draw(st.sampled_from(wrong).flatmap(lambda kind: KINDS[kind]), label="value")
+    doc = every_key_scene()
+    put(doc, path_of(key), value)
     err = scene_error(tmp_path, doc)
+    assert err.file == str(tmp_path / "fuzz.toml") and str(err).startswith(f"{err.file}: {err.key}: "), str(err)
     assert names_key(err, key), f"{key}: {err}"
 
 

@@ -16,13 +16,15 @@ from typing import Any
 from .errors import SceneError
 from .mesh_cloth import MASS_DISTRIBUTIONS, ClothMesh, MeshError, prepare
 from .mesh_io import read_mesh, transform_matrix
-from .scene_keys import Invalid, Table, any_real, choice, describe, int_text, per_element, real, text, vector
+from .scene_keys import (ARRAY, NUMBER, Invalid, Table, accepts, any_real, choice, describe, int_text, per_element,
+                         real, text, vector)
 
 GRID_KEYS = ("resolution", "size", "origin", "orientation")
 _positive = per_element(real(0.0, lo_open=True))
 _point = per_element(vector(3, any_real))  # an error names the element's own key
 
 
+@accepts(NUMBER, ARRAY)
 def _scale(value: Any, key: str) -> tuple[float, float, float]:
     if isinstance(value, list):
         return vector(3, _positive)(value, key)
@@ -30,6 +32,7 @@ def _scale(value: Any, key: str) -> tuple[float, float, float]:
     return (s, s, s)
 
 
+@accepts(ARRAY)
 def _pin_items(value: Any, key: str) -> tuple[tuple, ...]:
     """Pins as written: ("vertex", i, key), ("box", lo, hi, key), ("primvar" or "subset", name, key)."""
     if not isinstance(value, list):
@@ -57,6 +60,7 @@ def _pin_items(value: Any, key: str) -> tuple[tuple, ...]:
     return tuple(items)
 
 
+@accepts(ARRAY)
 def _mass_items(value: Any, key: str) -> tuple[tuple[int, float, str], ...]:
     if not isinstance(value, list):
         raise Invalid(f"expected an array of [vertex, kg] pairs, got {describe(value)}")

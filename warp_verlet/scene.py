@@ -21,9 +21,10 @@ else:  # pragma: no cover - exercised on Python 3.10 only
 
 from .errors import SceneError
 from .scene_keys import (  # the table reader and value parsers, under the names this module has always used
-    Invalid as _Invalid, Table as _Table, any_real as _any_real, boolean as _boolean, choice,
-    describe as _describe, int_text as _int_text, integer, non_negative as _non_negative,
-    per_element as _per_element, prim_name as _prim_name, real, text, toml_list as _toml_list, vector,
+    ARRAY, STRING, TABLE, Invalid as _Invalid, Table as _Table, accepts, any_real as _any_real,
+    boolean as _boolean, choice, describe as _describe, int_text as _int_text, integer,
+    non_negative as _non_negative, per_element as _per_element, prim_name as _prim_name, real, record_key, text,
+    toml_list as _toml_list, vector,
 )
 
 if TYPE_CHECKING:  # the mesh modules (numpy) are imported only by a scene that has a mesh cloth
@@ -255,6 +256,7 @@ def _read_simulation(file: str, data: Any) -> SimulationSettings:
 def _read_output(file: str, data: Any, scene_path: Path) -> OutputSettings:
     t = _Table(file, "output", data)
 
+    @accepts(STRING)
     def usd_path(value: Any, key: str) -> Path:
         if "\0" in text(value, key):
             raise _Invalid("expected a path without NUL characters")
@@ -296,6 +298,7 @@ def _drag_moved(data: dict) -> str:
             f"rate per second (velocity decays as exp(-damping t)); for the same motion at this budget write {hint}")
 
 
+@accepts(ARRAY)
 def _read_sticks(value: Any, key: str) -> tuple[str, ...]:
     if isinstance(value, dict):
         soft = {f: k for f, k in value.items() if isinstance(k, (int, float)) and not isinstance(k, bool) and k != 1}
@@ -318,14 +321,20 @@ def _read_sticks(value: Any, key: str) -> tuple[str, ...]:
     return tuple(f for f in STICK_FAMILIES if f in value)
 
 
+_COMPLIANCE = _per_element(real(0.0))  # m/N per stick family, 0 = rigid
+
+
+@accepts(TABLE)
 def _read_compliance(value: Any, key: str) -> dict[str, float]:
+    for family in STICK_FAMILIES:
+        record_key(f"{key}.{family}", _COMPLIANCE)
     if not isinstance(value, dict):
         raise _Invalid(f"expected a table like {{ bend = 1e-3 }} (m/N per stick family), got {_describe(value)}")
     out: dict[str, float] = {}
     for family, alpha in value.items():
         if family not in STICK_FAMILIES:
             raise _Invalid(f"unknown stick family (expected {', '.join(STICK_FAMILIES)})", f"{key}.{family}")
-        alpha = _per_element(real(0.0))(alpha, f"{key}.{family}")
+        alpha = _COMPLIANCE(alpha, f"{key}.{family}")
         if alpha > 0.0:  # 0 means rigid, the default
             out[family] = alpha
     return out
@@ -394,9 +403,10 @@ def _read_cloth(file: str, index: int, data: Any, scene_dir: Path) -> ClothSpec:
         mass=t.take("mass", real(0.0, lo_open=True), 1.0),
         sticks=t.take("sticks", _read_sticks, ("structural",)),
         compliance=t.take("compliance", _read_compliance, {}),
-        pins=t.take("pins", lambda v, k: _read_pins(v, k, rows, cols), ()),
+        pins=t.take("pins", accepts(ARRAY)(lambda v, k: _read_pins(v, k, rows, cols)), ()),
         tear_threshold=t.take("tear_threshold", real(1.0, lo_open=True), None),
-        particle_masses=t.take("particle_masses", lambda v, k: _read_particle_masses(v, k, rows, cols), ()),
+        particle_masses=t.take("particle_masses", accepts(ARRAY)(lambda v, k: _read_particle_masses(v, k, rows, cols)),
+                               ()),
         tethers=t.take("tethers", _boolean, None),
         tether_scale=t.take("tether_scale", real(1.0), 1.0),
     )
@@ -469,6 +479,7 @@ def _read_collider(file: str, index: int, data: Any) -> PlaneCollider | SphereCo
     return collider
 
 
+@accepts(ARRAY)
 def _read_path(value: Any, key: str) -> tuple[tuple[float, tuple[float, float, float]], ...]:
     if not isinstance(value, list) or not value:
         raise _Invalid(f"expected an array of [time, x, y, z] keyframes, got {_describe(value)}")
@@ -485,14 +496,18 @@ def parse_scene(data: dict, file: str = "<scene>", scene_path: Path | None = Non
     """Validate an already-parsed TOML document. ``file`` is used in error messages."""
     scene_path = scene_path or Path(file)
     top = _Table(file, "", data)
-    simulation = top.take("simulation", lambda v, k: _read_simulation(file, v), None) or SimulationSettings()
-    output = top.take("output", lambda v, k: _read_output(file, v, scene_path), None) or _read_output(file, {}, scene_path)
+    simulation = (top.take("simulation", accepts(TABLE)(lambda v, k: _read_simulation(file, v)), None)
+                  or SimulationSettings())
+    output = (top.take("output", accepts(TABLE)(lambda v, k: _read_output(file, v, scene_path)), None)
+              or _read_output(file, {}, scene_path))
 
+    @accepts(ARRAY)
     def cloths(value: Any, key: str) -> tuple[ClothSpec, ...]:
         if not isinstance(value, list) or not value:
             raise _Invalid("expected one or more [[cloth]] tables")
         return tuple(_read_cloth(file, i, c, scene_path.parent) for i, c in enumerate(value))
 
+    @accepts(ARRAY)
     def colliders(value: Any, key: str) -> tuple:
         if not isinstance(value, list):
             raise _Invalid(f"expected [[collider]] tables, got {_describe(value)}")

@@ -3,19 +3,65 @@
 Every failure is one :class:`SceneError` naming the file, the dotted key and what was expected: a parser
 raises :class:`Invalid` with the problem (and, inside an array, the element's own key), and
 :meth:`Table.take` adds the file and the key. Nothing here knows what a scene holds.
+
+Each parser declares the TOML kinds it accepts (:func:`accepts`), and :func:`recorded_keys` lists every key a
+load asks for with those kinds, as the loader takes it: tests/test_scene_fuzz.py fuzzes each key so recorded, so
+that a key added to the loader is fuzzed without a hand-kept list.
 """
 
 from __future__ import annotations
 
+import contextvars
 import math
 import re
-from typing import Any, Callable
+from contextlib import contextmanager
+from typing import Any, Callable, Iterator
 
 from .errors import SceneError
 
 PRIM_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")  # a USD prim name
 
 REQUIRED = object()
+
+# The kinds of TOML value a parser accepts (what tomllib gives: bool, int, float, str, list, dict).
+BOOL, INT, FLOAT, STRING, ARRAY, TABLE = "bool", "int", "float", "string", "array", "table"
+NUMBER = (INT, FLOAT)
+
+
+def accepts(*kinds: str | tuple[str, ...]):
+    """Declare the TOML kinds a parser accepts (``@accepts(ARRAY)``, ``accepts(*NUMBER)(parse)``): a value of
+    any other kind is refused by it, naming the key. Read by :func:`recorded_keys`."""
+    flat = frozenset(k for kind in kinds for k in ((kind,) if isinstance(kind, str) else kind))
+
+    def declare(parse: Callable[[Any, str], Any]) -> Callable[[Any, str], Any]:
+        parse.accepts = flat
+        return parse
+
+    return declare
+
+
+_RECORDING: contextvars.ContextVar[dict | None] = contextvars.ContextVar("recorded_keys", default=None)
+
+
+@contextmanager
+def recorded_keys() -> Iterator[dict[str, frozenset[str] | None]]:
+    """Inside the block, every key a table is asked for (by :meth:`Table.take`, present or not, or by a parser
+    through :func:`record_key`) is recorded: dotted key as errors name it -> the kinds its parser accepts
+    (None where the parser declares none)."""
+    keys: dict[str, frozenset[str] | None] = {}
+    token = _RECORDING.set(keys)
+    try:
+        yield keys
+    finally:
+        _RECORDING.reset(token)
+
+
+def record_key(key: str, parse: Callable[[Any, str], Any]) -> None:
+    """Record ``key`` as taken with ``parse``, inside :func:`recorded_keys` (for a parser that reads a table's
+    keys itself). Costs one context-variable read otherwise."""
+    keys = _RECORDING.get()
+    if keys is not None:
+        keys[key] = getattr(parse, "accepts", None)
 
 
 class Table:
@@ -37,6 +83,7 @@ class Table:
 
     def take(self, name: str, parse: Callable[[Any, str], Any], default: Any = REQUIRED) -> Any:
         self.seen.add(name)
+        record_key(self.key(name), parse)
         if name not in self.data:
             if default is REQUIRED:
                 raise self.error(name, "is required but missing")
@@ -94,6 +141,7 @@ def number(value: Any, integer: bool = False) -> float:
 def real(lo: float | None = None, hi: float | None = None, lo_open: bool = False, hi_open: bool = False):
     """A finite float within [lo, hi] (ends open where asked)."""
 
+    @accepts(NUMBER)
     def parse(value: Any, key: str) -> float:
         x = float(number(value))
         bad_lo = lo is not None and (x <= lo if lo_open else x < lo)
@@ -109,6 +157,7 @@ def real(lo: float | None = None, hi: float | None = None, lo_open: bool = False
 
 
 def integer(lo: int, hi: int | None = None):
+    @accepts(INT)
     def parse(value: Any, key: str) -> int:
         n = int(number(value, integer=True))
         if n < lo or (hi is not None and n > hi):
@@ -119,6 +168,7 @@ def integer(lo: int, hi: int | None = None):
 
 
 def vector(length: int, element: Callable[[Any, str], Any]):
+    @accepts(ARRAY)
     def parse(value: Any, key: str) -> tuple:
         if not isinstance(value, list) or len(value) != length:
             raise Invalid(f"expected an array of {length} numbers, got {describe(value)}")
@@ -128,6 +178,7 @@ def vector(length: int, element: Callable[[Any, str], Any]):
 
 
 def choice(options: tuple[str, ...]):
+    @accepts(STRING)
     def parse(value: Any, key: str) -> str:
         if not isinstance(value, str) or value not in options:
             raise Invalid(f"expected one of {', '.join(repr(o) for o in options)}, got {describe(value)}")
@@ -136,12 +187,14 @@ def choice(options: tuple[str, ...]):
     return parse
 
 
+@accepts(BOOL)
 def boolean(value: Any, key: str) -> bool:
     if not isinstance(value, bool):
         raise Invalid(f"expected true or false, got {describe(value)}")
     return value
 
 
+@accepts(STRING)
 def text(value: Any, key: str) -> str:
     if not isinstance(value, str) or not value:
         raise Invalid(f"expected a non-empty string, got {describe(value)}")
@@ -157,6 +210,8 @@ def per_element(parse_one):
         except Invalid as bad:
             raise Invalid(bad.problem, bad.key or key) from None
 
+    if hasattr(parse_one, "accepts"):
+        parse.accepts = parse_one.accepts
     return parse
 
 
@@ -168,6 +223,7 @@ def toml_list(items) -> str:
     return "[" + ", ".join(f'"{i}"' for i in items) + "]"
 
 
+@accepts(STRING)
 def prim_name(value: Any, key: str) -> str:
     """A USD prim name: the cloth or collider appears under that name in the cache."""
     name = text(value, key)
