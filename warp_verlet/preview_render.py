@@ -224,14 +224,13 @@ def _bulk(mesh: TriangleMesh, up_axis: str) -> np.ndarray:
     """The drawn points of a cloth that the camera frames: all of them, except slivers far from where most of
     its area is. A flag torn from its pole leaves a thin strip at the pins; framing the strip and the flag
     together would make the flag small again. The bulk is the box, on the image's axes, holding the middle
-    ``1 - 2 * SLIVER_AREA`` of the area; every point within ``BULK_GROWTH`` of its size of that box is kept, so
-    an untorn cloth is framed whole."""
+    ``1 - 2 * SLIVER_AREA`` of the area (by the triangles' centres); every triangle whose centre lies within
+    ``BULK_GROWTH`` of its size of that box is kept whole, so an untorn cloth is framed whole."""
     points = mesh.points.astype(np.float64)
     corners = points[mesh.triangles]
     area = np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
-    used = points[np.unique(mesh.triangles)]
     if area.sum() <= 0:
-        return used
+        return points[np.unique(mesh.triangles)]
     towards_eye = view_direction(up_axis)
     right = np.cross(up_vector(up_axis), towards_eye)
     right /= np.linalg.norm(right)
@@ -242,9 +241,8 @@ def _bulk(mesh: TriangleMesh, up_axis: str) -> np.ndarray:
     lo = centroid[order[np.argmax(cumulative >= SLIVER_AREA, axis=0), [0, 1]], [0, 1]]
     hi = centroid[order[np.argmax(cumulative >= 1 - SLIVER_AREA, axis=0), [0, 1]], [0, 1]]
     reach = BULK_GROWTH * (hi - lo).max()
-    projected = used @ axes
-    keep = np.all((projected >= lo - reach) & (projected <= hi + reach), axis=1)
-    return used[keep]
+    keep = np.all((centroid >= lo - reach) & (centroid <= hi + reach), axis=1)
+    return points[np.unique(mesh.triangles[keep])]  # the kept triangles whole, corners and all
 
 
 def frame_panel(geometry: FrameGeometry, up_axis: str, width: int, height: int) -> Panel:
