@@ -383,6 +383,25 @@ def test_a_fine_grid_has_a_smooth_hem():
     assert np.abs(errors).max() < 1.0, np.abs(errors).max()
 
 
+@pytest.mark.parametrize("n", [48, 256])
+def test_a_cloth_shows_no_specks_of_background(n):
+    # Rays through the shared edges of two triangles can miss both: a speck of background in the middle of
+    # the cloth. A smoothly bent, smoothly lit cloth must have no pixel much lighter than those around it.
+    r, c = np.meshgrid(np.arange(n + 1), np.arange(n + 1), indexing="ij")
+    bend = r / n
+    points = np.stack([c / n - 0.5 + 0.1 * bend, 1 - 0.8 * bend, 0.6 * bend**2], -1).reshape(-1, 3)
+    panel, pixels = panel_of(geometry_of(points, grid_faces(n + 1, n + 1)), 600, 560)
+    red = is_cloth_red(pixels)
+    core = red.copy()  # cloth pixels with cloth for two pixels all round: away from the outline
+    for dy in range(-2, 3):
+        for dx in range(-2, 3):
+            core &= np.roll(red, (dy, dx), axis=(0, 1))
+    assert core.sum() > 50000
+    blue = pixels[..., 2].astype(np.float64)
+    around = np.median([np.roll(blue, shift, axis) for shift in (-2, 2) for axis in (0, 1)], axis=0)
+    assert np.abs(blue - around)[core].max() <= 8
+
+
 def test_a_large_grid_is_drawn_at_about_one_quad_per_pixel():
     n = 1024
     faces, points = grid_faces(n + 1, n + 1), grid_points(n + 1, n + 1, sag=0.2)
