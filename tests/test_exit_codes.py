@@ -97,3 +97,10 @@ def test_a_closed_standard_output_ends_quietly(work, args, code):
     assert done.stderr == "", done.stderr  # no traceback, no "Exception ignored"
     if args[0] == "run":  # the run itself finished: only its summary had nowhere to go
         assert (work / "small.usdc").is_file()
+
+
+def test_a_bad_output_name_is_refused_before_warp_starts(work):
+    probe = ("import sys; from warp_verlet.cli import main; rc = main(['run', 'small.toml', '-o', 'out.txt', '-q']); "
+             "print(rc, 'warp' in sys.modules)")
+    done = subprocess.run([sys.executable, "-c", probe], cwd=work, capture_output=True, text=True, check=True)
+    assert done.stdout.split()[-2:] == ["2", "False"], done.stderr

@@ -299,6 +299,10 @@ def _run(args) -> int:
 
         scene = replace(scene, simulation=replace(scene.simulation, frames=args.frames))
     _warn_about(scene)
+    from .output_file import CacheOutput, input_files
+
+    # A bad output path is refused before Warp starts (a second or more); it only checks: nothing is written.
+    CacheOutput(args.output if args.output is not None else scene.output.path, inputs=input_files(scene))
     from .warp_setup import start_warp
 
     # Quiet unless -v (Warp's banner, per-module load timings and, on a CPU run, its CUDA-driver warning),
