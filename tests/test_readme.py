@@ -1,5 +1,5 @@
-"""The README shows what the code does: its sample run summary is the quick start's own run, and its Python
-example runs.
+"""The README shows what the code does: its sample run summary is the quick start's own run, its torn-stick
+counts are the runs', and its Python example runs.
 
 docs/make_readme_summary.py writes the summary block from a real run of the quick start; these tests run the
 same scene, every frame of it, and compare. The lines that measure time (wall, start-up and compile time) and
@@ -100,6 +100,20 @@ def test_the_readme_python_example_runs():
     done = subprocess.run([sys.executable, "-c", blocks[0]], cwd=REPO, capture_output=True, text=True)
     assert done.returncode == 0, done.stderr
     assert re.search(r"StretchStats\(max=[-+.\deE]+, rms=[-+.\deE]+\)", done.stdout), done.stdout
+
+
+def test_the_readme_torn_counts_are_the_runs(tmp_path):
+    """Each "(N sticks torn)" under a shipped scene's picture is what `warp-verlet run scenes/NAME.toml --device cpu
+    -q` reports, as the README says."""
+    counts = re.findall(r"`(\w+)`: [^|]*?\((\d+) sticks torn\)", readme_text())
+    assert len(counts) >= 2, "the README's pictures name no torn counts"
+    for name, shown in counts:
+        command = [sys.executable, "-m", "warp_verlet", "run", f"scenes/{name}.toml", "--device", "cpu", "-q",
+                   "-o", str(tmp_path / f"{name}.usdc")]
+        done = subprocess.run(command, cwd=REPO, capture_output=True, text=True)
+        assert done.returncode == 0, done.stderr
+        torn = summary_tool.parse_summary(done.stdout)["torn sticks"]
+        assert torn.split()[0] == shown, f"{name}: the README says {shown} sticks torn, the run {torn}"
 
 
 @pytest.mark.parametrize("text", ["no block here", "<!-- summary:begin -->\nno fence\n<!-- summary:end -->"])
