@@ -9,13 +9,15 @@ whose ``(index // q) % 2`` is the colour's parity (q = 1 for neighbours, 2 for a
 cells). Thread k of the colour takes the k-th anchor in row-major order, the order the explicit arrays hold
 the colour's sticks in.
 
-Rest lengths are computed exactly as the explicit path computes them on the host (warp_verlet/topology.py):
-the float64 norm of the difference of two float32 rest positions, rounded to float32. A grid's x depends on
-the column alone and its other coordinate on the row alone, so the squared differences are tabulated per
-column and per row in float64 (rounded as numpy rounds them) and the kernel adds one pair and takes the root:
-an addition, a square root and a rounding, which leave no room for a fused multiply-add to change a bit.
-The projection is ``stick_correction`` (kernels/relax.py), the explicit kernels' own arithmetic, so the two
-paths give the same positions bit for bit.
+Rest lengths are those the explicit path computes on the host (warp_verlet/topology.py): the float64 norm of
+the difference of two float32 rest positions, rounded to float32. A grid's x depends on the column alone and its
+other coordinate on the row alone, so a stick along the rows or the columns takes its rest length from a float32
+table per row or per column, and a shear stick adds the squared column and row steps (float64 tables, rounded as
+numpy rounds them) and takes the root: an addition, a square root and a rounding, which leave no room for a
+fused multiply-add to change a bit. The projection is ``stick_correction`` (kernels/relax.py), the explicit
+kernels' own arithmetic, so the two paths give the same positions bit for bit.
+
+Each kernel is launched over (rows of anchors, anchors per row), so that no thread divides to find its row.
 """
 
 from typing import Any
@@ -28,30 +30,21 @@ from .relax import MIN_LENGTH, stick_correction
 
 @wp.func
 def anchor_index(k: int, q: int, parity: int):
-    """The k-th index along an axis: every index when q is 0, else those whose (index // q) % 2 is ``parity``."""
+    """The k-th index along an axis: every index when q is 0, else those whose (index // q) % 2 is ``parity``,
+    for q = 1 or 2 (2 * q * (k // q) + parity * q + k % q, with shifts for the divisions)."""
     if q == 0:
         return k
-    return 2 * q * (k // q) + parity * q + k % q
-
-
-@wp.func
-def grid_rest(col_sq: wp.array(dtype=wp.float64), col_at: int, row_sq: wp.array(dtype=wp.float64), row_at: int):
-    """float32 rest length from a squared column difference and a squared row difference (index -1: none)."""
-    a = wp.float64(0.0)
-    b = wp.float64(0.0)
-    if col_at >= 0:
-        a = col_sq[col_at]
-    if row_at >= 0:
-        b = row_sq[row_at]
-    return wp.float32(wp.sqrt(a + b))
+    s = q - 1
+    return ((k >> s) << (s + 1)) + (parity << s) + (k & s)
 
 
 @wp.struct
 class GridColour:
     """One colour of one grid cloth: anchors (r, c) = (anchor_index(k_r, row_q, parity) + row_first,
-    anchor_index(k_c, col_q, parity) + col_first) for k_r < rows and k_c < ``cols``; each stick joins (r, c) to
-    (r + dr, c + dc). ``col_shift`` / ``row_shift`` say which entry of the squared-difference tables the stick
-    uses (c + col_shift, r + row_shift); ``use_col`` / ``use_row`` is 0 when the stick does not cross that axis."""
+    anchor_index(k_c, col_q, parity) + col_first); each stick joins (r, c) to (r + dr, c + dc). A stick that
+    crosses columns only takes its rest length from ``col_rest[c + col_shift]``, one that crosses rows only from
+    ``row_rest[r]``, and one that crosses both (shear) computes it from ``col_sq[c + col_shift]`` and
+    ``row_sq[r]`` (``use_col`` / ``use_row`` say which axes it crosses)."""
 
     first_particle: int
     grid_cols: int  # particles per row
@@ -64,25 +57,26 @@ class GridColour:
     dr: int
     dc: int
     use_col: int
-    col_shift: int
     use_row: int
-    row_shift: int
+    col_shift: int
 
 
 @wp.func
-def colour_stick(g: GridColour, k: int):
-    """Particles i, j and the table entries (column, row; -1: none) of the colour's k-th stick."""
-    r = anchor_index(k // g.cols, g.row_q, g.parity) + g.row_first
-    c = anchor_index(k % g.cols, g.col_q, g.parity) + g.col_first
+def colour_stick(g: GridColour, kr: int, kc: int, col_rest: wp.array(dtype=float), row_rest: wp.array(dtype=float),
+                 col_sq: wp.array(dtype=wp.float64), row_sq: wp.array(dtype=wp.float64)):
+    """Particles i, j and the rest length of the colour's stick (kr, kc): row kr and column kc of its anchors."""
+    r = anchor_index(kr, g.row_q, g.parity) + g.row_first
+    c = anchor_index(kc, g.col_q, g.parity) + g.col_first
     i = g.first_particle + r * g.grid_cols + c
     j = i + g.dr * g.grid_cols + g.dc
-    col_at = -1
-    row_at = -1
-    if g.use_col != 0:
-        col_at = c + g.col_shift
-    if g.use_row != 0:
-        row_at = r + g.row_shift
-    return i, j, col_at, row_at
+    rest = float(0.0)
+    if g.use_row == 0:
+        rest = col_rest[c + g.col_shift]
+    elif g.use_col == 0:
+        rest = row_rest[r]
+    else:
+        rest = wp.float32(wp.sqrt(col_sq[c + g.col_shift] + row_sq[r]))
+    return i, j, rest
 
 
 @wp.kernel
@@ -90,13 +84,16 @@ def relax_grid_colour(
     x: wp.array(dtype=Any),
     inv_mass: wp.array(dtype=float),
     g: GridColour,
+    col_rest: wp.array(dtype=float),
+    row_rest: wp.array(dtype=float),
     col_sq: wp.array(dtype=wp.float64),
     row_sq: wp.array(dtype=wp.float64),
-    first: int,
+    first_row: int,
 ):
-    """Gauss-Seidel over one colour of implicit grid sticks (relax_colour with ends and rest computed)."""
-    i, j, col_at, row_at = colour_stick(g, first + wp.tid())
-    rest = grid_rest(col_sq, col_at, row_sq, row_at)
+    """Gauss-Seidel over one colour of implicit grid sticks (relax_colour with ends and rest computed); a
+    thread per anchor, launched over (rows of anchors from ``first_row``, anchors per row)."""
+    kr, kc = wp.tid()
+    i, j, rest = colour_stick(g, first_row + kr, kc, col_rest, row_rest, col_sq, row_sq)
     wi = inv_mass[i]
     wj = inv_mass[j]
     xi = x[i]
@@ -111,19 +108,22 @@ def relax_grid_colour_compliant(
     x: wp.array(dtype=Any),
     inv_mass: wp.array(dtype=float),
     g: GridColour,
+    col_rest: wp.array(dtype=float),
+    row_rest: wp.array(dtype=float),
     col_sq: wp.array(dtype=wp.float64),
     row_sq: wp.array(dtype=wp.float64),
     compliance: float,
     inv_dt2: float,
-    first: int,
+    first_row: int,
     tension_first: int,
     tension: wp.array(dtype=float),
 ):
     """XPBD over one colour of implicit grid sticks (relax_colour_compliant with ends and rest computed, one
-    compliance for the colour's family); ``tension`` holds the soft colours' sticks from ``tension_first``."""
-    k = first + wp.tid()
-    i, j, col_at, row_at = colour_stick(g, k)
-    rest = grid_rest(col_sq, col_at, row_sq, row_at)
+    compliance for the colour's family); ``tension`` holds the soft colours' sticks from ``tension_first``, a
+    row of anchors after another."""
+    kr, kc = wp.tid()
+    i, j, rest = colour_stick(g, first_row + kr, kc, col_rest, row_rest, col_sq, row_sq)
+    k = tension_first + (first_row + kr) * g.cols + kc
     wi = inv_mass[i]
     wj = inv_mass[j]
     xi = x[i]
@@ -134,10 +134,10 @@ def relax_grid_colour_compliant(
     if w == type(length)(0.0) or length < type(length)(MIN_LENGTH):
         return
     alpha = type(length)(compliance) * type(length)(inv_dt2)
-    mu = type(length)(tension[tension_first + k])
+    mu = type(length)(tension[k])
     # The operations of relax_colour_compliant, in its order (its weight is 1 on a cloth that cannot tear).
     error = type(length)(1.0) * (length - type(length)(rest) - alpha * mu)
-    tension[tension_first + k] = float(mu + error / (w + alpha))
+    tension[k] = float(mu + error / (w + alpha))
     c = d * (error / (length * (w + alpha)))
     x[i] = xi + scaled(c, wi)
     x[j] = xj - scaled(c, wj)
@@ -154,18 +154,18 @@ def pull_grid_tethers(
     pin_row_sq: wp.array2d(dtype=wp.float64),
     tethers: int,
     scale: wp.float64,
-    first: int,
+    first_row: int,
 ):
-    """pull_tethers for a grid cloth's free particle ``first + tid``, whose tethers are computed: its
+    """pull_tethers for the free particle (first_row + row, column) of a grid cloth (a thread per particle,
+    launched over rows from ``first_row`` and columns), whose tethers are computed: its
     ``tethers`` nearest pins (ties to the lower pin, as warp_verlet/tethers.nearest_pins chooses them) at
     their rest-pose distances times ``scale``, from the squared column and row differences to each pin
     (pin_col_sq[pin, column], pin_row_sq[pin, row]), rounded to float32 as the tether table is."""
-    local = first + wp.tid()
-    if inv_mass[first_particle + local] == 0.0:
+    r, c = wp.tid()
+    r = r + first_row
+    p = first_particle + r * grid_cols + c
+    if inv_mass[p] == 0.0:
         return
-    r = local // grid_cols
-    c = local - r * grid_cols
-    p = first_particle + local
     xp = x[p]
     last_distance = wp.float64(-1.0)
     last_pin = int(-1)

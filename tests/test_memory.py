@@ -119,6 +119,7 @@ def test_device_and_host_limits_are_named():
         check_fits(scene, "cpu", device_free=None, host_free=need.device_bytes + need.host_bytes - 1)
     assert check_fits(scene, "cpu", device_free=None, host_free=need.device_bytes + need.host_bytes) == need
     # Per particle three positions and an inverse mass; stick arrays keep ends, rest and weight per stick, where
-    # implicit grid sticks keep four tables of squared steps (1 and 2 columns, 1 and 2 rows apart).
+    # implicit grid sticks keep rest lengths 1 and 2 columns and rows apart (float32) and squared steps 1 column
+    # and 1 row apart (float64, for shear sticks).
     assert estimate(scene, "explicit").device_bytes == 64 * 64 * 40 + 2 * 64 * 63 * 16
-    assert estimate(scene, "implicit").device_bytes == need.device_bytes == 64 * 64 * 40 + (63 + 62 + 63 + 62) * 8
+    assert estimate(scene, "implicit").device_bytes == need.device_bytes == 64 * 64 * 40 + 250 * 4 + 126 * 8

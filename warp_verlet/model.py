@@ -103,15 +103,23 @@ def squared_steps(axis: np.ndarray, step: int) -> np.ndarray:
 
 @dataclass(frozen=True)
 class GridColourDevice:
-    """One colour of implicit grid sticks: the kernel's GridColour, its stick count, the squared-step tables it
-    reads, its family's compliance (0: rigid) and where its sticks' tensions start in the solver's scratch."""
+    """One colour of implicit grid sticks: the kernel's GridColour, its anchors (rows x cols: its sticks), the
+    rest-length and squared-step tables it reads, its family's compliance (0: rigid) and where its sticks'
+    tensions start in the solver's scratch."""
 
     layout: object  # kernels.grid_relax.GridColour
-    count: int
+    rows: int
+    cols: int
+    col_rest: wp.array
+    row_rest: wp.array
     col_sq: wp.array
     row_sq: wp.array
     compliance: float
     tension_first: int
+
+    @property
+    def count(self) -> int:
+        return self.rows * self.cols
 
 
 # Per grid class (topology's order): (dr, dc, first column, parity along "row" or "col", q).
@@ -124,8 +132,9 @@ GRID_DIRECTIONS = {
 
 class GridDevice:
     """The implicit grid sticks of one grid cloth: its colours in the analytic colouring's order (class, then
-    parity: warp_verlet/colouring.grid_colouring) and the squared-step tables (per column for 1 and 2 columns
-    apart, per row for 1 and 2 rows apart, float64) their rest lengths come from."""
+    parity: warp_verlet/colouring.grid_colouring) and the tables their rest lengths come from: per column for 1
+    and 2 columns apart and per row for 1 and 2 rows apart, the squared steps (float64) and their roots (the
+    rest lengths of sticks along one axis, float32)."""
 
     def __init__(self, slot: "ClothSlot", spec, device):
         from warp_verlet.kernels.grid_relax import GridColour
@@ -133,10 +142,13 @@ class GridDevice:
         top = slot.topology
         rows, cols = top.rows, top.cols
         x, row = grid_axes(top)
-        tables = {name: wp.array(values, dtype=wp.float64, device=device) for name, values in (
-            ("col1", squared_steps(x, 1)), ("col2", squared_steps(x, 2)),
-            ("row1", squared_steps(row, 1)), ("row2", squared_steps(row, 2)))}
-        self.col_sq1, self.col_sq2, self.row_sq1, self.row_sq2 = (tables[k] for k in ("col1", "col2", "row1", "row2"))
+        squares = {"col1": squared_steps(x, 1), "col2": squared_steps(x, 2),
+                   "row1": squared_steps(row, 1), "row2": squared_steps(row, 2)}
+        sq = {k: wp.array(v, dtype=wp.float64, device=device) for k, v in squares.items()}
+        # sqrt(d^2) rounded to float32: what np.linalg.norm gives the explicit rest length of a one-axis stick.
+        rest = {k: wp.array(np.sqrt(v).astype(np.float32), dtype=float, device=device) for k, v in squares.items()}
+        self.col_sq1, self.row_sq1 = sq["col1"], sq["row1"]  # shear sticks (and the budget's stretch)
+        self.col_rest1, self.col_rest2, self.row_rest1, self.row_rest2 = (rest[k] for k in ("col1", "col2", "row1", "row2"))
         colours, soft = [], 0
         for cls in sorted(GRID_DIRECTIONS):
             family = FAMILY_OF_CLASS[cls]
@@ -158,12 +170,11 @@ class GridDevice:
                 g.row_first, g.col_first = 0, col_first
                 g.row_q, g.col_q = (q, 0) if parity_axis == "row" else (0, q)
                 g.parity, g.dr, g.dc = parity, dr, dc
-                g.use_col, g.col_shift = int(dc != 0), -1 if dc < 0 else 0
-                g.use_row, g.row_shift = int(dr != 0), 0
-                col_sq = self.col_sq2 if abs(dc) == 2 else self.col_sq1
-                row_sq = self.row_sq2 if dr == 2 else self.row_sq1
-                colours.append(GridColourDevice(g, n_rows * n_cols, col_sq, row_sq, compliance,
-                                                soft if compliance > 0.0 else 0))
+                g.use_col, g.use_row, g.col_shift = int(dc != 0), int(dr != 0), -1 if dc < 0 else 0
+                col_rest = self.col_rest2 if abs(dc) == 2 else self.col_rest1
+                row_rest = self.row_rest2 if dr == 2 else self.row_rest1
+                colours.append(GridColourDevice(g, n_rows, n_cols, col_rest, row_rest, self.col_sq1, self.row_sq1,
+                                                compliance, soft if compliance > 0.0 else 0))
                 soft += n_rows * n_cols if compliance > 0.0 else 0
         self.colours: tuple[GridColourDevice, ...] = tuple(colours)
         self.soft_sticks = soft
@@ -179,7 +190,7 @@ class GridTethersDevice:
         x, row = grid_axes(top)
         pinned = np.asarray(top.pinned, np.int64)
         pin_row, pin_col = pinned // top.cols, pinned % top.cols
-        self.first_particle, self.cols, self.particles = slot.first, top.cols, top.particle_count
+        self.first_particle, self.rows, self.cols = slot.first, top.rows, top.cols
         self.tethers = min(tethers, len(pinned))
         self.scale = float(spec.tether_scale)
         self.pins = wp.array((pinned + slot.first).astype(np.int32), dtype=int, device=device)

@@ -462,11 +462,11 @@ class GridTethers:
 
         t, x = model.grid_tethers, state.particle_q
 
-        def make(f, count):
-            return recorded(pull_grid_tethers, count, [x, model.inv_mass, t.first_particle, t.cols, t.pins,
-                                                       t.pin_col_sq, t.pin_row_sq, t.tethers,
-                                                       wp.float64(t.scale), f])
-        return Bound(None, [split_tasks(make, 0, t.particles, solver.threads)])
+        def make(f, rows):
+            return recorded(pull_grid_tethers, (rows, t.cols), [x, model.inv_mass, t.first_particle, t.cols, t.pins,
+                                                                t.pin_col_sq, t.pin_row_sq, t.tethers,
+                                                                wp.float64(t.scale), f])
+        return Bound(None, [split_tasks(make, 0, t.rows, solver.threads)])
 
 
 class GridSticks:
@@ -481,7 +481,8 @@ class GridSticks:
 
     def device_bytes(self, need: Need) -> int:
         r, c = need.grid_rows, need.grid_cols
-        tables = (max(c - 1, 0) + max(c - 2, 0) + max(r - 1, 0) + max(r - 2, 0)) * FLOAT64  # squared steps
+        steps = max(c - 1, 0) + max(c - 2, 0) + max(r - 1, 0) + max(r - 2, 0)  # 1 and 2 columns, 1 and 2 rows apart
+        tables = steps * FLOAT + (max(c - 1, 0) + max(r - 1, 0)) * FLOAT64  # rest lengths; squared steps (shear)
         return tables + need.soft_sticks * FLOAT  # a tension per soft stick (solver scratch)
 
     def bind(self, model: "Model", state: "State", solver) -> Bound:
@@ -491,16 +492,16 @@ class GridSticks:
         tension = solver.scratch("grid_tension", g.soft_sticks, float) if g.soft_sticks else None
         phases, soft_launches = [], []
         for colour in g.colours:
+            tables = [colour.col_rest, colour.row_rest, colour.col_sq, colour.row_sq]
             if colour.compliance > 0.0:
-                def make(f, n, colour=colour):
-                    return recorded(relax_grid_colour_compliant, n,
-                                    [x, model.inv_mass, colour.layout, colour.col_sq, colour.row_sq,
-                                     colour.compliance, 0.0, f, colour.tension_first], [tension])
+                def make(f, rows, colour=colour, tables=tables):
+                    return recorded(relax_grid_colour_compliant, (rows, colour.cols),
+                                    [x, model.inv_mass, colour.layout, *tables, colour.compliance, 0.0, f,
+                                     colour.tension_first], [tension])
             else:
-                def make(f, n, colour=colour):
-                    return recorded(relax_grid_colour, n, [x, model.inv_mass, colour.layout, colour.col_sq,
-                                                           colour.row_sq, f])
-            phase = split_tasks(make, 0, colour.count, threads)
+                def make(f, rows, colour=colour, tables=tables):
+                    return recorded(relax_grid_colour, (rows, colour.cols), [x, model.inv_mass, colour.layout, *tables, f])
+            phase = split_tasks(make, 0, colour.rows, threads)  # the CPU thread team cuts a colour by rows
             if colour.compliance > 0.0:
                 soft_launches += [task.launch for task in phase if task is not None]
             phases.append(phase)
