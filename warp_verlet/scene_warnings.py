@@ -42,8 +42,8 @@ def tether_warnings(scene: Scene) -> list[str]:
     tether_scale <= tear_threshold, the tethers hold the cloth short of the stretch a tear needs: only what the
     stick sweeps after the tether pass pull past them can still tear a stick (tests/test_scene_warnings.py: a
     hanging 8 x 8 grid at 200 g tears without tethers and not at all with tethers at tether_scale 1). Not a
-    sharp bound: measured on that grid with tear_threshold 1.3, tether_scale 1.2 and 1.29 still tear, so the
-    warning says what the tethers do rather than that nothing can tear."""
+    sharp bound: that grid still tears at tether_scale 1.29 against a tear_threshold of 1.3 (the same test), so
+    the warning says what the tethers do rather than that nothing can tear."""
     out = []
     for spec in scene.cloths:
         if not spec.uses_tethers or spec.tear_threshold is None:
