@@ -164,7 +164,7 @@ def export_panel(cache: Path, frame: int, out: Path, size: tuple[int, int]) -> N
     arrays["planes"] = np.array(panel.planes).reshape(-1, 4, 3)
     arrays["colours"] = preview_render.srgb_to_linear(
         [preview_render.ROPE_COLOUR, preview_render.SPHERE_COLOUR, preview_render.PLANE_COLOUR])
-    arrays["light"] = np.array([preview_render.KEY_LIGHT, preview_render.AMBIENT])
+    arrays["light"] = np.array([preview_render.KEY_LIGHT, preview_render.FILL_LIGHT])
     np.savez(out, **arrays)
     print(f"wrote {out}")
 
@@ -181,7 +181,7 @@ def render_blender(npz: Path, out: Path, engine: str, samples: int) -> None:
     scene.render.resolution_x, scene.render.resolution_y = width, height
     scene.render.film_transparent = False
     scene.view_settings.view_transform = "Standard"  # plain sRGB, as the preview writes
-    key, ambient = (float(x) for x in data["light"])
+    key, fill = (float(x) for x in data["light"])
 
     def material(name, rgb):
         mat = bpy.data.materials.new(name)
@@ -239,28 +239,31 @@ def render_blender(npz: Path, out: Path, engine: str, samples: int) -> None:
     scene.collection.objects.link(camera)
     scene.camera = camera
 
-    sun_data = bpy.data.lights.new("key", "SUN")
-    sun_data.energy = key * np.pi  # irradiance; a diffuse surface facing it returns albedo * energy / pi
-    sun_data.angle = 0.0
-    sun = bpy.data.objects.new("key", sun_data)
-    towards_light = data["towards_light"]
-    z = towards_light / np.linalg.norm(towards_light)  # a sun shines down its -Z
-    x = np.cross([0.0, 0.0, 1.0] if abs(z[2]) < 0.9 else [1.0, 0.0, 0.0], z)
-    x /= np.linalg.norm(x)
-    sun_matrix = np.eye(4)
-    sun_matrix[:3, :3] = np.stack([x, np.cross(z, x), z], axis=1)
-    sun.matrix_world = Matrix(sun_matrix.tolist())
-    scene.collection.objects.link(sun)
+    def sun(name, towards_light, share, shadows):
+        light = bpy.data.lights.new(name, "SUN")
+        light.energy = share * np.pi  # irradiance; a diffuse surface facing it returns albedo * energy / pi
+        light.angle = 0.0
+        light.use_shadow = shadows
+        obj = bpy.data.objects.new(name, light)
+        z = towards_light / np.linalg.norm(towards_light)  # a sun shines down its -Z
+        x = np.cross([0.0, 0.0, 1.0] if abs(z[2]) < 0.9 else [1.0, 0.0, 0.0], z)
+        x /= np.linalg.norm(x)
+        matrix = np.eye(4)
+        matrix[:3, :3] = np.stack([x, np.cross(z, x), z], axis=1)
+        obj.matrix_world = Matrix(matrix.tolist())
+        scene.collection.objects.link(obj)
 
+    sun("key", data["towards_light"], key, True)
+    sun("fill", towards_eye, fill, False)  # from the camera: it lights what the camera sees
     world = bpy.data.worlds.new("world")
     world.use_nodes = True
-    world.node_tree.nodes["Background"].inputs["Color"].default_value = (ambient, ambient, ambient, 1.0)
+    world.node_tree.nodes["Background"].inputs["Color"].default_value = (0.0, 0.0, 0.0, 1.0)
     scene.world = world
     if engine == "cycles":
         scene.render.engine = "CYCLES"
         scene.cycles.device = "CPU"
         scene.cycles.samples = samples
-        scene.cycles.max_bounces = 1  # direct light and the ambient sky, as the preview has
+        scene.cycles.max_bounces = 0  # direct light only, as the preview has
         # The white background the preview has, seen by the camera only.
         scene.render.film_transparent = True
     else:
