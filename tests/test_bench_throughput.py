@@ -33,7 +33,8 @@ def test_plain_scene_spends_nothing_in_absent_stages(tmp_path):
 
 def test_colliders_and_tearing_show_up_as_stages(tmp_path):
     tear = 1.05  # low enough for the 8 x 8 cloth to tear some sticks in its 60 frames (at 1.5 it tears none)
-    args = ["--device", "cpu", "--sizes", "8", "--repeats", "1", "--colliders", "--tear", str(tear), "--out", str(tmp_path)]
+    args = ["--device", "cpu", "--sizes", "8", "--repeats", "1", "--colliders", "--tear", str(tear),
+            "--out", str(tmp_path)]
     assert throughput.main(args) == 0
     (row,) = read(tmp_path / "throughput-colliders-tear.csv")
     # The sticks torn by the bench's last frame are those a plain run of the same scene tears in as many frames
