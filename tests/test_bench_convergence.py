@@ -37,6 +37,7 @@ def _row(rows, scene, method, budget):
     return r
 
 
+@pytest.mark.slow
 def test_rows_are_finite(result):
     _, _, res = result
     rows = res["rows"]
@@ -48,6 +49,7 @@ def test_rows_are_finite(result):
         assert (r["torn"] is not None) == (r["scene"] == "torn_net")
 
 
+@pytest.mark.slow
 def test_tethers_cut_the_stretch_at_the_same_budget(result):
     """Measured at 16^2, 8 frames: 8 x 2 plain 0.26% RMS / 2.9e-3 m from the reference, tethers 0.0053% /
     1.2e-5 m; tethers 2 x 2 0.084%."""
@@ -58,6 +60,7 @@ def test_tethers_cut_the_stretch_at_the_same_budget(result):
     assert teth["rms"] < 0.5 * _row(rows, "hanging", "tethers", (2, 2))["rms"]  # a higher budget helps too
 
 
+@pytest.mark.slow
 def test_reference_against_itself_is_zero(result):
     _, cache, res = result
     ref = res["references"][("hanging", 16)]
@@ -71,6 +74,7 @@ def test_reference_against_itself_is_zero(result):
     assert ref["check"]["resolved"]
 
 
+@pytest.mark.slow
 def test_reference_is_cached(result):
     out, cache, _ = result
     assert "hanging-16-cpu" in cache and (out / "references" / "hanging-16-cpu.npy").exists()
@@ -120,6 +124,7 @@ def test_unknown_method_key_is_skipped_with_one_message(capsys):
     assert conv.method_overrides("plain+tethers") == {"cloth": {"tethers": True}}
 
 
+@pytest.mark.slow
 def test_main_writes_md_json_png(tmp_path):
     args = ["--device", "cpu", "--methods", "plain", "tethers", "--scenes", "hanging", "--sizes", "8", "--frames", "3",
             "--budgets", "1x1", "2x1", "--ref", "4x4", "--out", str(tmp_path), "--stem", "s"]

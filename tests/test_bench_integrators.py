@@ -21,6 +21,7 @@ def res():
     return integrators.run(quick=True)
 
 
+@pytest.mark.slow
 def test_cli_quick_writes_outputs(tmp_path):
     assert integrators.main(["--quick", "--out", str(tmp_path)]) == 0
     for name in ("summary.csv", "convergence.csv", "energy_pendulum.csv", "energy_chain.csv", "integrators.md",

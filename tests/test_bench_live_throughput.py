@@ -27,6 +27,7 @@ def rows_of(tmp_path, *extra: str) -> tuple[list[dict], Path]:
         return list(csv.DictReader(f)), path
 
 
+@pytest.mark.slow
 def test_live_table_has_every_column_with_numbers(tmp_path):
     rows, path = rows_of(tmp_path)
     assert path.name == "live-cpu-4x8.csv"
@@ -41,6 +42,7 @@ def test_live_table_has_every_column_with_numbers(tmp_path):
     assert 0 < float(row["stretch RMS"].rstrip("%")) <= float(row["stretch max"].rstrip("%"))
 
 
+@pytest.mark.slow
 def test_budget_and_tethers_reach_the_scene(tmp_path):
     plain, _ = rows_of(tmp_path / "plain", "--substeps", "1", "--iterations", "1")
     tethered, path = rows_of(tmp_path / "tethered", "--substeps", "1", "--iterations", "1", "--tethers")

@@ -6,6 +6,8 @@ import csv
 import math
 from pathlib import Path
 
+import pytest
+
 import bench_package  # noqa: F401  (makes the repository's bench/ importable as the package "bench")
 from bench import precision
 
@@ -15,6 +17,7 @@ def read(path: Path) -> list[dict]:
         return list(csv.DictReader(f))
 
 
+@pytest.mark.slow
 def test_precision_bench_writes_cost_and_reach(tmp_path):
     assert precision.main(["--sizes", "6", "8", "--frames", "3", "--out", str(tmp_path)]) == 0
     cost = read(tmp_path / "precision-cost.csv")

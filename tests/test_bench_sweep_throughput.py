@@ -5,10 +5,13 @@ from __future__ import annotations
 import csv
 import importlib.util
 
+import pytest
+
 import bench_package  # noqa: F401  (makes the repository's bench/ importable as the package "bench")
 from bench import sweep_throughput as stp
 
 
+@pytest.mark.slow
 def test_sweep_throughput_outputs(tmp_path):
     ray = importlib.util.find_spec("ray") is not None
     args = ["--cases", "6x2", "--variants", "3", "--workers", "1", "--noop", "5", "--out", str(tmp_path),

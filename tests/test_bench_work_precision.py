@@ -39,6 +39,7 @@ def wp_run(tmp_path_factory):
     return out
 
 
+@pytest.mark.slow
 def test_work_precision_outputs(wp_run):
     for name in ("work_precision.csv", "reference.csv", "work_precision.md", "work_precision.png"):
         assert (wp_run / name).stat().st_size > 0, name
@@ -60,6 +61,7 @@ def test_work_precision_outputs(wp_run):
         assert text in md, text
 
 
+@pytest.mark.slow
 def test_work_precision_physics(wp_run):
     rows = _rows(wp_run / "work_precision.csv")
     err = {(r["solver"], int(r["substeps"]), int(r["iterations"])): float(r["pos_error"]) for r in rows}
@@ -79,6 +81,7 @@ def test_work_precision_physics(wp_run):
     assert err["coloured", 2, 32] < err["coloured", 1, 32]
 
 
+@pytest.mark.slow
 def test_work_precision_reference_resolves_the_errors(wp_run):
     # The reference (S = 16, K = 32) differs from its half-K and half-S runs well below the smallest error in
     # the sweep, so the sweep's errors are not reference noise. (With S = 8 the half-S difference, 1.1e-7, was
@@ -218,6 +221,7 @@ def test_cpu_reference_outputs(tmp_path, capsys):
         assert "no C compiler found" in capsys.readouterr().out
 
 
+@pytest.mark.slow
 def test_work_precision_in_a_local_pool_gives_the_same_points_and_says_so(wp_run, tmp_path):
     # The same grid in a 2-worker process pool: every point is the same simulation, so everything but the timings
     # is bit for bit the serial run's; the outputs say that these timings were taken in parallel.

@@ -15,6 +15,8 @@ from warp_verlet.runner import run_scene
 from warp_verlet.scene import load_scene
 from warp_verlet.usd_writer import validate_cache
 
+pytestmark = pytest.mark.slow  # each test drives a real Chromium
+
 
 @pytest.fixture(scope="module")
 def browser():

@@ -241,6 +241,7 @@ def test_more_threads_than_cores_warns(scene_file, monkeypatch, capsys):
     assert "warning: --threads 3 is more than the 2 core(s)" in err and "slower, not faster" in err
 
 
+@pytest.mark.slow
 def test_a_cpu_run_does_not_print_warps_cuda_driver_warning(scene_file):
     done = subprocess.run([sys.executable, "-m", "warp_verlet", "run", "small.toml", "--device", "cpu", "-q"],
                           cwd=scene_file.parent, capture_output=True, text=True)
@@ -260,6 +261,7 @@ def test_the_native_stderr_filter_drops_only_the_cuda_warning(capfd):
     assert CUDA_DRIVER_WARNING not in err and "something else native code said" in err
 
 
+@pytest.mark.slow
 def test_an_unwritable_warp_cache_chosen_by_the_user_is_one_clear_error(scene_file):
     env = dict(__import__("os").environ, WARP_CACHE_PATH=str(scene_file))  # a file, not a directory
     done = subprocess.run([sys.executable, "-m", "warp_verlet", "run", "small.toml", "--device", "cpu", "-q"],
@@ -320,6 +322,7 @@ def test_public_api_errors_derive_from_warp_verlet_error(scene_file):
     assert isinstance(caught.value, RuntimeError) and isinstance(caught.value, WarpVerletError)
 
 
+@pytest.mark.slow
 def test_no_builtin_exception_is_raised_on_purpose_anywhere_in_the_package():
     # Every error the package raises on purpose derives from WarpVerletError (README). AttributeError keeps
     # Python's meaning (a missing or read-only attribute), AssertionError marks a bug in the package itself.

@@ -64,6 +64,7 @@ def run_frames(scene, frames: int, **options) -> tuple[np.ndarray, int]:
     return sim.positions(), sim.torn_count()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("solver", ["coloured", "jacobi"])
 def test_threaded_relaxation_is_bit_identical_to_one_thread(solver):
     scene = busy_scene(solver)
@@ -99,6 +100,7 @@ def always_three_threads(monkeypatch):
     return created
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", ["heavy_chain", "stiff_iterations", "mass_ratio", "two_places"])
 def test_stability_cases_pass_with_threaded_relaxation(always_three_threads, case):
     assert_all_pass(getattr(cases, case)("cpu"))

@@ -212,6 +212,7 @@ def test_bad_faces_are_refused_by_edge_faces():
         edge_faces(Faces([3, 2], [0, 1, 2, 2, 3]), np.array([[0, 1]]))
 
 
+@pytest.mark.slow
 def test_edge_faces_scale_to_a_million_face_grid():
     rows = cols = 1025  # 1024 x 1024 faces, 2.1 million structural sticks
     topology = build_cloth(ClothSpec("cloth", (rows, cols), (1.0, 1.0)))

@@ -56,7 +56,7 @@ def rigid_scene(case: str):
                                              solver=record.get("solver", "coloured")))
 
 
-@pytest.mark.parametrize("case", CASES)
+@pytest.mark.parametrize("case", [pytest.param(c, marks=pytest.mark.slow) if c.startswith("big_grid") else c for c in CASES])
 def test_shipped_scene_with_rigid_sticks_is_unchanged(case):
     record = GOLDEN[case]
     scene = rigid_scene(case)

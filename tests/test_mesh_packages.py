@@ -19,6 +19,7 @@ ROOT = Path(__file__).resolve().parent.parent
 ASSETS = ROOT / "scenes" / "assets"
 
 
+@pytest.mark.slow
 def test_tablecloth_without_pillow_names_pillow():
     """trimesh imports Pillow when it is itself imported and, when that fails, raises the import error again from
     its OBJ loader for an OBJ with UVs (the tablecloth's). A fresh interpreter, so that trimesh is imported after

@@ -165,6 +165,7 @@ def start_endless(work: Path, output: str = "small.usdc") -> subprocess.Popen:
     pytest.fail(f"the endless run never saved frames: rc {proc.returncode}\n{err}")
 
 
+@pytest.mark.slow
 def test_a_rerun_killed_with_sigkill_keeps_the_previous_cache_byte_for_byte(work, good_cache, capsys):
     proc = start_endless(work)
     proc.send_signal(signal.SIGKILL)
@@ -187,6 +188,7 @@ def test_a_rerun_killed_with_sigkill_keeps_the_previous_cache_byte_for_byte(work
                                                       "small.usdc"]
 
 
+@pytest.mark.slow
 def test_sigterm_stops_like_ctrl_c_and_says_where_the_frames_are(work, good_cache):
     proc = start_endless(work)
     proc.send_signal(signal.SIGTERM)

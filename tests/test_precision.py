@@ -36,6 +36,7 @@ def fall_error(sim: Simulator, x0: np.ndarray, t: float) -> float:
 # ---------------------------------------------------------------------------------------------- below the floor
 
 
+@pytest.mark.slow
 def test_a_free_cloth_falls_freely_at_1000_substeps_in_float64(device):
     # dt = 1/60000 s: g dt^2 = 2.7e-9 m, a hundredth of a float32 spacing at y = 2 m (the floor here is
     # 3.12e-4 s: 53 substeps per frame at most). In float64 the sticks are relaxed 4 times per substep and the cloth still falls as
@@ -327,6 +328,7 @@ def busy(precision: str, solver: str = "coloured"):
                        file="<test>")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("solver", ["coloured", "jacobi"])
 def test_two_float64_runs_are_bit_identical(device, solver):
     # On the CPU the second run cuts the relaxation over two threads (and is not captured): still the same bits.

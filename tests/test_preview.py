@@ -80,6 +80,7 @@ def load_rgb(path) -> np.ndarray:
 # ------------------------------------------------------------------------------------------- images
 
 
+@pytest.mark.slow
 def test_png_has_the_requested_size_and_is_not_blank(cache, capsys):
     out = cache.parent / "p.png"
     assert main(["preview", str(cache), "-o", str(out), "--size", "320x240"]) == 0
@@ -92,6 +93,7 @@ def test_png_has_the_requested_size_and_is_not_blank(cache, capsys):
     assert ((pixels[..., 0] - pixels[..., 2]) > 60).sum() > 100
 
 
+@pytest.mark.slow
 def test_png_default_size_and_single_frame(cache):
     default, single = cache.parent / "d.png", cache.parent / "s.png"
     assert main(["preview", str(cache), "-o", str(default)]) == 0
@@ -100,6 +102,7 @@ def test_png_default_size_and_single_frame(cache):
     assert not np.array_equal(load_rgb(default), load_rgb(single))  # 4 panels vs 1
 
 
+@pytest.mark.slow
 def test_gif_has_one_image_per_frame_that_change(cache):
     out = cache.parent / "a.gif"
     assert main(["preview", str(cache), "-o", str(out), "--size", "200x160", "--frames", "0:7:2"]) == 0
@@ -214,6 +217,7 @@ def test_a_mixed_mesh_is_drawn_face_by_face_and_its_hidden_pentagon_left_out(tmp
         assert as_set(drawn) == house_polygons(frame, [1, 2])
 
 
+@pytest.mark.slow
 def test_a_mixed_mesh_renders_to_png(tmp_path, capsys):
     cache = write_house_cache(tmp_path / "house.usdc")
     whole, torn = tmp_path / "whole.png", tmp_path / "torn.png"
@@ -572,6 +576,7 @@ def test_unwritable_output_exits_1_and_names_the_file(cache, tmp_path, capsys, m
     assert not (tmp_path / "p.png").exists()
 
 
+@pytest.mark.slow
 def test_a_failed_write_leaves_no_partial_file(cache, tmp_path, capsys, monkeypatch):
     def fail_halfway(self, fp, *args, **kwargs):
         with open(fp, "wb") as f:
@@ -612,6 +617,7 @@ pins = ["top-left", "top-right"]
 """
 
 
+@pytest.mark.slow
 def test_run_with_preview_writes_a_png_next_to_the_cache(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     (tmp_path / "tiny.toml").write_text(RUN_SCENE)
@@ -632,6 +638,7 @@ def test_without_the_flag_run_writes_no_preview(tmp_path, monkeypatch, capsys):
 # ------------------------------------------------------------------------------------------ imports
 
 
+@pytest.mark.slow
 def test_preview_needs_no_simulator_and_leaves_pyplot_alone(cache):
     probe = (
         "import sys; from warp_verlet.cli import main; "
@@ -671,6 +678,7 @@ def damage_frame(path, frame: int, how: str) -> None:
     path.write_bytes(bytes(data))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("how, words", [("nan", "holds non-finite values"), ("count", "USD cannot read")])
 def test_a_damaged_frame_is_one_clear_error(tmp_path, how, words):
     path = write_cache(tmp_path / "damaged.usdc", rows=5, cols=5)

@@ -198,6 +198,7 @@ def names_key(err: SceneError, key: str) -> bool:
 # ---------------------------------------------------------------------------------------------- the serialiser
 
 
+@pytest.mark.slow
 @settings(max_examples=150, deadline=None)
 @given(doc=st.dictionaries(keys, values, max_size=5))
 def test_serialiser_round_trips_through_tomllib(doc):
@@ -225,6 +226,7 @@ documents = st.dictionaries(
 )
 
 
+@pytest.mark.slow
 @FUZZ
 @given(doc=documents)
 def test_random_structured_documents_raise_only_scene_errors(tmp_path, doc):
@@ -266,6 +268,7 @@ def test_a_key_taken_by_any_table_is_recorded():
     assert taken == {"simulation.brand_new": frozenset({"int", "float"})}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("key", sorted(EVERY_KEY))
 @settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(data=st.data())
@@ -351,6 +354,7 @@ def loaded_value(scene: Scene, path: tuple):
     return v[path[3]] if len(path) > 3 else v
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path", list(RANGES), ids=[dotted(p) for p in RANGES])
 @settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(number=extreme_numbers)
@@ -570,6 +574,7 @@ def test_missing_sections_and_keys(tmp_path, dropped):
 # ---------------------------------------------------------------------------------------------- truncation
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("scene_file", sorted(SCENES.glob("*.toml")), ids=lambda p: p.name)
 def test_shipped_scene_truncated_at_every_byte(tmp_path, scene_file):
     (tmp_path / "assets").symlink_to(SCENES / "assets")  # the mesh scenes' files, where their paths lead
@@ -642,6 +647,7 @@ def valid_scenes(draw) -> dict:
     }
 
 
+@pytest.mark.slow
 @FUZZ
 @given(doc=valid_scenes())
 def test_valid_scenes_load_and_read_back(tmp_path, doc):
@@ -705,6 +711,7 @@ def test_numbers_beyond_float32_are_refused_naming_the_key(tmp_path, path, numbe
     assert "float32" in err.problem
 
 
+@pytest.mark.slow
 @settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(normal=st.lists(st.floats(allow_nan=False, allow_infinity=False), min_size=3, max_size=3))
 @example(normal=[1e300, 1e300, 0.0])

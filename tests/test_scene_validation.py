@@ -594,6 +594,7 @@ fuzz_inputs = st.one_of(
 )
 
 
+@pytest.mark.slow
 @settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(doc=fuzz_inputs)
 def test_fuzz_only_scene_errors(tmp_path, doc):

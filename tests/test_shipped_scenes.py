@@ -48,6 +48,7 @@ def swinging(tmp_path_factory):
     return scene, summary, frames
 
 
+@pytest.mark.slow
 def test_swinging_cloth_swings_down_about_its_pinned_edge(swinging):
     scene, _, frames = swinging
     length = scene.cloths[0].size[0]  # m, from the pinned edge to the far edge
@@ -59,12 +60,14 @@ def test_swinging_cloth_swings_down_about_its_pinned_edge(swinging):
     assert abs(far_edge[:, 2].mean() - scene.cloths[0].origin[2]) < HANG_VERTICAL_TOLERANCE * length, far_edge[:, 2]
 
 
+@pytest.mark.slow
 def test_swinging_cloth_ends_at_rest(swinging):
     scene, _, frames = swinging
     speed = np.linalg.norm(np.diff(frames, axis=0), axis=-1).mean(axis=(1, 2)) * scene.simulation.fps  # m/s per frame
     assert speed[-1] < REST_FRACTION * speed.max(), f"mean speed {speed[-1]:.4f} m/s at the end, {speed.max():.3f} peak"
 
 
+@pytest.mark.slow
 def test_swinging_cloth_ends_converged(swinging):
     scene, summary, _ = swinging
     assert scene.cloths[0].uses_tethers  # the default for a pinned cloth that cannot tear, not a key of the scene

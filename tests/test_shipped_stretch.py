@@ -23,6 +23,7 @@ CASES = [
 ]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", CASES)
 def test_shipped_scene_ends_under_one_percent_rms_and_ten_percent_max(name):
     scene = load_scene(SCENES / f"{name}.toml")

@@ -39,6 +39,7 @@ def assert_all_pass(checks) -> None:
 # ---------------------------------------------------------------------------------------------- stiff
 
 
+@pytest.mark.slow
 def test_stiffness_one_with_200_iterations_settles_nearly_inextensible(device):
     assert_all_pass(cases.stiff_iterations(device))
 
@@ -58,6 +59,7 @@ def test_heavy_end_on_a_light_chain_hangs_at_the_predicted_length(device):
 # ---------------------------------------------------------------------------------------------- extreme steps
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("dt", cases.STEP_RANGE)
 def test_fixed_dt_from_1e5_to_0_1_s(device, dt):
     """Down to the float32 limit (|a| dt^2 >= 4 spacings of the coordinates, 2e-4 s for this cloth) a free
@@ -136,6 +138,7 @@ def test_long_undamped_run_gains_no_energy(device):
 # ---------------------------------------------------------------------------------------------- tethers and small steps
 
 
+@pytest.mark.slow
 def test_tethers_hold_every_particle_within_reach_and_the_cloth_taut(device):
     assert_all_pass(cases.tether_reach(device))
 

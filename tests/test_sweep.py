@@ -48,6 +48,7 @@ def check_rows_match_caches(out: Path, expect: int) -> list[dict]:
     return rows
 
 
+@pytest.mark.slow
 def test_grid_sweep_gives_valid_caches_and_a_matching_summary(tmp_path):
     sweep = load_sweep(write_sweep(tmp_path))
     result = run_sweep(sweep, local(), progress=False)
@@ -66,6 +67,7 @@ def test_grid_sweep_gives_valid_caches_and_a_matching_summary(tmp_path):
     assert all(r["name"] in md for r in rows)
 
 
+@pytest.mark.slow
 def test_a_diverging_variant_is_recorded_and_the_others_succeed(tmp_path):
     sweep = load_sweep(write_sweep(tmp_path, DIVERGING_SWEEP))
     result = run_sweep(sweep, local(), progress=False)
@@ -83,6 +85,7 @@ def test_a_diverging_variant_is_recorded_and_the_others_succeed(tmp_path):
     assert json.loads((tmp_path / "out" / f"{bad['name']}.json").read_text())["status"] == "diverged"
 
 
+@pytest.mark.slow
 def test_a_resumed_sweep_runs_only_what_is_missing(tmp_path):
     path = write_sweep(tmp_path)
     out = tmp_path / "out"
@@ -126,6 +129,7 @@ def test_resume_runs_again_a_short_cache_a_changed_parameter_and_a_failure(tmp_p
     assert third.ran == [0, 1, 2, 3] and third.resumed == []
 
 
+@pytest.mark.slow
 def test_a_worker_that_dies_is_recorded_as_killed_and_the_rest_go_on():
     backend = LocalBackend([Slot("cpu", 1)] * 2)
     outcomes = {o.key: o for o in backend.run(square_or_die, [(k, k) for k in (2, 13, 3, 7, 4, 5)])}
@@ -137,6 +141,7 @@ def test_a_worker_that_dies_is_recorded_as_killed_and_the_rest_go_on():
         assert outcomes[k].value["device"] == "cpu"
 
 
+@pytest.mark.slow
 def test_local_pool_pins_one_variant_per_slot():
     backend = LocalBackend([Slot("cpu", 1), Slot("cpu", 1)])
     outcomes = list(backend.run(square_or_die, [(k, k) for k in range(6)]))
@@ -170,6 +175,7 @@ simulation.substeps = [8, 9, 10, 11, 12, 13]
 """
 
 
+@pytest.mark.slow
 def test_ctrl_c_stops_cleanly_and_the_sweep_resumes(tmp_path):
     path = write_sweep(tmp_path, SLOW_SWEEP)
     out = tmp_path / "out"
@@ -203,6 +209,7 @@ def test_ctrl_c_stops_cleanly_and_the_sweep_resumes(tmp_path):
 
 # ---------------------------------------------------------------------------------------------- command line
 
+@pytest.mark.slow
 def test_cli_sweep_runs_resumes_and_reports(tmp_path, capsys):
     path = write_sweep(tmp_path, DIVERGING_SWEEP)
     assert main(["sweep", str(path), "--device", "cpu", "--workers", "2", "-q"]) == 1  # one variant diverged

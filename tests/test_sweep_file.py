@@ -146,6 +146,7 @@ def test_a_combination_the_scene_refuses_names_the_variant(tmp_path):
     assert "soft sticks need the coloured solver" in err.problem
 
 
+@pytest.mark.slow
 def test_ranges_grids_names_and_hashes(tmp_path):
     text = HEAD + ("frames = 5\n[axes]\n"
                    'simulation.substeps = { start = 8, stop = 32, step = 8 }\n'
@@ -246,6 +247,7 @@ sweep_docs = st.fixed_dictionaries(
 )
 
 
+@pytest.mark.slow
 @FUZZ
 @given(doc=sweep_docs)
 def test_random_sweep_documents_raise_only_scene_errors(tmp_path, doc):
@@ -267,6 +269,7 @@ def _dotted(path: tuple) -> str:
     return ".".join(str(p) for p in path)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path, spec", NUMERIC, ids=[_dotted(p) for p, _ in NUMERIC])
 @settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(number=extreme_numbers)
@@ -285,6 +288,7 @@ def test_numeric_axis_values_load_in_range_or_name_the_axis(tmp_path, path, spec
     assert_number_loaded(loaded_value(variant.scene, path), number, integer, lo, hi, lo_open, hi_open)
 
 
+@pytest.mark.slow
 def test_every_byte_prefix_of_the_shipped_sweeps_is_an_error_or_a_sweep(tmp_path):
     for path in sorted((ROOT / "scenes" / "sweeps").glob("*.toml")):
         raw = path.read_bytes().replace(b'"../', b'"' + str(ROOT / "scenes").encode() + b"/")

@@ -11,6 +11,7 @@ from pathlib import Path
 import pytest
 
 ray = pytest.importorskip("ray", reason="Ray is an optional extra (pip install 'warp-verlet[ray]')")
+pytestmark = pytest.mark.slow  # each test starts or uses a local Ray instance
 
 from sweep_helpers import DIVERGING_SWEEP, GRID_SWEEP, read_rows, square_or_die, write_sweep  # noqa: E402
 from warp_verlet.sweep import cache_problems, load_sweep, run_sweep  # noqa: E402

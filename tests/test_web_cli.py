@@ -46,6 +46,7 @@ def test_a_port_in_use_is_one_clear_error(viser, busy_port, rope_cache):
         assert "--port" in result.stderr and "Traceback" not in result.stderr
 
 
+@pytest.mark.slow
 def test_serves_on_localhost_and_warns_beyond_it(viser, rope_cache):
     cache = rope_cache
     port = free_port()
@@ -57,6 +58,7 @@ def test_serves_on_localhost_and_warns_beyond_it(viser, rope_cache):
     assert "warning: serving on 0.0.0.0" in anywhere.stderr and "reachable from other machines" in anywhere.stderr
 
 
+@pytest.mark.slow
 def test_view_refuses_what_is_not_a_cache(tmp_path):
     missing = cli("view", tmp_path / "nothing.usdc", "--port", free_port())
     assert missing.returncode == 2 and "nothing.usdc: no such file" in missing.stderr
@@ -66,6 +68,7 @@ def test_view_refuses_what_is_not_a_cache(tmp_path):
     assert bad.returncode == 2 and "not a USD file" in bad.stderr
 
 
+@pytest.mark.slow
 def test_the_player_never_imports_warp(viser, rope_cache):
     # The player serves a cache and plays it to its end, all without Warp (the cache was made in this process).
     code = ("import sys\n"
