@@ -112,3 +112,31 @@ def square_or_die(payload, slot):
     if payload == 7:
         raise ValueError("seven is refused")
     return square(payload, slot)
+
+
+def square_unless_killed(payload: dict, slot):
+    """A task: ``value`` squared, after waiting for every file in ``wait_for`` to exist and then ``sleep`` seconds.
+    ``die``: "always" kills its own worker process (SIGKILL, as the out-of-memory killer would); a path kills it the
+    first time only (when that file is not there yet: it is created first), so that the retry succeeds.
+    ``started`` and ``finished``: files created first of all and last of all (what another task's ``wait_for``
+    waits for); ``first``: a file created on the first run, so that a second run waits for nothing."""
+    import time
+
+    if payload.get("started"):
+        Path(payload["started"]).touch()
+    die = payload.get("die")
+    if die == "always" or (die is not None and not os.path.exists(die)):
+        if die != "always":
+            Path(die).touch()
+        os.kill(os.getpid(), signal.SIGKILL)
+    first = payload.get("first")  # a file: when it is there already, this is a second run, which waits for nothing
+    if first is None or not os.path.exists(first):
+        if first is not None:
+            Path(first).touch()
+        deadline = time.monotonic() + 120
+        while not all(os.path.exists(f) for f in payload.get("wait_for", ())) and time.monotonic() < deadline:
+            time.sleep(0.01)
+        time.sleep(payload.get("sleep", 0.0))
+    if payload.get("finished"):
+        Path(payload["finished"]).touch()
+    return square(payload["value"], slot)

@@ -14,8 +14,8 @@ from pathlib import Path
 
 import pytest
 
-from sweep_helpers import (DIVERGING_SWEEP, GRID_SWEEP, read_cache, read_rows, square_or_die, structural_stretch,
-                           write_sweep)
+from sweep_helpers import (DIVERGING_SWEEP, GRID_SWEEP, read_cache, read_rows, square_or_die, square_unless_killed,
+                           structural_stretch, write_sweep)
 from warp_verlet.cli import main
 from warp_verlet.sweep import cache_problems, load_sweep, run_sweep
 from warp_verlet.sweep_backends import InlineBackend, LocalBackend, Slot, device_slots
@@ -141,6 +141,70 @@ def test_a_worker_that_dies_is_recorded_as_killed_and_the_rest_go_on():
         assert outcomes[k].value["device"] == "cpu"
 
 
+def test_every_item_beside_a_dead_worker_is_run_again_and_says_so(tmp_path):
+    # "killer" kills its worker. The pool notices a dead worker when it next hears from one ("quick" finishing
+    # after the death), and then fails everything still running: "slow", which runs on for 3 s after "quick"
+    # finished, is run again alone, as is the killer. "later" never ran in that pool; "once" kills its worker on
+    # its first run only, so its second run succeeds.
+    backend = LocalBackend([Slot("cpu", 1)] * 3)
+    started, quick_done = str(tmp_path / "killer_started"), str(tmp_path / "quick_finished")
+    items = [("slow", {"value": 3, "wait_for": [started, quick_done], "sleep": 3.0,
+                       "first": str(tmp_path / "slow_ran")}),
+             ("killer", {"value": 13, "die": "always", "started": started}),
+             ("quick", {"value": 2, "wait_for": [started], "sleep": 0.2, "finished": quick_done}),
+             ("later", {"value": 4}), ("once", {"value": 5, "die": str(tmp_path / "died_once")})]
+    outcomes = {o.key: o for o in backend.run(square_unless_killed, items)}
+    died = "a worker process died (killed by SIGKILL (out of memory?)) while it ran"
+    assert outcomes["slow"].status == "done" and outcomes["slow"].value["value"] == 9
+    assert outcomes["slow"].retries == 1 and outcomes["slow"].retry_reason.startswith(died)
+    assert outcomes["killer"].status == "killed" and outcomes["killer"].retries == 1
+    assert outcomes["killer"].retry_reason.startswith(died)
+    # "quick" finished either before the pool broke (once) or was running when it did (then run again): either
+    # way its outcome says which.
+    quick = outcomes["quick"]
+    assert quick.status == "done" and quick.value["value"] == 4
+    assert (quick.retries, quick.retry_reason) == (0, None) or (quick.retries == 1 and quick.retry_reason.startswith(died))
+    assert outcomes["later"].status == "done" and outcomes["later"].retries == 0
+    assert outcomes["later"].retry_reason is None
+    assert outcomes["once"].status == "done" and outcomes["once"].value["value"] == 25
+    assert outcomes["once"].retries == 1 and outcomes["once"].retry_reason.startswith(died)
+
+
+def test_a_variant_whose_worker_is_killed_is_run_again_and_recorded(tmp_path, capsys):
+    """The out-of-memory killer's SIGKILL from outside, on the one worker of a real sweep: the variant runs again and
+    succeeds, and the console, sweep.csv, sweep.md and the sidecar all say that it was run again and why."""
+    import multiprocessing
+    import threading
+
+    path = write_sweep(tmp_path)
+    codes = []
+    sweep = threading.Thread(target=lambda: codes.append(main(["sweep", str(path), "--device", "cpu", "--workers",
+                                                               "1", "-q"])))
+    sweep.start()
+    deadline = time.monotonic() + 60
+    while not multiprocessing.active_children() and time.monotonic() < deadline:
+        time.sleep(0.01)
+    workers = multiprocessing.active_children()
+    assert len(workers) == 1, workers
+    os.kill(workers[0].pid, signal.SIGKILL)
+    sweep.join(timeout=300)
+    assert codes == [0]  # every variant ok in the end
+    out = tmp_path / "out"
+    rows = check_rows_match_caches(out, 4)
+    assert [r["status"] for r in rows] == ["ok"] * 4
+    assert [r["retries"] for r in rows] == ["1", "0", "0", "0"]  # only the first was running when it died
+    assert "killed by SIGKILL" in rows[0]["retry_reason"] and rows[1]["retry_reason"] == ""
+    err = capsys.readouterr().err
+    assert (f"variant {rows[0]['name']}: a worker process died (killed by SIGKILL (out of memory?)) while it ran, "
+            "which stops the whole pool; retried: ok") in err
+    assert sum("retried" in line for line in err.splitlines()) == 1
+    assert f"run again after their worker died: 1 variant(s), {rows[0]['name']}" in (out / "sweep.md").read_text()
+    assert json.loads((out / f"{rows[0]['name']}.json").read_text())["retries"] == 1
+    # A resumed sweep keeps the record of the run that made the cache.
+    assert main(["sweep", str(path), "--device", "cpu", "--workers", "1", "-q"]) == 0
+    assert read_rows(out / "sweep.csv")[0]["retries"] == "1"
+
+
 @pytest.mark.slow
 def test_local_pool_pins_one_variant_per_slot():
     backend = LocalBackend([Slot("cpu", 1), Slot("cpu", 1)])
@@ -221,6 +285,59 @@ def test_cli_sweep_runs_resumes_and_reports(tmp_path, capsys):
     assert main(["sweep", str(path), "--dry-run"]) == 0
     listing = capsys.readouterr().out
     assert "000_gravity=0_-9.81_0" in listing and "valid sweep, 3 variants" in listing
+
+
+def test_warps_start_up_messages_come_from_the_workers_only_with_verbose(tmp_path):
+    """Each worker starts Warp as `run` does: no banner, no module-load lines, and no CUDA-driver warning on the CPU,
+    unless -v. The warning is expected with -v where Warp, started bare, prints it on this machine (no driver)."""
+    from warp_verlet.warp_setup import CUDA_DRIVER_WARNING
+
+    bare = subprocess.run([sys.executable, "-c", "import warp; warp.init()"], capture_output=True, text=True)
+    no_driver = CUDA_DRIVER_WARNING in bare.stderr
+    path = write_sweep(tmp_path)
+
+    def sweep(*extra) -> str:
+        done = subprocess.run([sys.executable, "-m", "warp_verlet", "sweep", str(path), "--device", "cpu", "--workers",
+                               "2", "-q", "--restart", *extra], capture_output=True, text=True, timeout=300)
+        assert done.returncode == 0, done.stderr
+        return done.stdout + done.stderr
+
+    quiet, loud = sweep(), sweep("-v")
+    for noise in (CUDA_DRIVER_WARNING, "initialized", "took"):  # warning, banner, "Module ... load ... took"
+        assert noise not in quiet, quiet
+    assert "Warp" not in quiet and "4 variants: 4 ok" in quiet
+    assert loud.count("initialized") >= 1 and "took" in loud  # at least one worker's banner and module loads
+    assert (loud.count(CUDA_DRIVER_WARNING) >= 1) == no_driver, loud
+
+
+def test_sweep_frames_overrides_every_variant_and_is_part_of_resume(tmp_path, capsys):
+    path = write_sweep(tmp_path)
+    out = tmp_path / "out"
+    command = ["sweep", str(path), "--device", "cpu", "--workers", "2", "-q"]
+
+    def run(*extra) -> str:
+        assert main([*command, *extra]) == 0
+        return capsys.readouterr().out
+
+    assert "(4 run now, 0 done before)" in run("--frames", "2")
+    check_rows_match_caches(out, 4)
+    assert [r["frames"] for r in read_rows(out / "sweep.csv")] == ["2"] * 4
+    # Another count is another run of every variant: a 2-frame cache is never resumed as a 4-frame result.
+    assert "(4 run now, 0 done before)" in run("--frames", "4")
+    rows = check_rows_match_caches(out, 4)
+    assert [r["frames"] for r in rows] == ["4"] * 4
+    assert "(0 run now, 4 done before)" in run("--frames", "4")
+    assert "(4 run now, 0 done before)" in run()  # the base scene's 3 frames
+    assert [r["frames"] for r in check_rows_match_caches(out, 4)] == ["3"] * 4
+    # A sweep that varies the frame count itself cannot also take --frames.
+    varied = tmp_path / "varied.toml"
+    varied.write_text('[sweep]\nscene = "base.toml"\n[axes]\n"simulation.frames" = [2, 3]\n')
+    assert main(["sweep", str(varied), "--frames", "5", "--dry-run"]) == 2
+    assert ("axes.simulation.frames: simulation.frames is already set for every variant by --frames"
+            in capsys.readouterr().err)
+    with pytest.raises(SystemExit):
+        main(["sweep", str(path), "--frames", "0"])
+    assert "expected at least 1 frame, got 0" in capsys.readouterr().err
 
 
 def test_cli_sweep_errors(tmp_path, capsys, monkeypatch):

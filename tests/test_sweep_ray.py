@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import filecmp
 import json
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -13,7 +15,8 @@ import pytest
 ray = pytest.importorskip("ray", reason="Ray is an optional extra (pip install 'warp-verlet[ray]')")
 pytestmark = pytest.mark.slow  # each test starts or uses a local Ray instance
 
-from sweep_helpers import DIVERGING_SWEEP, GRID_SWEEP, read_rows, square_or_die, write_sweep  # noqa: E402
+from sweep_helpers import (DIVERGING_SWEEP, GRID_SWEEP, read_rows, square_or_die, square_unless_killed,  # noqa: E402
+                           write_sweep)
 from warp_verlet.sweep import cache_problems, load_sweep, run_sweep  # noqa: E402
 from warp_verlet.sweep_backends import LocalBackend, RayBackend, Slot, device_slots  # noqa: E402
 
@@ -81,6 +84,36 @@ def test_ray_records_a_task_error_and_a_killed_worker(ray_instance):
     assert outcomes[7].status == "error" and "ValueError: seven is refused" in outcomes[7].error
     for k in (2, 3):
         assert outcomes[k].status == "done" and outcomes[k].value["value"] == k * k
+
+
+def test_ray_runs_again_a_task_whose_worker_died_and_says_so(tmp_path, ray_instance):
+    # "once" kills its worker on its first run only: its second run succeeds, and its outcome says it was retried.
+    backend = RayBackend(device="cpu")
+    items = [("once", {"value": 5, "die": str(tmp_path / "died_once")}), ("killer", {"value": 13, "die": "always"}),
+             ("fine", {"value": 4})]
+    outcomes = {o.key: o for o in backend.run(square_unless_killed, items)}
+    assert outcomes["once"].status == "done" and outcomes["once"].value["value"] == 25
+    assert outcomes["once"].retries == 1 and outcomes["once"].retry_reason.startswith("its Ray worker died (")
+    assert outcomes["killer"].status == "killed" and outcomes["killer"].retries == 1
+    assert "again when retried" in outcomes["killer"].error
+    assert outcomes["fine"].status == "done" and outcomes["fine"].retries == 0 and outcomes["fine"].retry_reason is None
+
+
+def test_rays_start_up_messages_only_with_verbose(tmp_path):
+    """A sweep that starts its own local Ray instance: Ray's start-up lines and the workers' output only with -v."""
+    path = write_sweep(tmp_path)
+
+    def sweep(*extra) -> str:
+        done = subprocess.run([sys.executable, "-m", "warp_verlet", "sweep", str(path), "--ray", "--device", "cpu",
+                               "-q", "--restart", *extra], capture_output=True, text=True, timeout=300)
+        assert done.returncode == 0, done.stderr
+        return done.stdout + done.stderr
+
+    quiet = sweep()
+    assert "4 variants: 4 ok" in quiet
+    for noise in ("Started a local Ray instance", "(_ray_call", "INFO", "WARNING", "Warp"):
+        assert noise not in quiet, quiet
+    assert "Started a local Ray instance" in sweep("-v")
 
 
 def test_ray_ships_the_cache_back_from_a_node_without_the_drivers_disk(tmp_path, ray_instance, monkeypatch):

@@ -151,6 +151,11 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_argument("--restart", action="store_true", help="run every variant again (default: resume)")
     sweep.add_argument("--dry-run", action="store_true", help="list the variants and exit without running")
     sweep.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    sweep.add_argument("--frames", type=_positive_int,
+                       help="every variant's number of frames (default: [sweep] frames, else the base scene's); "
+                            "a resumed sweep runs again the variants done with another count")
+    sweep.add_argument("-v", "--verbose", action="store_true",
+                       help="show Warp's and Ray's start-up messages from the workers")
 
     validate = commands.add_parser("validate", help="check a scene file without running it")
     validate.add_argument("scene", type=Path)
@@ -338,7 +343,7 @@ def _run(args) -> int:
 def _sweep(args) -> int:
     from .sweep import load_sweep, show
 
-    sweep = load_sweep(args.sweep, args.output)
+    sweep = load_sweep(args.sweep, args.output, args.frames)
     if args.dry_run:
         for v in sweep.variants:
             params = ", ".join(f"{k} = {show(val)}" for k, val in v.params.items())
@@ -349,7 +354,7 @@ def _sweep(args) -> int:
     from .sweep_backends import make_backend
 
     backend = make_backend(args.device, args.workers, args.threads, args.ray, args.gpus_per_variant,
-                           args.cpus_per_variant)
+                           args.cpus_per_variant, verbose=args.verbose)
     print(f"{args.sweep}: {len(sweep.variants)} variants of {sweep.base}; {backend.description}", file=sys.stderr)
     try:
         with backend:

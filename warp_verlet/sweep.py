@@ -2,7 +2,8 @@
 
     [sweep]
     scene = "../wind_sheet.toml"          # the base scene, relative to this file
-    frames = 60                           # optional: every variant's simulation.frames
+    frames = 60                           # optional: every variant's simulation.frames (``sweep --frames N``
+                                          # overrides it)
 
     [axes]                                # the grid: every combination of these values
     "simulation.substeps" = [8, 16, 32]
@@ -21,7 +22,8 @@ then validated by :func:`warp_verlet.scene.parse_scene` like any scene file; so 
 
 Running (``run_sweep``): each variant writes ``<output>/<name>.<format>`` and a sidecar ``<name>.json`` with its
 parameter hash and its result row; ``sweep.csv`` and ``sweep.md`` list every variant. A re-run skips the variants
-whose sidecar says ok with the same hash and whose cache validates with the expected frames. The backends that run
+whose sidecar says ok with the same hash and whose cache validates with the expected frames. The hash is of the
+variant's whole scene document, frames included, so a run with another ``--frames`` runs every variant again. The backends that run
 the variants are in ``sweep_backends.py``.
 """
 
@@ -124,14 +126,16 @@ def read_toml(path: Path) -> dict:
         raise SceneError(file, None, "not valid TOML: arrays or inline tables nested too deeply") from None
 
 
-def load_sweep(path: str | Path, output: str | Path | None = None) -> Sweep:
-    """Read a sweep file, expand and validate every variant. ``output`` overrides ``[sweep] output``.
+def load_sweep(path: str | Path, output: str | Path | None = None, frames: int | None = None) -> Sweep:
+    """Read a sweep file, expand and validate every variant. ``output`` overrides ``[sweep] output``, ``frames``
+    (``sweep --frames``) ``[sweep] frames`` and the base scene's frame count, for every variant.
     Raises :class:`SceneError` naming the sweep file and the key (or axis) on any problem."""
     path = Path(path)
-    return parse_sweep(read_toml(path), str(path), path, output)
+    return parse_sweep(read_toml(path), str(path), path, output, frames)
 
 
-def parse_sweep(data: dict, file: str, path: Path, output: str | Path | None = None) -> Sweep:
+def parse_sweep(data: dict, file: str, path: Path, output: str | Path | None = None,
+                frames_override: int | None = None) -> Sweep:
     top = _Table(file, "", data)
     settings = top.take("sweep", lambda v, k: v)  # read below, as its own table
     axes_data = top.take("axes", lambda v, k: v, None)
@@ -144,6 +148,10 @@ def parse_sweep(data: dict, file: str, path: Path, output: str | Path | None = N
     frames = t.take("frames", integer(1), None)
     fmt = t.take("format", choice(FORMATS), "usdc")
     t.finish()
+    if frames_override is not None:
+        if isinstance(frames_override, bool) or not isinstance(frames_override, int) or frames_override < 1:
+            raise SceneError(file, None, f"--frames must be a whole number of frames >= 1, got {frames_override!r}")
+        frames = frames_override
     base = Path(os.path.normpath(path.parent / scene_name))
     try:
         base_scene = load_scene(base)
@@ -174,7 +182,8 @@ def parse_sweep(data: dict, file: str, path: Path, output: str | Path | None = N
             raise SceneError(file, axis.key, "output.path is set by the sweep (one cache per variant, in the "
                              "sweep's output directory); vary something else")
         if frames is not None and axis.path == ("simulation", "frames"):
-            raise SceneError(file, axis.key, "simulation.frames is already set for every variant by [sweep] frames; "
+            where = "--frames" if frames_override is not None else "[sweep] frames"
+            raise SceneError(file, axis.key, f"simulation.frames is already set for every variant by {where}; "
                              "remove one of the two")
     count = math.prod(len(a.values) for a in axes) * (samples or 1)
     if count > MAX_VARIANTS:
@@ -532,7 +541,7 @@ def _variant_error(sweep: Sweep, axes: list[Axis], values: list, index: int, par
 
 COLUMNS_BEFORE = ["index", "name"]
 COLUMNS_AFTER = ["status", "wall_s", "task_s", "frames", "stretch_rms", "stretch_max", "torn", "device", "host",
-                 "resumed", "error", "output", "hash"]
+                 "resumed", "retries", "retry_reason", "error", "output", "hash"]
 
 
 def summary_columns(sweep: Sweep) -> list[str]:
@@ -549,7 +558,7 @@ def run_variant(task: dict, slot) -> dict:
     from .sweep_backends import quiet_warp
 
     started = time.perf_counter()
-    quiet_warp()
+    quiet_warp(getattr(slot, "verbose", False), slot.device)
     from .runner import run_scene
 
     output = Path(task["output"])
@@ -582,6 +591,13 @@ def run_variant(task: dict, slot) -> dict:
 
         shutil.rmtree(shipped, ignore_errors=True)
     return row
+
+
+def _beside(bar, file):
+    """A context in which a line printed to ``file`` does not break the progress bar (None: no bar)."""
+    import contextlib
+
+    return bar.external_write_mode(file=file) if bar is not None else contextlib.nullcontext()
 
 
 def _frames_kept(exc: BaseException, output: Path) -> Path:
@@ -680,7 +696,13 @@ class _Summary:
                  "- wall_s: the run's simulation and writing time (`RunSummary.wall_seconds`); task_s: the whole "
                  "variant in its worker, building the simulator and loading kernels included",
                  "- stretch: |D - L| / L over structural sticks at the last frame; torn: sticks torn by the end "
-                 "(empty where no cloth can tear)", ""]
+                 "(empty where no cloth can tear)",
+                 "- retries: how often a variant was run again because its worker process died (retry_reason: how), "
+                 "whatever its status then", ""]
+        retried = [r["name"] for r in self.rows if r.get("retries")]
+        if retried:
+            lines.insert(4, f"- run again after their worker died: {len(retried)} variant(s), "
+                         + ", ".join(retried[:20]) + (", ..." if len(retried) > 20 else ""))
         if sweep.random_axes:
             lines.insert(3, f"- random sampler: seed {sweep.seed}, {sweep.samples} samples")
         cols = self.columns
@@ -708,7 +730,7 @@ def _cell(value: Any, md: bool = False) -> str:
 
 def _base_row(sweep: Sweep, variant: Variant, output: Path) -> dict:
     row = {"index": variant.index, "name": variant.name, **variant.params, "status": "pending",
-           "output": str(output), "hash": variant.hash, "resumed": False}
+           "output": str(output), "hash": variant.hash, "resumed": False, "retries": 0}
     if sweep.random_axes:
         row["sample"] = variant.sample
     return row
@@ -782,6 +804,12 @@ def run_sweep(sweep: Sweep, backend, out: Path | None = None, resume: bool = Tru
                 row.update(value)
             else:
                 row.update(status=outcome.status, error=outcome.error)
+            retries = getattr(outcome, "retries", 0)
+            row.update(retries=retries, retry_reason=getattr(outcome, "retry_reason", None))
+            if retries and log:
+                # Said on the console as it happens, beside the summary's columns: the variant's worker died.
+                with _beside(bar, sys.stderr):
+                    log(f"variant {v.name}: {row['retry_reason']}; retried: {row['status']}")
             if not Path(row["output"]).exists():
                 row["output"] = ""  # nothing was written (a failure before the first frame)
             result.ran.append(v.index)

@@ -3,7 +3,9 @@
 Every backend has ``run(fn, items)``: ``items`` are (key, payload) pairs, ``fn(payload, slot)`` runs one of them on
 ``slot`` (a :class:`Slot`: the device, the CPU threads it may use, and whether it sees the driver's disk), and
 ``run`` yields an :class:`Outcome` per item as each finishes, in finishing order. An exception in ``fn`` is an
-outcome ("error"), a worker process that dies is one ("killed"); the other items go on. Closing the generator
+outcome ("error"); an item whose worker process dies is run once more, and is "killed" when its worker dies again;
+the other items go on. Every item that was run again says so (``Outcome.retries``, ``retry_reason``), so that a
+summary records which variants lost a worker even when their second run succeeded. Closing the generator
 (or a KeyboardInterrupt inside it) stops the work in flight. Nothing here schedules: the pool hands out the
 next item when a worker is free, and Ray places tasks by their ``num_gpus`` / ``num_cpus``.
 
@@ -22,7 +24,7 @@ import signal
 import time
 import traceback
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Callable, Iterable, Iterator
 
 from .errors import WarpVerletError
@@ -36,6 +38,7 @@ class Slot:
     device: str  # "cpu", "cuda", "cuda:N"
     threads: int | None = None  # CPU relaxation threads (None: the simulator chooses)
     local: bool = True  # False: a Ray node that does not share the driver's disk
+    verbose: bool = False  # show Warp's start-up messages in the worker (warp-verlet sweep -v)
 
 
 @dataclass(frozen=True)
@@ -45,6 +48,8 @@ class Outcome:
     value: Any = None
     error: str | None = None
     latency: float = 0.0  # seconds from dispatch to the result's arrival in the driver
+    retries: int = 0  # times it was run again because its worker died
+    retry_reason: str | None = None  # how its worker died, when it was run again
 
 
 def _error_text(exc: BaseException) -> str:
@@ -61,45 +66,55 @@ def cpu_count() -> int:
         return os.cpu_count() or 1
 
 
-def quiet_warp() -> None:
-    """Warp without its banner and module-load lines, in a worker (tasks call it first)."""
+def _note(text: str) -> None:
+    import sys
+
+    print(f"note: {text}", file=sys.stderr)
+
+
+def quiet_warp(verbose: bool = False, device: str = "cpu") -> None:
+    """Start Warp in a worker as ``warp-verlet run`` does (warp_setup.start_warp): unless ``verbose``, without its
+    banner and module-load lines, and on the CPU without its CUDA-driver warning. Tasks call it first."""
+    from .warp_setup import start_warp
+
+    start_warp(verbose=verbose, cpu=not device.startswith("cuda"), note=_note)
+
+
+def cuda_devices(verbose: bool = False) -> int:
+    """The CUDA devices Warp sees (none on a machine without the driver: its warning is shown only if verbose)."""
     import warp as wp
 
-    wp.config.quiet = True
-    if hasattr(wp, "LOG_WARNING"):
-        wp.config.log_level = wp.LOG_WARNING
+    from .warp_setup import start_warp
 
-
-def cuda_devices() -> int:
-    import warp as wp
-
-    wp.config.quiet = True
+    start_warp(verbose=verbose, cpu=True, note=_note)
     return wp.get_cuda_device_count()
 
 
-def device_slots(device: str | None, workers: int | None, threads: int | None = None) -> list[Slot]:
+def device_slots(device: str | None, workers: int | None, threads: int | None = None,
+                 verbose: bool = False) -> list[Slot]:
     """The slots of a local run: ``device`` None means CUDA when present, else the CPU. On "cuda", one slot per GPU
     (``workers`` more or fewer slots go round the GPUs); on "cuda:N", ``workers`` (default 1) on that GPU; on the
-    CPU, ``workers`` (default: the cores) with ``threads`` each (default: the cores shared among the workers)."""
+    CPU, ``workers`` (default: the cores) with ``threads`` each (default: the cores shared among the workers).
+    ``verbose``: the workers show Warp's start-up messages."""
     if workers is not None and workers < 1:
         raise WarpVerletError(f"expected at least 1 worker, got {workers}")
     if device is None:
-        device = "cuda" if cuda_devices() else "cpu"
+        device = "cuda" if cuda_devices(verbose) else "cpu"
     if device == "cpu":
         n = workers or cpu_count()
-        return [Slot("cpu", threads or max(1, cpu_count() // n))] * n
+        return [Slot("cpu", threads or max(1, cpu_count() // n), verbose=verbose)] * n
     if threads is not None:
         raise WarpVerletError("--threads sets CPU relaxation threads and does not apply to CUDA")
-    gpus = cuda_devices()
+    gpus = cuda_devices(verbose)
     if device == "cuda":
         if not gpus:
             raise WarpVerletError("device 'cuda' asked for, but no CUDA device is present")
         n = workers or gpus
-        return [Slot(f"cuda:{i % gpus}") for i in range(n)]
+        return [Slot(f"cuda:{i % gpus}", verbose=verbose) for i in range(n)]
     if device.startswith("cuda:") and device[5:].isdigit():
         if int(device[5:]) >= gpus:
             raise WarpVerletError(f"device {device!r} asked for, but {gpus} CUDA device(s) are present")
-        return [Slot(device)] * (workers or 1)
+        return [Slot(device, verbose=verbose)] * (workers or 1)
     raise WarpVerletError(f"expected a device cpu, cuda or cuda:N, got {device!r}")
 
 
@@ -161,7 +176,8 @@ class LocalBackend:
     Only as many items are submitted as there are slots, so every submitted item is running. A worker that
     dies breaks a ProcessPoolExecutor and fails everything in it: the items that were running are then run
     again, each alone in a fresh one-worker pool, so that the one that kills its worker is found and recorded
-    ("killed", with the signal) while the others finish normally."""
+    ("killed", with the signal) while the others finish normally. Each of them is an outcome with ``retries`` 1
+    and the worker's death as its ``retry_reason``."""
 
     def __init__(self, slots: list[Slot]):
         self._packages: tuple = ()
@@ -203,21 +219,28 @@ class LocalBackend:
         self._packages = _package_of(fn)
         queue = deque(items)
         suspects: deque = deque()  # (key, payload, slot) that were running when a worker died
+        death = ""  # how that worker died
         while queue or suspects:
             if suspects:
                 key, payload, slot = suspects.popleft()
-                yield from self._alone(fn, key, payload, slot)
+                yield from self._alone(fn, key, payload, slot, death)
                 continue
             pool = self._pool(len(self.slots))
+            workers: dict = {}  # pid -> every worker process the pool started, to tell how one died
             free = list(self.slots)
             running: dict = {}  # future -> (key, payload, slot, t0)
             finished = False
+
+            def submit() -> None:
+                while queue and free:
+                    key, payload = queue.popleft()
+                    slot = free.pop()
+                    running[pool.submit(_call, fn, payload, slot)] = (key, payload, slot, time.perf_counter())
+                    workers.update(getattr(pool, "_processes", None) or {})
+
             try:
                 while queue or running:
-                    while queue and free:
-                        key, payload = queue.popleft()
-                        slot = free.pop()
-                        running[pool.submit(_call, fn, payload, slot)] = (key, payload, slot, time.perf_counter())
+                    submit()
                     done, _ = wait(list(running), return_when=FIRST_COMPLETED)
                     broken, ready = False, []
                     for future in done:
@@ -238,11 +261,10 @@ class LocalBackend:
                         for future, (key, payload, slot, t0) in running.items():
                             suspects.append((key, payload, slot))
                         running.clear()
+                        death = (f"a worker process died ({_signal_name(_died(workers.values()))}) while it ran, "
+                                 "which stops the whole pool")
                     else:  # hand the free workers their next variants before the driver handles these results
-                        while queue and free:
-                            key, payload = queue.popleft()
-                            slot = free.pop()
-                            running[pool.submit(_call, fn, payload, slot)] = (key, payload, slot, time.perf_counter())
+                        submit()
                     yield from ready
                     if broken:
                         break
@@ -250,7 +272,8 @@ class LocalBackend:
             finally:
                 _stop(pool, running if not finished else {})
 
-    def _alone(self, fn: Callable, key, payload, slot: Slot) -> Iterator[Outcome]:
+    def _alone(self, fn: Callable, key, payload, slot: Slot, death: str) -> Iterator[Outcome]:
+        """Run one item again, alone in a new pool, after ``death`` (how a worker died while it ran)."""
         from concurrent.futures.process import BrokenProcessPool
 
         pool = self._pool(1)
@@ -275,7 +298,24 @@ class LocalBackend:
                 outcome = Outcome(key, "done", future.result(), latency=latency)
         finally:
             _stop(pool, {future: None} if not future.done() else {})
-        yield outcome
+        yield replace(outcome, retries=1, retry_reason=death)
+
+
+def _died(processes) -> int | None:
+    """The exit code of the worker that broke a pool: the pool then terminates the others (SIGTERM), so it is the
+    one that ended otherwise (None when none did, or none could be read)."""
+    processes = list(processes)
+    for p in processes:
+        p.join(timeout=5)
+    # The pool's own thread reaps them too: the one of the two that loses the race for the exit status reads it
+    # a moment later, once the other has stored it.
+    deadline = time.monotonic() + 5
+    codes = [p.exitcode for p in processes]
+    while None in codes and time.monotonic() < deadline:
+        time.sleep(0.01)
+        codes = [p.exitcode for p in processes]
+    died = [c for c in codes if c not in (None, 0, -signal.SIGTERM)]
+    return died[0] if died else None
 
 
 def _package_of(fn: Callable) -> tuple:
@@ -358,34 +398,43 @@ def _driver_node() -> str:
     return ray.get_runtime_context().get_node_id()
 
 
-def _ray_call(fn: Callable, payload: Any, device: str, threads: int | None, driver_node: str) -> Any:
+def _ray_call(fn: Callable, payload: Any, device: str, threads: int | None, driver_node: str,
+              verbose: bool = False) -> Any:
     import ray
 
     local = ray.get_runtime_context().get_node_id() == driver_node
-    return fn(payload, Slot(device, threads, local))
+    return fn(payload, Slot(device, threads, local, verbose))
 
 
 class RayBackend:
     """Each item one Ray task: ``num_gpus`` per task on CUDA (default 1: one variant per GPU), ``num_cpus`` on the
     CPU (default 1). Results stream back as tasks finish (``ray.wait``). A task's exception is an "error"
-    outcome; a worker that dies is retried once by Ray (``max_retries=1``), then "killed". A task on a node that
-    does not share the driver's disk sends its output back through the object store.
+    outcome. A task whose worker dies is submitted once more from here (``max_retries=0`` and a second task,
+    rather than Ray's own retry, which a driver cannot see when it succeeds), then "killed"; either way its
+    outcome records the retry. A task on a node that does not share the driver's disk sends its output back
+    through the object store.
+
+    Unless ``verbose``, Ray logs only errors and the workers' output is not forwarded to the driver's console
+    (the workers start Warp quietly, as ``run`` does).
 
     ``address``: None or "local" starts a local Ray instance (shut down at the end); "auto" joins the cluster
     started on this machine with ``ray start``; anything else is a cluster address (``ray://host:10001``). When
     Ray is already initialised in this process (a test's ``ray.init(num_cpus=2)``), that connection is used."""
 
     def __init__(self, address: str | None = None, device: str = "cpu", gpus_per_task: float | None = None,
-                 cpus_per_task: float | None = None, threads: int | None = None, **init_kwargs):
+                 cpus_per_task: float | None = None, threads: int | None = None, verbose: bool = False,
+                 **init_kwargs):
         ray = import_ray()
         if device not in ("cpu", "cuda"):
             raise WarpVerletError(f"on Ray the device is 'cpu' or 'cuda' (Ray assigns each task its GPU), got {device!r}")
         self.device = device
+        self.verbose = verbose
         self.started = False
         if not ray.is_initialized():
             import logging
 
-            kwargs = {"include_dashboard": False, "logging_level": logging.WARNING, **init_kwargs}
+            kwargs = {"include_dashboard": False, "logging_level": logging.INFO if verbose else logging.ERROR,
+                      "log_to_driver": verbose, **init_kwargs}
             if address not in (None, "local"):
                 kwargs["address"] = address
             ray.init(**kwargs)
@@ -428,17 +477,21 @@ class RayBackend:
         except ImportError:  # pragma: no cover - older Ray
             OutOfMemoryError = WorkerCrashedError  # noqa: N806
         _pickle_by_value(ray, fn)
-        task = ray.remote(_ray_call).options(max_retries=1, **self.resources)
+        task = ray.remote(_ray_call).options(max_retries=0, **self.resources)
         driver_node = _driver_node()
-        pending: dict = {}
+        pending: dict = {}  # ref -> (key, payload, t0, retry_reason: None on the first run)
         queue = iter(items)
         # Enough tasks in flight to keep every slot busy and show an autoscaler the demand, not the whole sweep
         # at once (a sweep of 100 000 variants would otherwise pickle every scene up front).
         window = max(4 * self.parallel, 256)
 
+        def launch(key, payload, t0: float, reason: str | None) -> None:
+            ref = task.remote(fn, payload, self.device, self.threads, driver_node, self.verbose)
+            pending[ref] = (key, payload, t0, reason)
+
         def submit() -> None:
             for key, payload in queue:
-                pending[task.remote(fn, payload, self.device, self.threads, driver_node)] = (key, time.perf_counter())
+                launch(key, payload, time.perf_counter(), None)
                 if len(pending) >= window:
                     return
 
@@ -447,22 +500,27 @@ class RayBackend:
             while pending:
                 ready, _ = ray.wait(list(pending), num_returns=1)
                 for ref in ready:
-                    key, t0 = pending.pop(ref)
+                    key, payload, t0, reason = pending.pop(ref)
+                    retried = {"retries": 1, "retry_reason": reason} if reason is not None else {}
                     try:
                         value = ray.get(ref)
                     except RayTaskError as exc:
                         cause = exc.cause if getattr(exc, "cause", None) is not None else exc
                         status = "interrupted" if isinstance(cause, KeyboardInterrupt) else "error"
                         text = _error_text(cause) if cause is not exc else str(exc).strip().splitlines()[-1]
-                        yield Outcome(key, status, error=text, latency=time.perf_counter() - t0)
+                        yield Outcome(key, status, error=text, latency=time.perf_counter() - t0, **retried)
                     except (WorkerCrashedError, OutOfMemoryError) as exc:
-                        yield Outcome(key, "killed", error=f"its Ray worker died, and again when retried: "
-                                      f"{type(exc).__name__}: {str(exc).strip().splitlines()[0]}",
-                                      latency=time.perf_counter() - t0)
+                        died = f"{type(exc).__name__}: {str(exc).strip().splitlines()[0]}"
+                        if reason is None:  # once more, in a new worker
+                            launch(key, payload, t0, f"its Ray worker died ({died})")
+                            continue
+                        yield Outcome(key, "killed", error=f"its Ray worker died, and again when retried: {died}",
+                                      latency=time.perf_counter() - t0, **retried)
                     except TaskCancelledError:
-                        yield Outcome(key, "interrupted", error="cancelled", latency=time.perf_counter() - t0)
+                        yield Outcome(key, "interrupted", error="cancelled", latency=time.perf_counter() - t0,
+                                      **retried)
                     else:
-                        yield Outcome(key, "done", value, latency=time.perf_counter() - t0)
+                        yield Outcome(key, "done", value, latency=time.perf_counter() - t0, **retried)
                 submit()
         finally:
             for ref in pending:  # closed early (Ctrl-C): stop what is queued and running
@@ -489,15 +547,17 @@ class RayBackend:
 
 
 def make_backend(device: str | None = None, workers: int | None = None, threads: int | None = None,
-                 ray: str | None = None, gpus_per_task: float | None = None, cpus_per_task: float | None = None):
-    """The backend the command line asks for: Ray when ``ray`` is given (None: local pool)."""
+                 ray: str | None = None, gpus_per_task: float | None = None, cpus_per_task: float | None = None,
+                 verbose: bool = False):
+    """The backend the command line asks for: Ray when ``ray`` is given (None: local pool). ``verbose``: Warp's
+    and Ray's start-up messages are shown (``sweep -v``)."""
     if ray is not None:
         if workers is not None:
             raise WarpVerletError("--workers is for the local pool; on Ray, set --cpus-per-variant or "
                                   "--gpus-per-variant and let Ray place the tasks")
         if device is None:
-            device = "cuda" if cuda_devices() else "cpu"
-        return RayBackend(ray, device, gpus_per_task, cpus_per_task, threads)
+            device = "cuda" if cuda_devices(verbose) else "cpu"
+        return RayBackend(ray, device, gpus_per_task, cpus_per_task, threads, verbose=verbose)
     if gpus_per_task is not None or cpus_per_task is not None:
         raise WarpVerletError("--gpus-per-variant and --cpus-per-variant are Ray's; the local pool takes --workers")
-    return LocalBackend(device_slots(device, workers, threads))
+    return LocalBackend(device_slots(device, workers, threads, verbose))

@@ -7,8 +7,10 @@ directory instead (with a note), and when an explicitly chosen one (``WARP_CACHE
 ``warp.config.kernel_cache_dir``) is not writable it raises one clear :class:`WarpVerletError`.
 
 On a machine without an NVIDIA driver, Warp's native library prints "Warp CUDA warning: Could not find or load
-the NVIDIA CUDA driver" to the process's stderr when it starts. On a CPU run that is noise:
-:func:`start_warp` filters that one line out (the command line shows it again with ``-v``).
+the NVIDIA CUDA driver" to the process's stderr when it starts. On a CPU run that is noise, and so it is in each
+worker of a sweep: :func:`start_warp` filters that one line out (the command line shows it again with ``-v``).
+On a run that asked for CUDA it is the reason the run cannot go on, and it becomes one ``note:`` line in the
+project's words before the error that says no CUDA device is available.
 """
 
 from __future__ import annotations
@@ -81,25 +83,27 @@ def ensure_kernel_cache(note: Callable[[str], None] | None = None) -> None:
 
 
 @contextlib.contextmanager
-def _native_stderr_without(text: str) -> Iterator[None]:
+def _native_stderr_without(text: str) -> Iterator[list[str]]:
     """Capture what native code writes to file descriptor 2 meanwhile, and pass it on without the lines that
-    contain ``text``."""
+    contain ``text``; the list it gives holds those lines once the block is over."""
+    dropped: list[str] = []
     try:
         sys.stderr.flush()
         saved = os.dup(2)
     except (OSError, ValueError, AttributeError):  # no usable fd 2: nothing to filter
-        yield
+        yield dropped
         return
     with tempfile.TemporaryFile() as capture:
         os.dup2(capture.fileno(), 2)
         try:
-            yield
+            yield dropped
         finally:
             os.dup2(saved, 2)
             os.close(saved)
             capture.seek(0)
-            kept = [line for line in capture.read().decode("utf-8", "replace").splitlines(keepends=True)
-                    if text not in line]
+            kept = []
+            for line in capture.read().decode("utf-8", "replace").splitlines(keepends=True):
+                (dropped if text in line else kept).append(line)
             if kept:
                 sys.stderr.write("".join(kept))
                 sys.stderr.flush()
@@ -107,15 +111,18 @@ def _native_stderr_without(text: str) -> Iterator[None]:
 
 def start_warp(verbose: bool = False, cpu: bool = False, note: Callable[[str], None] | None = None) -> None:
     """Initialise Warp for a run: quiet unless ``verbose`` (no banner, no per-module load times), a writable
-    kernel cache, and on a CPU run (``cpu``) no CUDA-driver warning unless ``verbose``."""
+    kernel cache, and no CUDA-driver warning unless ``verbose``: on a CPU run (``cpu``, or the default device,
+    which falls back to the CPU) it is dropped, on a run that asked for CUDA it is said as a note."""
     import warp as wp
 
     if not verbose:
         wp.config.quiet = True
         wp.config.log_level = wp.LOG_WARNING
     ensure_kernel_cache(note)
-    if verbose or not cpu:
+    if verbose:
         wp.init()
         return
-    with _native_stderr_without(CUDA_DRIVER_WARNING):
+    with _native_stderr_without(CUDA_DRIVER_WARNING) as dropped:
         wp.init()
+    if dropped and not cpu and note is not None:
+        note("Warp could not find or load the NVIDIA CUDA driver, so no CUDA device can be used")
