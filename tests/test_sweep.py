@@ -141,6 +141,7 @@ def test_a_worker_that_dies_is_recorded_as_killed_and_the_rest_go_on():
         assert outcomes[k].value["device"] == "cpu"
 
 
+@pytest.mark.slow
 def test_every_item_beside_a_dead_worker_is_run_again_and_says_so(tmp_path):
     # "killer" kills its worker. The pool notices a dead worker when it next hears from one ("quick" finishing
     # after the death), and then fails everything still running: "slow", which runs on for 3 s after "quick"
@@ -170,6 +171,7 @@ def test_every_item_beside_a_dead_worker_is_run_again_and_says_so(tmp_path):
     assert outcomes["once"].retries == 1 and outcomes["once"].retry_reason.startswith(died)
 
 
+@pytest.mark.slow
 def test_a_variant_whose_worker_is_killed_is_run_again_and_recorded(tmp_path, capsys):
     """The out-of-memory killer's SIGKILL from outside, on the one worker of a real sweep: the variant runs again and
     succeeds, and the console, sweep.csv, sweep.md and the sidecar all say that it was run again and why."""
@@ -287,6 +289,7 @@ def test_cli_sweep_runs_resumes_and_reports(tmp_path, capsys):
     assert "000_gravity=0_-9.81_0" in listing and "valid sweep, 3 variants" in listing
 
 
+@pytest.mark.slow
 def test_warps_start_up_messages_come_from_the_workers_only_with_verbose(tmp_path):
     """Each worker starts Warp as `run` does: no banner, no module-load lines, and no CUDA-driver warning on the CPU,
     unless -v. The warning is expected with -v where Warp, started bare, prints it on this machine (no driver)."""
@@ -310,6 +313,7 @@ def test_warps_start_up_messages_come_from_the_workers_only_with_verbose(tmp_pat
     assert (loud.count(CUDA_DRIVER_WARNING) >= 1) == no_driver, loud
 
 
+@pytest.mark.slow
 def test_sweep_frames_overrides_every_variant_and_is_part_of_resume(tmp_path, capsys):
     path = write_sweep(tmp_path)
     out = tmp_path / "out"
