@@ -17,7 +17,8 @@ numpy rounds them) and takes the root: an addition, a square root and a rounding
 fused multiply-add to change a bit. The projection is ``stick_correction`` (kernels/relax.py), the explicit
 kernels' own arithmetic, so the two paths give the same positions bit for bit.
 
-Each kernel is launched over (rows of anchors, anchors per row), so that no thread divides to find its row.
+Each kernel runs a power of two of threads per row of anchors, so that a thread finds its row and column with a
+shift and a mask, not a division (the threads past the row's last anchor return at once).
 """
 
 from typing import Any
@@ -49,6 +50,7 @@ class GridColour:
     first_particle: int
     grid_cols: int  # particles per row
     cols: int  # anchors per row in this colour
+    col_bits: int  # threads per row of anchors: 2^col_bits >= cols (the surplus threads return at once)
     row_first: int
     col_first: int
     row_q: int
@@ -91,9 +93,13 @@ def relax_grid_colour(
     first_row: int,
 ):
     """Gauss-Seidel over one colour of implicit grid sticks (relax_colour with ends and rest computed); a
-    thread per anchor, launched over (rows of anchors from ``first_row``, anchors per row)."""
-    kr, kc = wp.tid()
-    i, j, rest = colour_stick(g, first_row + kr, kc, col_rest, row_rest, col_sq, row_sq)
+    thread per anchor, 2^col_bits threads per row of anchors from ``first_row``."""
+    t = wp.tid()
+    kr = first_row + (t >> g.col_bits)
+    kc = t & ((1 << g.col_bits) - 1)
+    if kc >= g.cols:
+        return
+    i, j, rest = colour_stick(g, kr, kc, col_rest, row_rest, col_sq, row_sq)
     wi = inv_mass[i]
     wj = inv_mass[j]
     xi = x[i]
@@ -121,9 +127,13 @@ def relax_grid_colour_compliant(
     """XPBD over one colour of implicit grid sticks (relax_colour_compliant with ends and rest computed, one
     compliance for the colour's family); ``tension`` holds the soft colours' sticks from ``tension_first``, a
     row of anchors after another."""
-    kr, kc = wp.tid()
-    i, j, rest = colour_stick(g, first_row + kr, kc, col_rest, row_rest, col_sq, row_sq)
-    k = tension_first + (first_row + kr) * g.cols + kc
+    t = wp.tid()
+    kr = first_row + (t >> g.col_bits)
+    kc = t & ((1 << g.col_bits) - 1)
+    if kc >= g.cols:
+        return
+    i, j, rest = colour_stick(g, kr, kc, col_rest, row_rest, col_sq, row_sq)
+    k = tension_first + kr * g.cols + kc
     wi = inv_mass[i]
     wj = inv_mass[j]
     xi = x[i]
@@ -154,19 +164,27 @@ def pull_grid_tethers(
     pin_row_sq: wp.array2d(dtype=wp.float64),
     tethers: int,
     scale: wp.float64,
+    col_bits: int,
     first_row: int,
 ):
-    """pull_tethers for the free particle (first_row + row, column) of a grid cloth (a thread per particle,
-    launched over rows from ``first_row`` and columns), whose tethers are computed: its
+    """pull_tethers for a free particle of a grid cloth (2^col_bits threads per row from ``first_row``, the
+    surplus returning at once), whose tethers are computed: its
     ``tethers`` nearest pins (ties to the lower pin, as warp_verlet/tethers.nearest_pins chooses them) at
     their rest-pose distances times ``scale``, from the squared column and row differences to each pin
     (pin_col_sq[pin, column], pin_row_sq[pin, row]), rounded to float32 as the tether table is."""
-    r, c = wp.tid()
-    r = r + first_row
+    t = wp.tid()
+    r = first_row + (t >> col_bits)
+    c = t & ((1 << col_bits) - 1)
+    if c >= grid_cols:
+        return
     p = first_particle + r * grid_cols + c
     if inv_mass[p] == 0.0:
         return
     xp = x[p]
+    # Each pin's rest distance once (MAX_GRID_TETHER_PINS at most), then the nearest ``tethers`` in order.
+    distance = wp.vector(wp.float64(0.0), length=8)
+    for n in range(pins.shape[0]):
+        distance[n] = wp.sqrt(pin_col_sq[n, c] + pin_row_sq[n, r])
     last_distance = wp.float64(-1.0)
     last_pin = int(-1)
     for _k in range(tethers):
@@ -174,19 +192,18 @@ def pull_grid_tethers(
         best = int(-1)
         best_distance = wp.float64(0.0)
         for n in range(pins.shape[0]):
-            rest_distance = wp.sqrt(pin_col_sq[n, c] + pin_row_sq[n, r])
-            later = rest_distance > last_distance or (rest_distance == last_distance and n > last_pin)
-            if later and (best < 0 or rest_distance < best_distance):
+            later = distance[n] > last_distance or (distance[n] == last_distance and n > last_pin)
+            if later and (best < 0 or distance[n] < best_distance):
                 best = n
-                best_distance = rest_distance
+                best_distance = distance[n]
         last_distance = best_distance
         last_pin = best
         a = pins[best]
         d = xp - x[a]
-        distance = wp.length(d)
-        limit = type(distance)(wp.float32(best_distance * scale))
-        if distance > limit:
-            xp = x[a] + d * (limit / distance)
+        length = wp.length(d)
+        limit = type(length)(wp.float32(best_distance * scale))
+        if length > limit:
+            xp = x[a] + d * (limit / length)
     x[p] = xp
 
 

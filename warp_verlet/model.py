@@ -96,6 +96,11 @@ def grid_axes(topology: ClothTopology) -> tuple[np.ndarray, np.ndarray]:
     return x, row
 
 
+def power_of_two_bits(n: int) -> int:
+    """The least b with 2^b >= n: the implicit grid kernels run 2^b threads per row of n."""
+    return max(int(n) - 1, 0).bit_length()
+
+
 def squared_steps(axis: np.ndarray, step: int) -> np.ndarray:
     """(axis[k + step] - axis[k])^2 in float64, rounded as numpy rounds the explicit rest lengths' squares."""
     return np.square(axis[step:] - axis[:-step]) if len(axis) > step else np.zeros(0)
@@ -166,7 +171,7 @@ class GridDevice:
                 if n_rows * n_cols == 0:
                     continue
                 g = GridColour()
-                g.first_particle, g.grid_cols, g.cols = slot.first, cols, n_cols
+                g.first_particle, g.grid_cols, g.cols, g.col_bits = slot.first, cols, n_cols, power_of_two_bits(n_cols)
                 g.row_first, g.col_first = 0, col_first
                 g.row_q, g.col_q = (q, 0) if parity_axis == "row" else (0, q)
                 g.parity, g.dr, g.dc = parity, dr, dc
@@ -191,6 +196,7 @@ class GridTethersDevice:
         pinned = np.asarray(top.pinned, np.int64)
         pin_row, pin_col = pinned // top.cols, pinned % top.cols
         self.first_particle, self.rows, self.cols = slot.first, top.rows, top.cols
+        self.col_bits = power_of_two_bits(top.cols)
         self.tethers = min(tethers, len(pinned))
         self.scale = float(spec.tether_scale)
         self.pins = wp.array((pinned + slot.first).astype(np.int32), dtype=int, device=device)

@@ -463,9 +463,9 @@ class GridTethers:
         t, x = model.grid_tethers, state.particle_q
 
         def make(f, rows):
-            return recorded(pull_grid_tethers, (rows, t.cols), [x, model.inv_mass, t.first_particle, t.cols, t.pins,
-                                                                t.pin_col_sq, t.pin_row_sq, t.tethers,
-                                                                wp.float64(t.scale), f])
+            return recorded(pull_grid_tethers, rows << t.col_bits,
+                            [x, model.inv_mass, t.first_particle, t.cols, t.pins, t.pin_col_sq, t.pin_row_sq, t.tethers,
+                             wp.float64(t.scale), t.col_bits, f])
         return Bound(None, [split_tasks(make, 0, t.rows, solver.threads)])
 
 
@@ -495,12 +495,13 @@ class GridSticks:
             tables = [colour.col_rest, colour.row_rest, colour.col_sq, colour.row_sq]
             if colour.compliance > 0.0:
                 def make(f, rows, colour=colour, tables=tables):
-                    return recorded(relax_grid_colour_compliant, (rows, colour.cols),
+                    return recorded(relax_grid_colour_compliant, rows << colour.layout.col_bits,
                                     [x, model.inv_mass, colour.layout, *tables, colour.compliance, 0.0, f,
                                      colour.tension_first], [tension])
             else:
                 def make(f, rows, colour=colour, tables=tables):
-                    return recorded(relax_grid_colour, (rows, colour.cols), [x, model.inv_mass, colour.layout, *tables, f])
+                    return recorded(relax_grid_colour, rows << colour.layout.col_bits,
+                                    [x, model.inv_mass, colour.layout, *tables, f])
             phase = split_tasks(make, 0, colour.rows, threads)  # the CPU thread team cuts a colour by rows
             if colour.compliance > 0.0:
                 soft_launches += [task.launch for task in phase if task is not None]
