@@ -34,11 +34,11 @@ MAX_PNG_PANELS = 4
 MAX_GIF_FRAMES = 120
 MAX_GIF_FPS = 50.0  # GIF delays are in 1/100 s and viewers slow down anything shorter than 2/100 s
 TITLE_ROOM_PX, CAPTION_ROOM_PX = 26, 14  # room above each panel for its title, below them for the file name
-# Memory per pixel of the image while one image is drawn and written: Mitsuba's film (R, G, B, A, the albedo's
-# three channels and the filter weight, as float32: 32 bytes), the float64 copies the shading works on (about
-# 80), the 8-bit panel and the canvas (6), and Pillow's palette image and the encoder's working copies of a GIF
-# frame (about 5). GIF frames are written one at a time, so this does not grow with the frame count.
-BYTES_PER_PIXEL = 124
+# Memory per pixel of the image while one image is drawn and written: Mitsuba's film (R, G, B, A and the filter
+# weight, as float32: 20 bytes), the two passes' float64 copies (R, G, B, A: 64) and the sum and its sRGB
+# conversion (about 30), the 8-bit panel and the canvas (6), and Pillow's palette image and the encoder's working
+# copies of a GIF frame (about 5). GIF frames are written one at a time, so this does not grow with the frame count.
+BYTES_PER_PIXEL = 125
 
 
 # ------------------------------------------------------------------------------------- frame selection
