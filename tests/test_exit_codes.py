@@ -87,6 +87,7 @@ def closed_stdout_run(args: list[str], cwd) -> subprocess.CompletedProcess:
         os.close(write)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("args, code", [
     (["validate", "small.toml"], STDOUT_CLOSED),
     (["run", "small.toml", "--device", "cpu", "-q", "--frames", "1"], STDOUT_CLOSED),

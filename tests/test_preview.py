@@ -363,6 +363,7 @@ def test_a_piece_torn_away_is_framed_without_the_strip_left_at_the_pins():
     assert every.min() >= 0 and every[:, 0].max() <= width and every[:, 1].max() <= height
 
 
+@pytest.mark.slow
 def test_a_fine_grid_has_a_smooth_hem():
     # A 256 x 256 grid whose bottom hem waves 12 times across: drawn as the old 64 x 64 coarse grid, the hem
     # was a chord through every 4th point, off the curve by several pixels; now it follows the curve.
@@ -395,6 +396,7 @@ def test_a_fine_grid_has_a_smooth_hem():
     assert np.abs(errors).max() < 1.0, np.abs(errors).max()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("n", [48, 256])
 def test_a_cloth_shows_no_specks_of_background(n):
     # Rays through the shared edges of two triangles can miss both: a speck of background in the middle of
@@ -414,6 +416,7 @@ def test_a_cloth_shows_no_specks_of_background(n):
     assert np.abs(blue - around)[core].max() <= 8
 
 
+@pytest.mark.slow
 def test_a_large_grid_is_drawn_at_about_one_quad_per_pixel():
     n = 1024
     faces, points = grid_faces(n + 1, n + 1), grid_points(n + 1, n + 1, sag=0.2)

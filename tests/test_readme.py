@@ -70,6 +70,7 @@ def test_the_readme_quick_start_is_the_command_the_summary_comes_from():
     assert summary_tool.quick_start_command() in shell_lines
 
 
+@pytest.mark.slow
 def test_the_readme_summary_is_a_real_run_of_the_quick_start(tmp_path):
     shown = summary_tool.parse_summary(summary_tool.readme_summary(readme_text()))
     assert shown.get("device", "").startswith("cpu"), "the README's sample must be a CPU run: run " \
@@ -94,6 +95,7 @@ def test_the_comparison_catches_a_changed_line():
     assert not compare(shown, dict(shown, **{STRETCH: "max 3.7341e-03, rms 2.27e-04 (structural sticks, last frame)"}))
 
 
+@pytest.mark.slow
 def test_the_readme_python_example_runs():
     blocks = re.findall(r"```python\n(.*?)```", readme_text(), re.S)
     assert blocks, "the README has no Python example"
@@ -102,6 +104,7 @@ def test_the_readme_python_example_runs():
     assert re.search(r"StretchStats\(max=[-+.\deE]+, rms=[-+.\deE]+\)", done.stdout), done.stdout
 
 
+@pytest.mark.slow
 def test_the_readme_torn_counts_are_the_runs(tmp_path):
     """Each "(N sticks torn)" under a shipped scene's picture is what `warp-verlet run scenes/NAME.toml --device cpu
     -q` reports, as the README says."""

@@ -131,6 +131,7 @@ def test_one_particle_pinned_two_ways_reaches_the_gauss_seidel_fixed_point(devic
 # ---------------------------------------------------------------------------------------------- long run and divergence
 
 
+@pytest.mark.slow
 def test_long_undamped_run_gains_no_energy(device):
     assert_all_pass(cases.long_run(device))
 
