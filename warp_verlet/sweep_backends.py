@@ -470,12 +470,14 @@ class RayBackend:
 
     def run(self, fn: Callable, items: Iterable[tuple[Any, Any]]) -> Iterator[Outcome]:
         ray = import_ray()
-        from ray.exceptions import RayTaskError, TaskCancelledError, WorkerCrashedError
+        import ray.exceptions as ray_errors
+        from ray.exceptions import RayTaskError, TaskCancelledError
 
-        try:
-            from ray.exceptions import OutOfMemoryError
-        except ImportError:  # pragma: no cover - older Ray
-            OutOfMemoryError = WorkerCrashedError  # noqa: N806
+        # What the death of a task's worker (or of its node, or of the result it had stored there) looks like
+        # here: the task runs once more, then it is "killed".
+        died_errors = tuple(getattr(ray_errors, name) for name in
+                            ("WorkerCrashedError", "OutOfMemoryError", "NodeDiedError", "ObjectLostError")
+                            if hasattr(ray_errors, name))
         _pickle_by_value(ray, fn)
         task = ray.remote(_ray_call).options(max_retries=0, **self.resources)
         driver_node = _driver_node()
@@ -509,7 +511,7 @@ class RayBackend:
                         status = "interrupted" if isinstance(cause, KeyboardInterrupt) else "error"
                         text = _error_text(cause) if cause is not exc else str(exc).strip().splitlines()[-1]
                         yield Outcome(key, status, error=text, latency=time.perf_counter() - t0, **retried)
-                    except (WorkerCrashedError, OutOfMemoryError) as exc:
+                    except died_errors as exc:
                         died = f"{type(exc).__name__}: {str(exc).strip().splitlines()[0]}"
                         if reason is None:  # once more, in a new worker
                             launch(key, payload, t0, f"its Ray worker died ({died})")
