@@ -26,7 +26,7 @@ from .memory import available_host_bytes
 # this module.
 from .cache_reader import (FrameGeometry, Polygons, PointCache, PreviewError, grid_shape,  # noqa: F401
                            open_cache, read_frame, visible_polygons)
-from .preview_render import clip_plane, render_frame  # noqa: F401  (clip_plane: re-exported)
+from .preview_render import render_frame
 
 SUFFIXES = (".png", ".gif")
 DEFAULT_SIZE = {".png": (800, 800), ".gif": (480, 480)}  # pixels; a GIF is smaller because it has many frames
