@@ -44,7 +44,7 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
     quiet_warp()
     substeps, iterations = (int(v) for v in args.budget.split("x"))
-    for sticks in ("explicit", "implicit"):
+    for sticks in ("explicit", "auto", "implicit"):
         times, first = kernel_times(args.size, substeps, iterations, args.device, sticks)
         print(f"{args.size}^2 {args.budget} {sticks}: {sum(t for t, _ in times.values()):.3f} ms of kernels per frame")
         for name, (ms, n) in sorted(times.items(), key=lambda kv: -kv[1][0]):

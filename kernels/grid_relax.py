@@ -181,21 +181,19 @@ def pull_grid_tethers(
     if inv_mass[p] == 0.0:
         return
     xp = x[p]
-    # Each pin's rest distance once (MAX_GRID_TETHER_PINS at most), then the nearest ``tethers`` in order.
-    distance = wp.vector(wp.float64(0.0), length=8)
-    for n in range(pins.shape[0]):
-        distance[n] = wp.sqrt(pin_col_sq[n, c] + pin_row_sq[n, r])
     last_distance = wp.float64(-1.0)
     last_pin = int(-1)
     for _k in range(tethers):
-        # The next pin in (distance, index) order after the last one taken.
+        # The next pin in (distance, index) order after the last one taken. The distances are recomputed in
+        # each round: a local array of them measured slower (it lives in local memory).
         best = int(-1)
         best_distance = wp.float64(0.0)
         for n in range(pins.shape[0]):
-            later = distance[n] > last_distance or (distance[n] == last_distance and n > last_pin)
-            if later and (best < 0 or distance[n] < best_distance):
+            rest_distance = wp.sqrt(pin_col_sq[n, c] + pin_row_sq[n, r])
+            later = rest_distance > last_distance or (rest_distance == last_distance and n > last_pin)
+            if later and (best < 0 or rest_distance < best_distance):
                 best = n
-                best_distance = distance[n]
+                best_distance = rest_distance
         last_distance = best_distance
         last_pin = best
         a = pins[best]
