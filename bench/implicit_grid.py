@@ -158,7 +158,8 @@ def main(argv=None) -> int:
     for n in args.sizes:
         rows += budget_rows(str(device), [n], parse(args.large_budgets if n >= 2048 else args.budgets), args.repeats,
                             copy_gbs)
-    title = f"Hanging sheet with tethers at 1 s, stick and tether arrays ("explicit") against implicit grid sticks with the tether table ("auto" on a GPU) and with implicit tethers ("implicit"): {machine(device)}"
+    title = ("Hanging sheet with tethers at 1 s, stick and tether arrays (explicit) against implicit grid sticks "
+             f"with the tether table (auto, on a GPU) and with implicit tethers (implicit): {machine(device)}")
     if copy_gbs:
         title += f"; device copy {copy_gbs:.0f} GB/s (read + write)"
     write_table(rows, args.out, "implicit-grid", title)
