@@ -4,17 +4,17 @@ in one run on one device.
     python -m bench.implicit_grid --device cuda --out bench/results/implicit_grid
     python -m bench.implicit_grid --device cpu --sizes 64 --budgets 4x8 --target-size 0   # a smoke run
 
-The scene is the benchmark's hanging sheet (bench.common.hanging_sheet: 1 m, pinned at its top corners, three
-rigid stick families) with tethers, n x n particles. For each size, each sticks' form ("explicit": every stick's
-ends, rest length and weight, and every tether, read from arrays; "auto": the sticks computed from the grid,
-kernels/grid_relax.py, the tethers from their table; "implicit": both computed) and each budget S x K (substeps x sweeps), it runs 60 frames: frames 1-2 are a warm-up
-(compilation, graph capture), frames 3-60 are timed in ``--repeats`` batches and the median batch gives
-ms/frame (the spread is half the range). Beside it: G stick projections per second, the RMS and max structural
-stretch at frame 60 (the two forms must agree bit for bit, so their errors are equal; "same" says whether the
-positions are), and the bandwidth the explicit form's data needs per frame (RELAX_BYTES_PER_PROJECTION per stick
-projection, as bench.throughput counts it, plus the tether table and the positions per sweep) over the measured
-time, next to the device-to-device copy rate measured in the same run: an implicit row above 100% moves less
-data than that, from cache.
+The scene is the benchmark's hanging sheet (bench.common.hanging_sheet: 1 m, pinned at its top corners, three rigid
+stick families) with tethers, n x n particles. For each size, each sticks' form ("explicit": every stick's ends,
+rest length and weight, and every tether, read from arrays; "auto": the sticks computed from the grid,
+kernels/grid_relax.py, the tethers from their table; "implicit": both computed) and each budget S x K (substeps x
+sweeps), it runs 60 frames: frames 1-2 are a warm-up (compilation, graph capture), frames 3-60 are timed in
+``--repeats`` batches and the median batch gives ms/frame (the spread is half the range). Beside it: G stick
+projections per second, the RMS and max structural stretch at frame 60 (the three forms must agree bit for bit, so
+their errors are equal; "same positions" says whether they do), and the bandwidth the explicit form's data needs
+per frame (RELAX_BYTES_PER_PROJECTION per stick projection, as bench.throughput counts it, plus the tether table
+and the positions per sweep) over the measured time, next to the device-to-device copy rate measured in the same
+run: an implicit row above 100% moves less data than that, from cache.
 
 The budget table runs ``target_stretch`` at ``--target-size`` with 1 sweep per substep: 20 frames to settle,
 then frames timed as above; and then the fixed budget it settled on (the substeps it chose most in the timed

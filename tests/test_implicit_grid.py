@@ -116,6 +116,23 @@ def test_the_rule_picks_implicit_sticks_for_one_grid_cloth_that_cannot_tear(devi
         Simulator(grid, device, sticks="lazy")
 
 
+def test_auto_on_a_gpu_computes_the_sticks_and_keeps_the_tether_table(monkeypatch):
+    """What "auto" does on a GPU, on the CPU: the rule's device test answered as a GPU would."""
+    import warp_verlet.model as model_module
+
+    real = model_module.stick_form
+    monkeypatch.setattr(model_module, "stick_form", lambda sticks, colouring, device: real(
+        sticks, colouring, type("GPU", (), {"is_cpu": False})()))
+    scene = make_scene({"substeps": 2}, resolution=[7, 9], pins=["top-left", "top-right"])
+    sim = Simulator(scene, "cpu")
+    assert sim.constraint_sets == ("tethers", "grid sticks")
+    assert hasattr(sim.model, "tether_pin") and not hasattr(sim.model, "stick_ends")
+    for _ in range(3):
+        sim.step_frame()
+    explicit, _ = run_frames(scene, "cpu", "explicit", frames=3)
+    np.testing.assert_array_equal(sim.positions(), explicit)
+
+
 def test_implicit_sticks_allocate_no_stick_arrays_and_issue_one_launch_per_colour(launches):
     k = 3
     scene = make_scene({"iterations": k}, resolution=[8, 9], sticks=["structural", "shear", "bend"],

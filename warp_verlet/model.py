@@ -153,7 +153,8 @@ class GridDevice:
         # sqrt(d^2) rounded to float32: what np.linalg.norm gives the explicit rest length of a one-axis stick.
         rest = {k: wp.array(np.sqrt(v).astype(np.float32), dtype=float, device=device) for k, v in squares.items()}
         self.col_sq1, self.row_sq1 = sq["col1"], sq["row1"]  # shear sticks (and the budget's stretch)
-        self.col_rest1, self.col_rest2, self.row_rest1, self.row_rest2 = (rest[k] for k in ("col1", "col2", "row1", "row2"))
+        self.col_rest1, self.col_rest2 = rest["col1"], rest["col2"]
+        self.row_rest1, self.row_rest2 = rest["row1"], rest["row2"]
         colours, soft = [], 0
         for cls in sorted(GRID_DIRECTIONS):
             family = FAMILY_OF_CLASS[cls]
@@ -235,6 +236,7 @@ class Model:
         self.solver = scene.simulation.solver
         need = Need.of(scene, sticks)
         self.precision = need.precision
+        self.stick_request = sticks  # what Need.of was asked: the solver's Need must be asked the same
         self.sticks_form = "implicit" if need.implicit_grid else "explicit"
         double = self.precision == "float64"
         self.position_dtype = wp.vec3d if double else wp.vec3

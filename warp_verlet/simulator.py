@@ -167,7 +167,7 @@ class Simulator:
         with wp.ScopedDevice(self.device):
             self.model = Model(scene, self.device, colouring, sticks)
             self.state = State(self.model)
-        self._sticks = self.model.sticks_form
+        self._sticks = self.model.stick_request
         self.solver = VerletSolver(self.model, self.settings, Need.of(scene, self._sticks), threads)
         self.threads = self.solver.threads
         self.min_dt = self.solver.min_dt

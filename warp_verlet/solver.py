@@ -37,8 +37,11 @@ class VerletSolver:
         if need.precision != model.precision:
             raise ArgumentError(f"need.precision = {need.precision!r} but the model's positions are {model.precision}")
         self.precision = model.precision
-        if need.implicit_grid != (model.sticks_form == "implicit"):
-            raise ArgumentError(f"need.implicit_grid = {need.implicit_grid} but the model's sticks are {model.sticks_form}")
+        implicit_tethers = hasattr(model, "grid_tethers")
+        if need.implicit_grid != (model.sticks_form == "implicit") or bool(need.grid_pins) != implicit_tethers:
+            raise ArgumentError(f"need (implicit sticks {need.implicit_grid}, implicit tethers {bool(need.grid_pins)}) "
+                                f"does not match the model's {model.sticks_form} sticks: ask Need.of with the model's "
+                                "stick_request")
         accel = np.add(settings.gravity, settings.wind)
         self.accel = model.position_dtype(*accel)  # in the positions' type, as every factor of the step
         self.accel_magnitude = acceleration(settings)
