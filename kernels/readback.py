@@ -65,16 +65,20 @@ def squared_stretch(a: Any, b: Any, rest: float):
 
 @wp.kernel
 def grid_row_stretch(x: wp.array(dtype=Any), first_particle: int, rows: int, cols: int,
-                     col_sq: wp.array(dtype=wp.float64), row_sq: wp.array(dtype=wp.float64),
+                     col_sq: wp.array(dtype=wp.float64), row_sq: wp.array(dtype=wp.float64), chunk: int,
                      sums: wp.array(dtype=wp.float64), counts: wp.array(dtype=int)):
-    """Row r of a grid cloth that cannot tear: the squared stretch of its structural sticks, (r, c)-(r, c+1) and
-    (r, c)-(r+1, c), summed in column order (a fixed order: the same sum on every run), rest lengths from the
-    implicit sticks' squared steps (kernels/grid_relax.py)."""
-    r = wp.tid()
+    """Columns k * chunk .. (k + 1) * chunk - 1 of row r of a grid cloth that cannot tear (thread r * chunks per
+    row + k): the squared stretch of their structural sticks, (r, c)-(r, c+1) and (r, c)-(r+1, c), summed in
+    column order (a fixed order: the same sum on every run), rest lengths from the implicit sticks' squared
+    steps (kernels/grid_relax.py)."""
+    t = wp.tid()
+    per_row = (cols + chunk - 1) // chunk
+    r = t // per_row
+    first = (t - r * per_row) * chunk
     total = wp.float64(0.0)
     n = int(0)
     row = first_particle + r * cols
-    for c in range(cols):
+    for c in range(first, wp.min(first + chunk, cols)):
         a = x[row + c]
         if c + 1 < cols:
             total += squared_stretch(a, x[row + c + 1], wp.float32(wp.sqrt(col_sq[c])))
@@ -82,8 +86,8 @@ def grid_row_stretch(x: wp.array(dtype=Any), first_particle: int, rows: int, col
         if r + 1 < rows:
             total += squared_stretch(a, x[row + cols + c], wp.float32(wp.sqrt(row_sq[r])))
             n += 1
-    sums[r] = total
-    counts[r] = n
+    sums[t] = total
+    counts[t] = n
 
 
 @wp.kernel

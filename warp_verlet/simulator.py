@@ -69,14 +69,15 @@ class StretchStats:
 
 class StretchReadback:
     """The RMS structural stretch for the target_stretch budget, reduced on the device in a fixed order
-    (kernels/readback.py: per grid row, or per chunk of structural sticks, then partial sums of partial sums),
+    (kernels/readback.py: per piece of a grid row, or per chunk of structural sticks, then sums of partial sums),
     so that one float64 crosses to the host and the same positions always give the same number. On CUDA the
     number is copied into pinned host memory behind an event and read at the next frame boundary, a frame late,
     so that the host never waits for the device; on the CPU the launches are synchronous and it is read at once.
     A grid with implicit sticks needs no arrays but the partial sums; other cloths upload their structural
     sticks once."""
 
-    STICKS_PER_THREAD = 256
+    STICKS_PER_THREAD = 64
+    COLUMNS_PER_THREAD = 32  # of a grid row: enough threads that a 1024^2 sum is not one long loop per row
     SUMS_PER_THREAD = 32
 
     def __init__(self, model: Model, device):
@@ -87,9 +88,10 @@ class StretchReadback:
         with wp.ScopedDevice(device):
             if model.sticks_form == "implicit":
                 top, g = model.cloths[0].topology, model.grid
-                count = top.rows
+                chunk = self.COLUMNS_PER_THREAD
+                count = top.rows * -(-top.cols // chunk)
                 kernel = instance(grid_row_stretch, model.position_dtype)
-                self._inputs = [model.cloths[0].first, top.rows, top.cols, g.col_sq1, g.row_sq1]
+                self._inputs = [model.cloths[0].first, top.rows, top.cols, g.col_sq1, g.row_sq1, chunk]
                 self._weight_at = None
             else:
                 chosen = np.flatnonzero(model.structural)
