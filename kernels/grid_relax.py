@@ -61,6 +61,20 @@ class GridColour:
     use_col: int
     use_row: int
     col_shift: int
+    uniform_mass: int  # 1: every free particle weighs free_weight and the pins (the kernel's ``pins``) nothing
+    free_weight: float
+
+
+@wp.func
+def particle_weight(g: GridColour, p: int, inv_mass: wp.array(dtype=float), pins: wp.array(dtype=int)):
+    """inv_mass[p], found without reading it where the cloth's free particles share one inverse mass: 0 for one
+    of the few pins, else the free particles' (the same float32 the array holds)."""
+    if g.uniform_mass == 0:
+        return inv_mass[p]
+    for n in range(pins.shape[0]):
+        if pins[n] == p:
+            return float(0.0)
+    return g.free_weight
 
 
 @wp.func
@@ -86,6 +100,7 @@ def relax_grid_colour(
     x: wp.array(dtype=Any),
     inv_mass: wp.array(dtype=float),
     g: GridColour,
+    pins: wp.array(dtype=int),
     col_rest: wp.array(dtype=float),
     row_rest: wp.array(dtype=float),
     col_sq: wp.array(dtype=wp.float64),
@@ -100,8 +115,8 @@ def relax_grid_colour(
     if kc >= g.cols:
         return
     i, j, rest = colour_stick(g, kr, kc, col_rest, row_rest, col_sq, row_sq)
-    wi = inv_mass[i]
-    wj = inv_mass[j]
+    wi = particle_weight(g, i, inv_mass, pins)
+    wj = particle_weight(g, j, inv_mass, pins)
     xi = x[i]
     xj = x[j]
     c = stick_correction(xi, xj, wi, wj, rest, 1.0)
@@ -114,6 +129,7 @@ def relax_grid_colour_compliant(
     x: wp.array(dtype=Any),
     inv_mass: wp.array(dtype=float),
     g: GridColour,
+    pins: wp.array(dtype=int),
     col_rest: wp.array(dtype=float),
     row_rest: wp.array(dtype=float),
     col_sq: wp.array(dtype=wp.float64),
@@ -134,8 +150,8 @@ def relax_grid_colour_compliant(
         return
     i, j, rest = colour_stick(g, kr, kc, col_rest, row_rest, col_sq, row_sq)
     k = tension_first + kr * g.cols + kc
-    wi = inv_mass[i]
-    wj = inv_mass[j]
+    wi = particle_weight(g, i, inv_mass, pins)
+    wj = particle_weight(g, j, inv_mass, pins)
     xi = x[i]
     xj = x[j]
     d = xj - xi

@@ -76,6 +76,9 @@ def test_implicit_and_explicit_sticks_agree_bit_for_bit_on_every_shipped_grid_sc
     {"sticks": ["shear"], "resolution": [2, 9], "pins": ["top-left"]},
     {"sticks": ["structural", "bend"], "resolution": [1, 11], "pins": [0]},  # a rope: no rows to cross
     {"resolution": [12, 3], "origin": [0.3, 7.1, -2.0], "size": [0.77, 0.31], "pins": ["top-left"]},
+    # particle masses: the kernels read every weight (elsewhere the free particles share one, and pins weigh 0)
+    {"pins": ["top-left", "top-right"], "particle_masses": [[4, 6, 0.05], [9, 0, 0.001]], "tethers": True},
+    {"pins": [], "compliance": {"bend": 1e-3}},  # no pins: every weight read too
 ])
 @pytest.mark.parametrize("precision", ["float32", "float64"])
 def test_grid_configurations_agree_bit_for_bit(cloth, precision, device):
@@ -148,6 +151,7 @@ def test_implicit_sticks_allocate_no_stick_arrays_and_issue_one_launch_per_colou
     assert sim.solver._scratch["grid_tension"].shape == (model.grid.soft_sticks,)
     colours = ["relax_grid_colour"] * 8 + ["relax_grid_colour_compliant"] * 4
     assert launches.of(sim.step) == ["verlet_step", "zero"] + (["pull_grid_tethers"] + colours) * k
+    assert model.grid.pins.numpy().tolist() == [0, 8]  # the pins a projection checks: the free weigh alike
 
 
 def test_implicit_colours_cover_every_stick_once_in_the_analytic_order():

@@ -25,7 +25,7 @@ from .errors import ArgumentError
 from .multilevel import grid_hierarchy, merge_levels
 from .tethers import TetherTable, build_tethers
 from .scene import Scene
-from .stages import Need
+from .stages import MAX_UNIFORM_MASS_PINS, Need
 from .faces import edge_faces
 from .mesh_cloth import STRUCTURAL
 from .topology import (BEND_H, BEND_V, FAMILY_OF_CLASS, SHEAR_ANTI, SHEAR_DIAG, STRUCT_H, STRUCT_V, ClothTopology,
@@ -113,6 +113,7 @@ class GridColourDevice:
     tensions start in the solver's scratch."""
 
     layout: object  # kernels.grid_relax.GridColour
+    pins: wp.array  # the pins, where the layout says the free particles share one weight (else empty)
     rows: int
     cols: int
     col_rest: wp.array
@@ -141,7 +142,7 @@ class GridDevice:
     and 2 columns apart and per row for 1 and 2 rows apart, the squared steps (float64) and their roots (the
     rest lengths of sticks along one axis, float32)."""
 
-    def __init__(self, slot: "ClothSlot", spec, device):
+    def __init__(self, slot: "ClothSlot", spec, device, uniform: bool):
         from warp_verlet.kernels.grid_relax import GridColour
 
         top = slot.topology
@@ -155,6 +156,16 @@ class GridDevice:
         self.col_sq1, self.row_sq1 = sq["col1"], sq["row1"]  # shear sticks (and the budget's stretch)
         self.col_rest1, self.col_rest2 = rest["col1"], rest["col2"]
         self.row_rest1, self.row_rest2 = rest["row1"], rest["row2"]
+        weight = top.inv_mass
+        free = np.unique(weight[weight > 0])
+        pinned = np.flatnonzero(weight == 0)
+        # The kernels find a particle's weight without reading it when the free particles share one and the pins
+        # are few (Need.weight_pins, from the scene: no particle masses, at most MAX_UNIFORM_MASS_PINS pins).
+        if uniform and not (len(free) <= 1 and len(pinned) <= MAX_UNIFORM_MASS_PINS):
+            raise AssertionError(f"cloth {top.name!r}: its free particles do not share one weight")
+        if uniform:
+            self.pins = wp.array((pinned + slot.first).astype(np.int32), dtype=int, device=device)
+        no_pins = wp.empty(0, dtype=int, device=device)
         colours, soft = [], 0
         for cls in sorted(GRID_DIRECTIONS):
             family = FAMILY_OF_CLASS[cls]
@@ -177,10 +188,12 @@ class GridDevice:
                 g.row_q, g.col_q = (q, 0) if parity_axis == "row" else (0, q)
                 g.parity, g.dr, g.dc = parity, dr, dc
                 g.use_col, g.use_row, g.col_shift = int(dc != 0), int(dr != 0), -1 if dc < 0 else 0
+                g.uniform_mass, g.free_weight = int(uniform), float(free[0]) if uniform and len(free) else 0.0
                 col_rest = self.col_rest2 if abs(dc) == 2 else self.col_rest1
                 row_rest = self.row_rest2 if dr == 2 else self.row_rest1
-                colours.append(GridColourDevice(g, n_rows, n_cols, col_rest, row_rest, self.col_sq1, self.row_sq1,
-                                                compliance, soft if compliance > 0.0 else 0))
+                colours.append(GridColourDevice(g, self.pins if uniform else no_pins, n_rows, n_cols, col_rest,
+                                                row_rest, self.col_sq1, self.row_sq1, compliance,
+                                                soft if compliance > 0.0 else 0))
                 soft += n_rows * n_cols if compliance > 0.0 else 0
         self.colours: tuple[GridColourDevice, ...] = tuple(colours)
         self.soft_sticks = soft
@@ -287,7 +300,7 @@ class Model:
             sizes = self.colouring.sizes
             self.colour_ranges = [(int(a), int(n)) for a, n in zip(np.r_[0, np.cumsum(sizes)[:-1]], sizes) if n > 0]
             if need.implicit_grid:  # the sticks are computed from the grid: no stick arrays on the device
-                self.grid = GridDevice(self.cloths[0], scene.cloths[0], device)
+                self.grid = GridDevice(self.cloths[0], scene.cloths[0], device, uniform=need.weight_pins > 0)
                 self._hold(self.grid, "grid")
                 if [c.count for c in self.grid.colours] != [n for _, n in self.colour_ranges]:
                     raise AssertionError("implicit grid colours differ from the analytic colouring")

@@ -55,6 +55,7 @@ class Need:
     grid_cols: int = 0
     soft_sticks: int = 0  # implicit grid sticks of families with a compliance (each keeps an XPBD tension)
     grid_pins: int = 0  # implicit grid tethers: the cloth's pins (0: the tethers are arrays)
+    weight_pins: int = 0  # implicit grid sticks of a cloth whose free particles weigh alike: its pins
 
     @property
     def position_bytes(self) -> int:
@@ -93,6 +94,9 @@ class Need:
 
 
 STICK_FORMS = ("auto", "explicit", "implicit")
+MAX_UNIFORM_MASS_PINS = 8
+"""Implicit grid sticks find a particle's weight without reading it (0 for a pin, the free particles' for any
+other) when the cloth sets no particle masses and has at most this many pins, which each projection checks."""
 MAX_GRID_TETHER_PINS = 8
 """Implicit tethers find each particle's nearest pins in every sweep, among all the cloth's pins: above this
 many pins the tether table (kernels/tether.py) serves instead."""
@@ -141,7 +145,8 @@ def grid_counts(scene: "Scene", sticks: str) -> dict:
     # each particle's nearest pins and their float64 distances in every sweep (bench/results/implicit_grid).
     pins = cloth.pin_count if (sticks == "implicit" and cloth.uses_tethers
                                and 0 < cloth.pin_count <= MAX_GRID_TETHER_PINS) else 0
-    return {"grid_rows": r, "grid_cols": c, "soft_sticks": soft, "grid_pins": pins}
+    weight_pins = cloth.pin_count if not cloth.particle_masses and 0 < cloth.pin_count <= MAX_UNIFORM_MASS_PINS else 0
+    return {"grid_rows": r, "grid_cols": c, "soft_sticks": soft, "grid_pins": pins, "weight_pins": weight_pins}
 
 
 @dataclass(frozen=True)
@@ -488,7 +493,8 @@ class GridSticks:
         r, c = need.grid_rows, need.grid_cols
         steps = max(c - 1, 0) + max(c - 2, 0) + max(r - 1, 0) + max(r - 2, 0)  # 1 and 2 columns, 1 and 2 rows apart
         tables = steps * FLOAT + (max(c - 1, 0) + max(r - 1, 0)) * FLOAT64  # rest lengths; squared steps (shear)
-        return tables + need.soft_sticks * FLOAT  # a tension per soft stick (solver scratch)
+        # a tension per soft stick (solver scratch); the pins where the free particles weigh alike
+        return tables + need.soft_sticks * FLOAT + need.weight_pins * INT
 
     def bind(self, model: "Model", state: "State", solver) -> Bound:
         from warp_verlet.kernels.grid_relax import relax_grid_colour, relax_grid_colour_compliant
@@ -497,7 +503,7 @@ class GridSticks:
         tension = solver.scratch("grid_tension", g.soft_sticks, float) if g.soft_sticks else None
         phases, soft_launches = [], []
         for colour in g.colours:
-            tables = [colour.col_rest, colour.row_rest, colour.col_sq, colour.row_sq]
+            tables = [colour.pins, colour.col_rest, colour.row_rest, colour.col_sq, colour.row_sq]
             if colour.compliance > 0.0:
                 def make(f, rows, colour=colour, tables=tables):
                     return recorded(relax_grid_colour_compliant, rows << colour.layout.col_bits,
