@@ -6,7 +6,8 @@ substep is
 1. ``verlet_step`` (gravity and wind folded into one acceleration on the host, damping per second),
 2. relaxation: ``iterations`` sweeps, each one launch of ``relax_colour`` (``relax_colour_compliant`` when
    a stick is soft) per colour (Gauss-Seidel across colours), or one ``relax_jacobi`` gather plus a copy
-   (Jacobi),
+   (Jacobi); on a GPU, one grid cloth that cannot tear computes its sticks instead of reading them
+   (``relax_grid_colour``, kernels/grid_relax.py, bit-identical; ``constraint_sets`` names the choice),
 3. collider clamping, once, after the sweeps: ``collide_spheres`` and ``collide_planes`` for the kinds the
    scene has (moving spheres are first placed on the device clock),
 4. ``tear_sticks``, only when a cloth of the scene can tear,
