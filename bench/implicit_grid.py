@@ -146,8 +146,13 @@ def main(argv=None) -> int:
     p.add_argument("--target", type=float, default=0.001, help="target_stretch of the budget table")
     p.add_argument("--target-size", type=int, default=1024, help="grid of the budget table (0: none)")
     p.add_argument("--out", type=Path, default=None, help="write implicit-grid.md/.csv and target-stretch.md/.csv")
+    p.add_argument("--block-dim", type=int, default=None, help="threads per block of the implicit sticks' launches")
     args = p.parse_args(argv)
     quiet_warp()
+    if args.block_dim:
+        from warp_verlet import stages
+
+        stages.GRID_BLOCK_DIM = args.block_dim
     device = wp.get_device(args.device)
     copy_gbs = copy_bandwidth(device) if device.is_cuda else None
 

@@ -41,9 +41,21 @@ def main(argv=None) -> int:
     p.add_argument("--device", default="cuda")
     p.add_argument("--size", type=int, default=1024)
     p.add_argument("--budget", default="4x8")
+    p.add_argument("--block-dims", type=int, nargs="*", default=[],
+                   help="also time the implicit sticks ('auto') with these threads per block (stages.GRID_BLOCK_DIM)")
     args = p.parse_args(argv)
     quiet_warp()
     substeps, iterations = (int(v) for v in args.budget.split("x"))
+    from warp_verlet import stages
+
+    for block in args.block_dims:
+        stages.GRID_BLOCK_DIM = block
+        times, _ = kernel_times(args.size, substeps, iterations, args.device, "auto")
+        colour = [k for k in times if k.startswith("relax_grid_colour")]
+        if colour:  # CUDA only: the CPU has no activity timing
+            ms, n = times[colour[0]]
+            print(f"{args.size}^2 {args.budget} auto, {block} threads per block: a colour {ms / n * 1e3:.1f} us")
+    stages.GRID_BLOCK_DIM = 256
     for sticks in ("explicit", "auto", "implicit"):
         times, first = kernel_times(args.size, substeps, iterations, args.device, sticks)
         print(f"{args.size}^2 {args.budget} {sticks}: {sum(t for t, _ in times.values()):.3f} ms of kernels per frame")

@@ -169,12 +169,12 @@ class Bound:
     phases: list[list[Task | None]] | None = None
 
 
-def recorded(kernel, dim: int, inputs: list, outputs: list | None = None) -> Task:
+def recorded(kernel, dim: int, inputs: list, outputs: list | None = None, block_dim: int = 256) -> Task:
     """A launch recorded once (replaying it skips ``wp.launch``'s argument packing, which dominates small
     grids on the CPU: measured at 64^2, 2.5 -> 1.4 ms per 8 sweeps), as a Task."""
     import warp as wp
 
-    launch = wp.launch(kernel, dim, inputs=inputs, outputs=outputs or [], record_cmd=True)
+    launch = wp.launch(kernel, dim, inputs=inputs, outputs=outputs or [], record_cmd=True, block_dim=block_dim)
     return Task(kernel.key, launch.launch, launch)
 
 
@@ -479,6 +479,10 @@ class GridTethers:
         return Bound(None, [split_tasks(make, 0, t.rows, solver.threads)])
 
 
+GRID_BLOCK_DIM = 256
+"""Threads per block of the implicit grid sticks' launches (Warp's default; bench.kernel_times --block-dims)."""
+
+
 class GridSticks:
     """Implicit grid sticks (kernels/grid_relax.py): one launch per colour of the analytic grid colouring, in
     its order, each stick's ends and rest length computed from the thread index and the grid; the same
@@ -508,11 +512,11 @@ class GridSticks:
                 def make(f, rows, colour=colour, tables=tables):
                     return recorded(relax_grid_colour_compliant, rows << colour.layout.col_bits,
                                     [x, model.inv_mass, colour.layout, *tables, colour.compliance, 0.0, f,
-                                     colour.tension_first], [tension])
+                                     colour.tension_first], [tension], block_dim=GRID_BLOCK_DIM)
             else:
                 def make(f, rows, colour=colour, tables=tables):
                     return recorded(relax_grid_colour, rows << colour.layout.col_bits,
-                                    [x, model.inv_mass, colour.layout, *tables, f])
+                                    [x, model.inv_mass, colour.layout, *tables, f], block_dim=GRID_BLOCK_DIM)
             phase = split_tasks(make, 0, colour.rows, threads)  # the CPU thread team cuts a colour by rows
             if colour.compliance > 0.0:
                 soft_launches += [task.launch for task in phase if task is not None]
