@@ -479,8 +479,9 @@ class GridTethers:
         return Bound(None, [split_tasks(make, 0, t.rows, solver.threads)])
 
 
-GRID_BLOCK_DIM = 256
-"""Threads per block of the implicit grid sticks' launches (Warp's default; bench.kernel_times --block-dims)."""
+GRID_BLOCK_DIM = 128
+"""Threads per block of the implicit grid sticks' launches: 128 ran 2% faster per frame than Warp's default 256
+on an H100 at 1024^2, 512 7% slower (bench/results/implicit_grid/README.md)."""
 
 
 class GridSticks:
