@@ -36,6 +36,9 @@ LAST = np.load(ROOT / "tests" / "data" / "golden_rigid_last.npz")
 # (equally valid) code. Then the positions must still agree to float32 rounding accumulated over the run.
 SAME_WARP = GOLDEN["_warp"] == wp.__version__
 CASES = sorted(k for k in GOLDEN if not k.startswith("_"))
+# Colliders the shipped scenes have given a thickness since the recording (a clearance that keeps renders free
+# of z-fighting); the recording had none, so the comparison takes it off again.
+THICKENED_SINCE = {"ball_through_net": {"ground"}, "flag_tear": {"ground"}, "sphere_sweep": {"ball"}}
 
 
 def rigid_scene(case: str):
@@ -48,6 +51,9 @@ def rigid_scene(case: str):
     # The budget it was recorded with (the shipped scenes have since been re-tuned for less stretch).
     data["simulation"]["substeps"] = round(1.0 / (data["simulation"].get("fps", 60.0) * record["dt"]))
     data["simulation"]["iterations"] = record["iterations"]
+    for collider in data.get("collider", []):
+        if collider["name"] in THICKENED_SINCE.get(stem, ()):
+            collider.pop("thickness")
     for cloth in data["cloth"]:
         cloth.pop("compliance", None)
         cloth["tethers"] = False  # a new constraint, which the old code did not have

@@ -73,3 +73,12 @@ def test_swinging_cloth_ends_converged(swinging):
     assert scene.cloths[0].uses_tethers  # the default for a pinned cloth that cannot tear, not a key of the scene
     stretch = (summary.stretch_rms, summary.stretch_max)
     assert stretch[0] < RMS_BOUND and stretch[1] < MAX_BOUND, stretch
+
+
+@pytest.mark.parametrize("path", sorted(SCENES.glob("*.toml")), ids=lambda p: p.stem)
+def test_every_shipped_scene_validates_without_a_warning(path):
+    """A shipped scene is an example to copy: none may show a trap that `validate` warns about (a collider of
+    thickness 0, tethers that stop tearing, a cloth starting inside a collider, a budget the run will flag)."""
+    from warp_verlet.scene_warnings import scene_warnings
+
+    assert scene_warnings(load_scene(path)) == []

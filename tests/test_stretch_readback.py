@@ -88,3 +88,16 @@ def test_on_cuda_the_budget_reads_the_stretch_a_frame_late_and_meets_its_target(
     assert sum(sim.budget.frames_at.values()) == 40
     assert sim.budget.last_rms == pytest.approx(sim.stretch().rms, rel=1e-12)
     assert sim.stretch().rms < 0.00002 and max(sim.budget.frames_at) > 4
+
+
+@pytest.mark.cuda
+@pytest.mark.skipif(not wp.is_cuda_available(), reason="no CUDA device")
+def test_the_run_summary_counts_every_frame_in_the_budget_on_cuda(tmp_path):
+    """On CUDA the last frame's stretch is still on its way when the frames end: the summary's budget line
+    must count it (run_scene settles the budget before reporting)."""
+    from warp_verlet.runner import run_scene
+
+    frames = 12
+    summary = run_scene(budget_scene(0.00002), tmp_path / "budget.usdc", device="cuda", frames=frames)
+    counted = [part.split(" x ") for part in summary.budget.split("substeps ")[1].split(" (")[0].split(", ")]
+    assert sum(int(n) for _, n in counted) == frames
