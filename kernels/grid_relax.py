@@ -26,7 +26,7 @@ from typing import Any
 import warp as wp
 
 from .positions import for_positions, scaled
-from .relax import MIN_LENGTH, stick_correction
+from .relax import compliant_correction, stick_correction
 
 
 @wp.func
@@ -154,17 +154,9 @@ def relax_grid_colour_compliant(
     wj = particle_weight(g, j, inv_mass, pins)
     xi = x[i]
     xj = x[j]
-    d = xj - xi
-    length = wp.length(d)
-    w = type(length)(wi) + type(length)(wj)
-    if w == type(length)(0.0) or length < type(length)(MIN_LENGTH):
-        return
-    alpha = type(length)(compliance) * type(length)(inv_dt2)
-    mu = type(length)(tension[k])
-    # The operations of relax_colour_compliant, in its order (its weight is 1 on a cloth that cannot tear).
-    error = type(length)(1.0) * (length - type(length)(rest) - alpha * mu)
-    tension[k] = float(mu + error / (w + alpha))
-    c = d * (error / (length * (w + alpha)))
+    # Weight 1: a cloth that tears keeps stick arrays.
+    c, mu = compliant_correction(xi, xj, wi, wj, rest, 1.0, compliance, inv_dt2, tension[k])
+    tension[k] = mu
     x[i] = xi + scaled(c, wi)
     x[j] = xj - scaled(c, wj)
 

@@ -35,6 +35,23 @@ def stick_correction(xi: Any, xj: Any, wi: float, wj: float, rest: float, k: flo
     return d * (type(length)(k) * (length - type(length)(rest)) / (length * w))
 
 
+@wp.func
+def compliant_correction(xi: Any, xj: Any, wi: float, wj: float, rest: float, k: float, compliance: float,
+                         inv_dt2: float, tension: float):
+    """The XPBD form of stick_correction (see the module docstring): the move of particle i per unit of w_i,
+    and the stick's new tension mu. With compliance 0 it is stick_correction's move bit for bit."""
+    d = xj - xi
+    length = wp.length(d)
+    w = type(length)(wi) + type(length)(wj)
+    if w == type(length)(0.0) or length < type(length)(MIN_LENGTH):
+        return type(d)(0.0), tension
+    alpha = type(length)(compliance) * type(length)(inv_dt2)
+    mu = type(length)(tension)
+    # The same operations, in the same order, as stick_correction: with alpha = 0 this is the rigid move.
+    error = type(length)(k) * (length - type(length)(rest) - alpha * mu)
+    return d * (error / (length * (w + alpha))), float(mu + error / (w + alpha))
+
+
 @wp.kernel
 def relax_colour(
     x: wp.array(dtype=Any),
@@ -82,18 +99,8 @@ def relax_colour_compliant(
     wj = inv_mass[j]
     xi = x[i]
     xj = x[j]
-    d = xj - xi
-    length = wp.length(d)
-    w = type(length)(wi) + type(length)(wj)
-    if w == type(length)(0.0) or length < type(length)(MIN_LENGTH):
-        return
-    alpha = type(length)(compliance[s]) * type(length)(inv_dt2)
-    mu = type(length)(tension[s])
-    # The same operations, in the same order, as stick_correction: with alpha = 0 this is the rigid kernel
-    # bit for bit.
-    error = type(length)(weight[s]) * (length - type(length)(rest[s]) - alpha * mu)
-    tension[s] = float(mu + error / (w + alpha))
-    c = d * (error / (length * (w + alpha)))
+    c, mu = compliant_correction(xi, xj, wi, wj, rest[s], weight[s], compliance[s], inv_dt2, tension[s])
+    tension[s] = mu
     x[i] = xi + scaled(c, wi)
     x[j] = xj - scaled(c, wj)
 
