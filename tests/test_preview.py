@@ -141,6 +141,16 @@ def test_hidden_faces_are_not_drawn_and_holes_are_held_between_samples(tmp_path)
         assert len(drawn) == 3 and drawn == every[frame] - face1[frame]
 
 
+def test_a_corner_torn_out_renders_without_a_word_from_the_renderer(tmp_path, capfd):
+    """A torn-out corner leaves its vertex in no face; the renderer must not be handed it (Mitsuba prints a
+    warning about vertices without a normal at every frame otherwise, at the C++ level: capfd sees it)."""
+    path = write_cache(tmp_path / "corner.usdc", rows=4, cols=4)
+    set_holes(path, {0: [0]})  # face 0 alone holds vertex 0
+    assert main(["preview", str(path), "-o", str(tmp_path / "corner.png"), "--size", "64x64"]) == 0
+    captured = capfd.readouterr()
+    assert "invalid" not in captured.out + captured.err and "WARN" not in captured.out + captured.err
+
+
 def test_a_mesh_that_never_tears_draws_every_face(tmp_path):
     path = write_cache(tmp_path / "whole.usdc", rows=4, cols=5)
     cache = preview.open_cache(path)

@@ -286,12 +286,16 @@ def _diffuse(mi, srgb) -> dict:
 
 
 def _mesh(mi, name: str, mesh: TriangleMesh, srgb, smooth: bool):
+    # Only the vertices some triangle uses: a torn-out region leaves vertices in no face, which have no normal
+    # (Mitsuba would say so on the terminal at every frame).
+    used, triangles = np.unique(mesh.triangles, return_inverse=True)
+    points = mesh.points[used]
     props = mi.Properties()
     props["bsdf"] = mi.load_dict(_diffuse(mi, srgb))
-    shape = mi.Mesh(name, len(mesh.points), len(mesh.triangles), props=props, has_vertex_normals=smooth)
+    shape = mi.Mesh(name, len(points), len(mesh.triangles), props=props, has_vertex_normals=smooth)
     params = mi.traverse(shape)
-    params["vertex_positions"] = type(params["vertex_positions"])(mesh.points.ravel())
-    params["faces"] = type(params["faces"])(mesh.triangles.ravel())
+    params["vertex_positions"] = type(params["vertex_positions"])(points.ravel())
+    params["faces"] = type(params["faces"])(triangles.reshape(-1).astype(mesh.triangles.dtype))
     params.update()  # also computes the vertex normals from the faces, when smooth
     return shape
 
