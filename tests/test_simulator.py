@@ -205,3 +205,25 @@ def test_device_readbacks_match_the_host(device, solver):
     untorn = Simulator(make_scene(resolution=[6, 6]), device)
     untorn.step_frame()
     assert untorn.device_stretch().rms == pytest.approx(untorn.stretch().rms, rel=1e-12)
+
+
+def test_a_device_that_is_not_a_string_is_an_argument_error():
+    from warp_verlet.errors import ArgumentError
+
+    with pytest.raises(ArgumentError, match="device must be None or a string.*got 3"):
+        Simulator(make_scene(), 3)
+
+
+def test_a_dt_too_large_for_the_position_bound_is_refused_before_it_moves_anything():
+    from warp_verlet.errors import ArgumentError
+
+    # Gravity only (9.81 m/s^2) and position_bound = 1e4 m: |a| dt^2 <= 1e4 m allows dt up to sqrt(1e4 / 9.81) s.
+    sim = Simulator(make_scene({"position_bound": 1.0e4}, **HANGING), "cpu")
+    largest = np.sqrt(1.0e4 / 9.81)
+    start = sim.positions()
+    for dt in (1e300, 1e20, 1.01 * largest):
+        with pytest.raises(ArgumentError, match="dt = .* is too large"):
+            sim.step(dt)
+        assert np.array_equal(sim.positions(), start) and sim.steps == 0
+    sim.step(0.5 * largest)  # within the bound: taken, and every position stays finite and inside it
+    assert sim.steps == 1 and np.isfinite(sim.positions()).all() and np.abs(sim.positions()).max() <= 1.0e4

@@ -192,3 +192,16 @@ def test_one_model_serves_many_states():
         sim.solver.step(other, sim.settings.dt)
         sim.step()
     assert np.array_equal(other.positions(), sim.positions())
+
+
+def test_a_velocity_or_positions_of_the_wrong_shape_is_an_argument_error_naming_the_shape():
+    from warp_verlet.errors import ArgumentError
+
+    sim = Simulator(make_scene(resolution=[4, 4]), "cpu")  # 16 particles
+    for wrong in ([1.0, 2.0], np.zeros((5, 3)), [[1.0, 2.0, 3.0, 4.0]], "fast"):
+        with pytest.raises(ArgumentError, match=r"velocity must be numbers of shape \(3,\) or \(16, 3\)"):
+            sim.state.set_velocity(wrong)
+    with pytest.raises(ArgumentError, match=r"points must have shape \(16, 3\).*got \(5, 3\)"):
+        sim.state.set_positions(np.zeros((5, 3)))
+    sim.state.set_velocity([1.0, 0.0, 0.0])  # the two shapes it documents are still taken
+    sim.state.set_velocity(np.ones((16, 3)))

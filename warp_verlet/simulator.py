@@ -44,6 +44,8 @@ def resolve_device(name: str | None = None):
     ensure_kernel_cache(note=warnings.warn)  # a clear error, not Warp's PermissionError, when it cannot compile
     if name is None:
         return wp.get_device("cuda" if wp.is_cuda_available() else "cpu")
+    if not isinstance(name, str):
+        raise ArgumentError(f"device must be None or a string 'cpu', 'cuda' or 'cuda:N', got {name!r}")
     if name != "cpu" and not (name == "cuda" or (name.startswith("cuda:") and name[5:].isdigit())):
         raise WarpVerletError(f"device must be 'cpu', 'cuda' or 'cuda:N', got {name!r}")
     if name.startswith("cuda") and not wp.is_cuda_available():
@@ -255,7 +257,22 @@ class Simulator:
         """Advance by one substep of ``dt`` seconds (the scene's fixed dt by default)."""
         dt = self.dt if dt is None else float(dt)
         self.solver.check_step(self.state, dt)
+        self._check_dt_fits(dt)
         self.solver.step(self.state, dt)
+
+    def _check_dt_fits(self, dt: float) -> None:
+        """Refuse a dt whose step cannot end inside ``position_bound``: the kernels square dt in float32, which
+        overflows to inf past about 1.8e19 s, and a step whose gravity-and-wind move |a| dt^2 alone exceeds the
+        bound has diverged before it starts (1e300 s left every position non-finite)."""
+        bound = self.settings.position_bound
+        float32_max = float(np.finfo(np.float32).max)
+        if dt * dt <= float32_max and self.solver.accel_magnitude * dt * dt <= bound:
+            return
+        a = self.solver.accel_magnitude
+        largest = min(np.sqrt(float32_max), np.sqrt(bound / a) if a > 0 else np.inf)
+        raise ArgumentError(f"dt = {dt:.3g} s is too large: one step must keep |a| dt^2 = {a * dt * dt:.3g} m "
+                            f"within simulation.position_bound = {bound:g} m and dt^2 within float32, so dt "
+                            f"may be at most {largest:.3g} s here")
 
     def step_frame(self) -> None:
         """The scene's ``substeps`` fixed steps of one frame, replayed from a capture (a CUDA graph, or Warp's

@@ -91,7 +91,12 @@ class State:
         (N, 3). Pinned particles stay at rest. The next step runs the exact start (x = x0 + v0 dt + a dt^2 / 2
         for a constant acceleration a)."""
         n, dtype = self.model.particle_count, self.model.host_position_dtype
-        v = np.broadcast_to(np.asarray(velocity, dtype=dtype), (n, 3))
+        try:
+            v = np.broadcast_to(np.asarray(velocity, dtype=dtype), (n, 3))
+        except (ValueError, TypeError):
+            shape = np.shape(velocity) if not isinstance(velocity, str) else "a string"
+            raise ArgumentError(f"velocity must be numbers of shape (3,) or ({n}, 3) for this model's {n} "
+                                f"particles, got {shape}") from None
         if not np.isfinite(v).all():
             raise ArgumentError("velocity must be finite")
         v = np.where(self.model.host_inv_mass[:, None] > 0, v, 0.0).astype(dtype)
@@ -106,7 +111,14 @@ class State:
 
     def set_positions(self, points) -> None:
         """Overwrite the positions, (N, 3) m, keeping the implicit velocity x - x_prev of every particle."""
-        points = np.asarray(points, dtype=self.model.host_position_dtype).reshape(self.model.particle_count, 3)
+        n = self.model.particle_count
+        try:
+            points = np.asarray(points, dtype=self.model.host_position_dtype)
+        except (ValueError, TypeError):
+            raise ArgumentError(f"points must be numbers of shape ({n}, 3)") from None
+        if points.size != 3 * n:
+            raise ArgumentError(f"points must have shape ({n}, 3) for this model's {n} particles, got {points.shape}")
+        points = points.reshape(n, 3)
         if self.dt_prev is None:
             self.particle_q.assign(points)
             return
