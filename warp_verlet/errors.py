@@ -8,6 +8,8 @@ closed cache) a :class:`StateError` (a RuntimeError too).
 
 from __future__ import annotations
 
+import re
+
 
 class WarpVerletError(Exception):
     """Base class of every error this package raises on purpose."""
@@ -65,14 +67,31 @@ class DiskFullError(OutputError):
     """The disk holding the output has not enough free space for the cache (or for its next save)."""
 
 
+# USD's C++ namespace, spelled into the names in some of its messages ("pxrInternal_v0_26_11__pxrReserved__::").
+_USD_NAMESPACE = re.compile(r"\bpxrInternal_v\w*?__pxrReserved__::")
+# USD's C++ location, as its default diagnostic output and Tf.ErrorException spell it.
+_USD_LOCATION = re.compile(r"(?:Error|Warning|Status)?\s*in '?[\w:<>~]+'? at line \d+ (?:in file|of) \S+\s*(?::|--)\s*")
+# What USD appends to a diagnostic about a stage it was opening (the stage again, with its memory address), the
+# in-memory session layer it names beside a file ("@anon:0x55f5...:scene-session.usda@"), and the "skipping" of
+# a layer it went on without (a refused asset is not gone on with).
+_USD_CONTEXT = re.compile(r"\s*\(instantiating stage on stage @[^@]*@ <0x[0-9a-fA-F]+>\)|,?@anon:0x[0-9a-fA-F]+:[^@]*@"
+                          r"|;\s*skipping\.?")
+
+
+def plain_usd_text(text: str) -> str:
+    """A message of USD's without its C++ namespace, function names, source files, line numbers and addresses."""
+    text = _USD_CONTEXT.sub("", _USD_LOCATION.sub("", _USD_NAMESPACE.sub("", str(text))))
+    return text.strip().strip("'").strip()
+
+
 def usd_cause(exc: BaseException) -> str:
     """The plain cause of a USD error (``pxr.Tf.ErrorException``), without USD's C++ function names, source
     files and line numbers: the commentary of each Tf error it carries, joined by "; ". Needs no pxr import."""
-    parts = [str(getattr(arg, "commentary", "") or "").strip() for arg in getattr(exc, "args", ())]
+    parts = [plain_usd_text(getattr(arg, "commentary", "") or "") for arg in getattr(exc, "args", ())]
     parts = [p for p in parts if p]
     if parts:
         return "; ".join(dict.fromkeys(parts))  # in order, each once
     text = str(exc).strip()
     # "Error in 'f' at line N in file F : 'cause'": keep the causes.
-    quoted = [chunk.rsplit(" : ", 1)[-1].strip().strip("'") for chunk in text.split("\n") if chunk.strip()]
-    return "; ".join(q for q in quoted if q) or text
+    quoted = [plain_usd_text(chunk.rsplit(" : ", 1)[-1]) for chunk in text.split("\n") if chunk.strip()]
+    return "; ".join(q for q in quoted if q) or plain_usd_text(text)

@@ -65,6 +65,9 @@ class SourceMesh:
     prim_path: str | None = None  # the USD prim the mesh came from (None for other formats)
     to_local: np.ndarray | None = None  # (4, 4) float64: scene-frame points back to the prim's own space
     named_vertices: dict | None = None  # (kind, name) -> vertex indices, for pins by primvar or subset
+    # Every other file the source composes (a USD file's sublayers, references and payloads, recursively): a run's
+    # output may not be one of them (output_file.input_files finds them here).
+    dependencies: tuple[Path, ...] = ()
 
 
 @dataclass(frozen=True, eq=False)
@@ -111,20 +114,42 @@ def default_weld_distance(points: np.ndarray) -> float:
     return WELD_FRACTION * float(np.linalg.norm(points.max(axis=0) - points.min(axis=0)))
 
 
-def weld(points: np.ndarray, distance: float) -> np.ndarray:
+# Bytes one candidate pair of the close-pair search takes at its peak: two int64 indices, the two points
+# gathered (float64 x 3 each), their difference and its norm, with numpy's temporaries.
+WELD_PAIR_BYTES = 128
+
+
+def weld(points: np.ndarray, distance: float, what: str = "the mesh") -> np.ndarray:
     """The particle of each point: points within ``distance`` of each other (directly or through a chain of
     such points) share one. Particles are numbered in order of their first point, so with no duplicates
     particle i is point i.
 
-    Points within ``distance`` lie in one cell of side 2 x distance in at least one of the 8 grids shifted
-    by 0 or half a cell along each axis (on each axis the two grids' cell borders alternate half a cell
-    apart, so a gap shorter than half a cell crosses at most one of them). Each grid's cells are grouped by
-    sorting, and only points sharing a cell are compared."""
+    Coincident points are one particle whatever the distance, so they are collapsed first: a pile of k copies
+    (stacked triangles, duplicated borders) costs one point instead of k (k - 1) / 2 comparisons. The rest go
+    through :func:`_close_pairs`, which refuses (MeshError, naming ``what``) a search that cannot fit in memory."""
     points = np.asarray(points, np.float64)
     n = len(points)
     if n < 2:
         return np.zeros(n, np.int32)
-    pairs = []
+    distinct, inverse = np.unique(points, axis=0, return_inverse=True)
+    inverse = inverse.reshape(-1)
+    component = connected_labels(len(distinct), _close_pairs(distinct, distance, what))[inverse]
+    # Number the particles in order of their lowest point index, as if no point had been collapsed.
+    lowest = np.full(len(distinct), n, np.int64)
+    np.minimum.at(lowest, component, np.arange(n))
+    _, particle = np.unique(lowest[component], return_inverse=True)
+    return particle.reshape(-1).astype(np.int32)
+
+
+def _close_pairs(points: np.ndarray, distance: float, what: str) -> np.ndarray:
+    """(P, 2) pairs of points within ``distance`` of each other, enough to connect every such chain.
+
+    Points within ``distance`` lie in one cell of side 2 x distance in at least one of the 8 grids shifted
+    by 0 or half a cell along each axis (on each axis the two grids' cell borders alternate half a cell
+    apart, so a gap shorter than half a cell crosses at most one of them). Each grid's cells are grouped by
+    sorting, and only points sharing a cell are compared: k points in one cell make k (k - 1) / 2 candidate
+    pairs, counted before any is made, so a dense cluster is refused before it exhausts the memory."""
+    n = len(points)
     if distance <= 0.0:
         shifts = [np.zeros(3)]
         cells_of = lambda shift: points  # noqa: E731 - exact duplicates only: group equal coordinates
@@ -133,6 +158,7 @@ def weld(points: np.ndarray, distance: float) -> np.ndarray:
         origin = points.min(axis=0)
         shifts = [np.array([(k >> a) & 1 for a in range(3)], np.float64) * 0.5 for k in range(8)]
         cells_of = lambda shift: np.floor((points - origin) / cell + shift)  # noqa: E731
+    groups = []
     for shift in shifts:
         cells = cells_of(shift)
         order = np.lexsort(cells.T[::-1])
@@ -141,19 +167,35 @@ def weld(points: np.ndarray, distance: float) -> np.ndarray:
         new[1:] = (sorted_cells[1:] != sorted_cells[:-1]).any(axis=1)
         start = np.flatnonzero(new)
         size = np.diff(np.append(start, n))
+        groups.append((order, start, size))
+    candidates = sum(int((size * (size - 1) // 2).sum()) for _, _, size in groups)
+    _check_weld_fits(candidates, max(int(size.max()) for _, _, size in groups), distance, what)
+    pairs = []
+    for order, start, size in groups:
         for k in np.unique(size[size > 1]):  # groups of k points: all k (k - 1) / 2 pairs at once
             members = order[start[size == k][:, None] + np.arange(k)]
             a, b = np.triu_indices(k, 1)
             pairs.append(np.stack([members[:, a].ravel(), members[:, b].ravel()], axis=1))
-    if pairs:
-        pairs = np.concatenate(pairs)
-        close = np.linalg.norm(points[pairs[:, 0]] - points[pairs[:, 1]], axis=1) <= distance
-        pairs = pairs[close]
-    else:
-        pairs = np.zeros((0, 2), np.int64)
-    labels = connected_labels(n, pairs)  # each point's lowest-index partner
-    _, particle = np.unique(labels, return_inverse=True)  # lowest indices in order: first occurrence order
-    return particle.astype(np.int32)
+    if not pairs:
+        return np.zeros((0, 2), np.int64)
+    pairs = np.concatenate(pairs)
+    close = np.linalg.norm(points[pairs[:, 0]] - points[pairs[:, 1]], axis=1) <= distance
+    return pairs[close]
+
+
+def _check_weld_fits(candidates: int, largest_group: int, distance: float, what: str) -> None:
+    """Refuse a close-pair search whose candidate pairs would take more than half the available host memory
+    (as memory.check_fits does for a run's arrays), or 8 GiB where that is unknown."""
+    from .memory import available_host_bytes, gib  # imported here: memory imports the scene, which imports this
+
+    available = available_host_bytes()
+    budget = available // 2 if available is not None else 8 * 2**30
+    need = candidates * WELD_PAIR_BYTES
+    if need > budget:
+        raise MeshError(f"{what}: {largest_group} distinct vertices lie in one cell of {2 * distance:.3g} m (twice "
+                        f"the weld distance): welding would compare {candidates} pairs of vertices, about "
+                        f"{gib(need)} GiB, more than the {gib(budget)} GiB it may take here; lower weld_distance "
+                        "or remove the crowded vertices")
 
 
 def _vector_areas(points: np.ndarray, faces: Faces) -> np.ndarray:
@@ -189,7 +231,7 @@ def prepare(source: SourceMesh, weld_distance: float | None = None) -> ClothMesh
                         "loose vertex would fall on its own: remove it from the mesh")
 
     distance = default_weld_distance(points) if weld_distance is None else float(weld_distance)
-    particle_of_vertex = weld(points, distance)
+    particle_of_vertex = weld(points, distance, what)
     _, first_vertex = np.unique(particle_of_vertex, return_index=True)  # each particle's lowest vertex
     particle_points = points[first_vertex]
     welded_faces = Faces(faces.counts, particle_of_vertex[faces.indices])

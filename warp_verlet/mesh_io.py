@@ -19,11 +19,12 @@ to install, not as a mesh that cannot be read.
 from __future__ import annotations
 
 import re
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
 
-from .errors import usd_cause
+from .errors import plain_usd_text, usd_cause
 from .faces import Faces
 from .mesh_cloth import MeshError, SourceMesh
 
@@ -86,7 +87,8 @@ def _read_mesh(path: Path, prim: str | None, transform: np.ndarray, named: tuple
     if is_usd:
         if prim is None:
             raise MeshError(f"{path}: a USD file holds many prims; name the mesh with prim = \"/path/to/Mesh\"")
-        return _read_usd(path, prim, transform, named)
+        with usd_diagnostics():  # a composition problem is read from the stage and raised as a MeshError
+            return _read_usd(path, prim, transform, named)
     if prim is not None:
         raise MeshError(f"{path}: prim is for USD files only; this is a {path.suffix or 'suffix-less'} file")
     if named:
@@ -118,6 +120,42 @@ def _read_trimesh(path: Path, transform: np.ndarray) -> SourceMesh:
                       uvs=uvs, uv_interpolation="vertex" if uvs is not None else None)
 
 
+@contextmanager
+def usd_diagnostics():
+    """While open, USD's warnings and status messages are collected (into the list it yields, as their plain
+    commentary) instead of printed: USD prints them with its C++ function, source file and line, which mean
+    nothing to a user. Errors still raise (pxr.Tf.ErrorException)."""
+    from pxr import UsdUtils
+
+    delegate = UsdUtils.CoalescingDiagnosticDelegate()
+    collected: list[str] = []
+    try:
+        yield collected
+    finally:
+        collected.extend(plain_usd_text(d.commentary) for d in delegate.TakeUncoalescedDiagnostics())
+        del delegate  # unregisters it: USD prints its diagnostics again
+
+
+def composition_problems(stage) -> list[str]:
+    """What USD could not compose on an open stage, one plain line each: sublayer cycles, reference or payload
+    cycles, and sublayers, references or payloads that are missing or not USD layers (USD skips each with a
+    warning and goes on, and a cache made from what is left is not the asset)."""
+    return [" ".join(plain_usd_text(str(error)).split()) for error in stage.GetCompositionErrors()]
+
+
+def layer_dependencies(path: Path) -> tuple[Path, ...]:
+    """Every file the USD file at ``path`` composes or names, recursively: its sublayers, references and payloads
+    (unloaded payloads and unselected variants included), the other assets they name, and the paths it names that
+    do not exist yet (a file written there later would become part of the asset). None may be a run's output."""
+    from pxr import UsdUtils
+
+    with usd_diagnostics():  # an unresolved path is reported as a warning; it is returned as well
+        layers, assets, unresolved = UsdUtils.ComputeAllDependencies(str(path))
+    found = [Path(layer.realPath) for layer in layers if layer.realPath]
+    found += [Path(asset) for asset in (*assets, *unresolved) if asset]
+    return tuple(dict.fromkeys(found))
+
+
 def _read_usd(path: Path, prim_path: str, transform: np.ndarray, named) -> SourceMesh:
     from pxr import Sdf, Tf, Usd, UsdGeom
 
@@ -129,6 +167,10 @@ def _read_usd(path: Path, prim_path: str, transform: np.ndarray, named) -> Sourc
         raise MeshError(f"{path}: cannot open as USD ({usd_cause(exc)})") from None
     if stage is None:
         raise MeshError(f"{path}: cannot open as USD")
+    problems = composition_problems(stage)
+    if problems:
+        more = f" (and {len(problems) - 1} more composition problems)" if len(problems) > 1 else ""
+        raise MeshError(f"{path}: a broken USD asset: {problems[0]}{more}")
     prim = stage.GetPrimAtPath(prim_path)
     if not prim.IsValid():
         meshes = [str(p.GetPath()) for p in stage.Traverse() if p.IsA(UsdGeom.Mesh)][:5]
@@ -153,7 +195,8 @@ def _read_usd(path: Path, prim_path: str, transform: np.ndarray, named) -> Sourc
     vertex_sets = {key: _named_vertices(path, mesh, faces, len(points), *key, time) for key in named}
     return SourceMesh(description=f"{path} prim {prim_path}", file=path, points=apply(to_scene, points), faces=faces,
                       uvs=uvs, uv_interpolation=interpolation, left_handed=left, prim_path=prim_path,
-                      to_local=np.linalg.inv(to_scene), named_vertices=vertex_sets)
+                      to_local=np.linalg.inv(to_scene), named_vertices=vertex_sets,
+                      dependencies=layer_dependencies(path))
 
 
 def _read_uvs(mesh, points: int, corners: int, time):
