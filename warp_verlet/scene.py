@@ -9,6 +9,7 @@ the file, the key and what was expected. ``docs/scenes.md`` documents every key 
 from __future__ import annotations
 
 import math
+import os
 import sys
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -570,16 +571,36 @@ def _check_override(file: str, cloths: tuple[ClothSpec, ...]) -> None:
                          f"{len(assets)} files ({', '.join(sorted(map(str, assets)))}): write kind = \"cache\"")
 
 
-def load_scene(path: str | Path) -> Scene:
-    """Read and validate a scene file. Raises :class:`SceneError` on any problem."""
+# The most bytes a scene or sweep file may hold. The largest shipped scene is a few kB; a scene that lists
+# particle masses or pins one by one stays far below this. Reading stops here, so a file that never ends
+# (/dev/zero, a pipe) or a huge one costs this much memory at most, not all the machine has.
+MAX_TOML_BYTES = 16 * 2**20
+UTF8_BOM = b"\xef\xbb\xbf"
+
+
+def read_toml_file(path: str | Path, what: str = "scene file") -> dict:
+    """The TOML document in ``path`` (a scene or sweep file, ``what`` in messages), read up to
+    :data:`MAX_TOML_BYTES`. Raises :class:`SceneError` naming the file on any problem: unreadable, too large,
+    not UTF-8 (a byte order mark is named as such), not TOML."""
     path = Path(path)
     file = str(path)
+    cap = MAX_TOML_BYTES
     try:
-        raw = path.read_bytes()
+        with open(path, "rb") as f:
+            raw = f.read(cap + 1)  # one byte more than allowed tells "too large" from "just fits"
+            if len(raw) > cap:
+                size = os.fstat(f.fileno()).st_size  # 0 for a device or a pipe: its size is unknown
+                known = f"{size:,} bytes" if size > cap else f"more than {cap:,} bytes"
+                most = f"{cap:,} bytes" + (f" ({cap // 2**20} MiB)" if cap % 2**20 == 0 else "")
+                raise SceneError(file, None, f"the file is too large for a {what}: {known}, and a {what} may hold "
+                                 f"at most {most}")
     except (OSError, ValueError) as exc:  # ValueError: a path with a NUL character
         raise SceneError(file, None, f"cannot read the file ({getattr(exc, 'strerror', None) or exc})") from None
+    if raw.startswith(UTF8_BOM):
+        raise SceneError(file, None, "the file starts with a UTF-8 byte order mark (BOM, bytes EF BB BF), which "
+                         "TOML does not allow: save it as UTF-8 without a BOM")
     try:
-        data = tomllib.loads(raw.decode("utf-8"))
+        return tomllib.loads(raw.decode("utf-8"))
     except UnicodeDecodeError as exc:
         raise SceneError(file, None, f"expected UTF-8 text ({exc.reason} at byte {exc.start})") from None
     except tomllib.TOMLDecodeError as exc:
@@ -588,7 +609,12 @@ def load_scene(path: str | Path) -> Scene:
         raise SceneError(file, None, f"not valid TOML: {exc}") from None
     except RecursionError:  # tomllib recurses once per level of nested arrays / inline tables
         raise SceneError(file, None, "not valid TOML: arrays or inline tables nested too deeply") from None
-    return parse_scene(data, file, path)
+
+
+def load_scene(path: str | Path) -> Scene:
+    """Read and validate a scene file. Raises :class:`SceneError` on any problem."""
+    path = Path(path)
+    return parse_scene(read_toml_file(path), str(path), path)
 
 
 # ------------------------------------------------------------------------------------------------------------

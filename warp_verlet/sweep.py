@@ -44,13 +44,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover - exercised on Python 3.10 only
-    import tomli as tomllib
-
 from .errors import SceneError, WarpVerletError
-from .scene import Scene, _describe, _Invalid, _Table, choice, integer, load_scene, parse_scene, real, text
+from .scene import (Scene, _describe, _Invalid, _Table, choice, integer, load_scene, parse_scene, read_toml_file, real,
+                    text)
 
 FORMATS = ("usdc", "usda", "usd")
 MAX_VARIANTS = 100_000
@@ -107,23 +103,9 @@ class Sweep:
         return [a.name for a in (*self.axes, *self.random_axes)]
 
 
-def read_toml(path: Path) -> dict:
-    """A TOML file's document, with the scene loader's errors (file, what was expected) on any problem."""
-    file = str(path)
-    try:
-        raw = path.read_bytes()
-    except (OSError, ValueError) as exc:
-        raise SceneError(file, None, f"cannot read the file ({getattr(exc, 'strerror', None) or exc})") from None
-    try:
-        return tomllib.loads(raw.decode("utf-8"))
-    except UnicodeDecodeError as exc:
-        raise SceneError(file, None, f"expected UTF-8 text ({exc.reason} at byte {exc.start})") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise SceneError(file, None, f"not valid TOML: {exc}") from None
-    except ValueError as exc:  # int()'s digit limit
-        raise SceneError(file, None, f"not valid TOML: {exc}") from None
-    except RecursionError:
-        raise SceneError(file, None, "not valid TOML: arrays or inline tables nested too deeply") from None
+def read_toml(path: Path, what: str = "sweep file") -> dict:
+    """A TOML file's document, with the scene loader's errors and size cap (scene.read_toml_file)."""
+    return read_toml_file(path, what)
 
 
 def load_sweep(path: str | Path, output: str | Path | None = None, frames: int | None = None) -> Sweep:
@@ -158,7 +140,7 @@ def parse_sweep(data: dict, file: str, path: Path, output: str | Path | None = N
     except SceneError as exc:
         where = f"the base scene {base}" if exc.file == str(base) else str(base)
         raise SceneError(file, "sweep.scene", f"{where} is invalid: {exc}") from None
-    base_doc = read_toml(base)  # load_scene read it without complaint
+    base_doc = read_toml(base, "scene file")  # load_scene read it without complaint
 
     axes = _read_axes(file, "axes", axes_data, grid=True) if axes_data is not None else ()
     seed = samples = None
@@ -307,8 +289,10 @@ def _range_values(spec: dict) -> tuple:
         if step == 0 or (stop - start) * step < 0:
             raise _Invalid(f"step {step:g} never goes from start {start:g} to stop {stop:g}", ".step")
         span = (stop - start) / step
-        if span + 1 > MAX_RANGE:
-            raise _Invalid(f"expected at most {MAX_RANGE} values, got {math.floor(span) + 1}")
+        if not span + 1 <= MAX_RANGE:  # a span too wide for a float (inf) is refused too, before it is counted
+            made = f"{math.floor(span) + 1}" if math.isfinite(span) else "more than a float can count"
+            raise _Invalid(f"expected at most {MAX_RANGE} values in a range, got {made} (start {start:g} to "
+                           f"stop {stop:g} in steps of {step:g})")
         count = math.floor(span + 1e-9) + 1
         values = [start + i * step for i in range(count)]
     else:
