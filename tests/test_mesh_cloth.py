@@ -258,6 +258,37 @@ def test_bad_meshes_are_one_clear_error_each(tmp_path):
     assert "vertex 4 is used by no face" in scene_error(tmp_path, {"mesh": "loose.obj"})
 
 
+def test_a_non_finite_vertex_is_reported_as_the_file_has_it(tmp_path):
+    """An inf coordinate is named with the vertex as written, before a rotation would spread NaN to the other
+    coordinates, in plain numbers (no numpy reprs), and with no numpy warning from the transform."""
+    (tmp_path / "inf.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv inf 1 0\nf 1 2 3\nf 2 4 3\n")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        message = scene_error(tmp_path, {"mesh": "inf.obj", "rotate": [30.0, 0.0, 0.0]})
+    assert message.endswith("inf.obj: vertex 3 is not a finite point: (inf, 1, 0) in the file (1 such vertices)")
+    assert "nan" not in message and "np." not in message
+
+
+def test_a_vertex_beyond_float32_is_reported_as_such(tmp_path):
+    """1e39 is a finite float64 but no float32: said as that, not as the welding problem it would become."""
+    (tmp_path / "far.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1e39 1 0\nf 1 2 3\nf 2 4 3\n")
+    message = scene_error(tmp_path, {"mesh": "far.obj"})
+    assert "far.obj: vertex 3 is at (1e+39, 1, 0) m in the scene, beyond float32's range (+-3.4e+38)" in message
+    assert "weld" not in message
+    # The range is checked in the scene's frame: a point that fits in the file but not once scaled is refused too.
+    (tmp_path / "near.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1e38 1 0\nf 1 2 3\nf 2 4 3\n")
+    assert "vertex 3 is at (1e+39, 10, 0) m in the scene" in scene_error(tmp_path, {"mesh": "near.obj", "scale": 10.0})
+
+
+@pytest.mark.parametrize("face", ["f 0 1 2", "f 1 2 0", "f 1/1 0/2 3/3", "f 1 2 -0"])
+def test_an_obj_face_naming_vertex_0_is_refused_as_such(tmp_path, face):
+    """OBJ numbers vertices from 1: a face naming 0 is that mistake, not a loose vertex."""
+    (tmp_path / "zero.obj").write_text(f"# a triangle\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\n{face}\n")
+    message = scene_error(tmp_path, {"mesh": "zero.obj"})
+    assert message.endswith(f"zero.obj: line 6: face '{face}' names vertex 0; OBJ numbers vertices from 1 (or from "
+                            "-1 back from the last)")
+
+
 def test_non_manifold_edges_are_simulated_with_a_warning(tmp_path):
     """Three triangles on one edge (a fin): allowed, warned, and no bend stick crosses that edge."""
     points = np.array([[0, 0, 0], [1, 0, 0], [0.5, 1, 0], [0.5, -1, 0], [0.5, 0, 1]], np.float64)

@@ -49,6 +49,33 @@ def apply(matrix: np.ndarray, points: np.ndarray) -> np.ndarray:
     return points @ matrix[:3, :3].T + matrix[:3, 3]
 
 
+FLOAT32_MAX = float(np.finfo(np.float32).max)
+
+
+def _point_text(point) -> str:
+    return "(" + ", ".join(f"{float(v):g}" for v in point) + ")"
+
+
+def to_scene(description: str, matrix: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """The file's points moved into the scene's frame by ``matrix``, once each is known to be finite in the file
+    (a non-finite coordinate is reported as the file has it, before the transform spreads NaN to the others)
+    and within float32's range after the move (the simulation and its cache hold positions in float32)."""
+    finite = np.isfinite(points).all(axis=1)
+    if not finite.all():
+        bad = int(np.flatnonzero(~finite)[0])
+        raise MeshError(f"{description}: vertex {bad} is not a finite point: {_point_text(points[bad])} in the "
+                        f"file ({int((~finite).sum())} such vertices)")
+    with np.errstate(over="ignore", invalid="ignore"):  # an overflow is reported below, as such
+        moved = apply(matrix, points)
+    outside = ~(np.abs(moved) <= FLOAT32_MAX).all(axis=1)
+    if outside.any():
+        bad = int(np.flatnonzero(outside)[0])
+        raise MeshError(f"{description}: vertex {bad} is at {_point_text(moved[bad])} m in the scene, beyond "
+                        f"float32's range (+-{FLOAT32_MAX:.3g}), in which positions are simulated and cached "
+                        f"({int(outside.sum())} such vertices)")
+    return moved
+
+
 # The package to install for a module whose import name differs from its name on PyPI.
 PACKAGE_OF_MODULE = {"PIL": "Pillow", "pxr": "usd-core", "yaml": "PyYAML", "collada": "pycollada",
                      "skimage": "scikit-image", "sklearn": "scikit-learn"}
@@ -104,6 +131,8 @@ def _read_trimesh(path: Path, transform: np.ndarray) -> SourceMesh:
     if suffix not in trimesh.available_formats():
         raise MeshError(f"{path}: trimesh cannot read .{suffix} files (it reads "
                         f"{', '.join(sorted(trimesh.available_formats()))}; or give a USD file and a prim)")
+    if suffix == "obj":
+        _check_obj_vertex_numbers(path)
     try:
         # process=False and maintain_order: the vertices and faces as the file has them, nothing merged or
         # reordered, so the cache lines up with the file (welding is ours, and keeps the vertex order).
@@ -116,7 +145,8 @@ def _read_trimesh(path: Path, transform: np.ndarray) -> SourceMesh:
     triangles = np.asarray(getattr(loaded, "faces", np.zeros((0, 3))), np.int64).reshape(-1, 3)
     uv = getattr(getattr(loaded, "visual", None), "uv", None)
     uvs = np.asarray(uv, np.float32) if uv is not None and len(uv) == len(points) and len(points) else None
-    return SourceMesh(description=str(path), file=path, points=apply(transform, points), faces=Faces.uniform(triangles),
+    return SourceMesh(description=str(path), file=path, points=to_scene(str(path), transform, points),
+                      faces=Faces.uniform(triangles),
                       uvs=uvs, uv_interpolation="vertex" if uvs is not None else None)
 
 
@@ -156,6 +186,22 @@ def layer_dependencies(path: Path) -> tuple[Path, ...]:
     return tuple(dict.fromkeys(found))
 
 
+# A face ("f") line naming vertex 0, which OBJ does not have: it numbers vertices from 1 (and from -1 back from
+# the last), and trimesh would take 0 silently as another vertex.
+_OBJ_VERTEX_ZERO = re.compile(rb"^[ \t]*f[ \t][^\n]*?(?<=[ \t])[+-]?0+(?=[/ \t\r\n]|$)", re.M)
+
+
+def _check_obj_vertex_numbers(path: Path) -> None:
+    text = path.read_bytes()
+    found = _OBJ_VERTEX_ZERO.search(text)
+    if found:
+        line = text.count(b"\n", 0, found.start()) + 1
+        end = text.find(b"\n", found.start())
+        face = text[found.start():end if end >= 0 else len(text)]
+        raise MeshError(f"{path}: line {line}: face {face.decode('utf-8', 'replace').strip()!r} names vertex 0; OBJ "
+                        "numbers vertices from 1 (or from -1 back from the last)")
+
+
 def _read_usd(path: Path, prim_path: str, transform: np.ndarray, named) -> SourceMesh:
     from pxr import Sdf, Tf, Usd, UsdGeom
 
@@ -189,13 +235,15 @@ def _read_usd(path: Path, prim_path: str, transform: np.ndarray, named) -> Sourc
     # Gf matrices act on row vectors (p' = p M): transpose for the column-vector convention used here.
     local_to_world = np.asarray(UsdGeom.Xformable(prim).ComputeLocalToWorldTransform(time), np.float64).T
     to_metres = np.diag([UsdGeom.GetStageMetersPerUnit(stage)] * 3 + [1.0])
-    to_scene = transform @ to_metres @ local_to_world
+    to_scene_matrix = transform @ to_metres @ local_to_world
     uvs, interpolation = _read_uvs(mesh, len(points), len(faces.indices), time)
     left = mesh.GetOrientationAttr().Get() == UsdGeom.Tokens.leftHanded
     vertex_sets = {key: _named_vertices(path, mesh, faces, len(points), *key, time) for key in named}
-    return SourceMesh(description=f"{path} prim {prim_path}", file=path, points=apply(to_scene, points), faces=faces,
+    description = f"{path} prim {prim_path}"
+    return SourceMesh(description=description, file=path, points=to_scene(description, to_scene_matrix, points),
+                      faces=faces,
                       uvs=uvs, uv_interpolation=interpolation, left_handed=left, prim_path=prim_path,
-                      to_local=np.linalg.inv(to_scene), named_vertices=vertex_sets,
+                      to_local=np.linalg.inv(to_scene_matrix), named_vertices=vertex_sets,
                       dependencies=layer_dependencies(path))
 
 
