@@ -269,6 +269,14 @@ def test_a_non_finite_vertex_is_reported_as_the_file_has_it(tmp_path):
     assert "nan" not in message and "np." not in message
 
 
+def test_a_non_finite_source_point_is_reported_in_plain_numbers():
+    """A SourceMesh built through the API, with no file: prepare names the point without numpy reprs."""
+    points = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [np.nan, 1, 0]], np.float64)
+    with pytest.raises(ValueError) as caught:
+        prepare(source(points, Faces.uniform([[0, 1, 2], [1, 3, 2]])))
+    assert str(caught.value) == "test mesh: vertex 3 is not a finite point: (nan, 1, 0)"
+
+
 def test_a_vertex_beyond_float32_is_reported_as_such(tmp_path):
     """1e39 is a finite float64 but no float32: said as that, not as the welding problem it would become."""
     (tmp_path / "far.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1e39 1 0\nf 1 2 3\nf 2 4 3\n")

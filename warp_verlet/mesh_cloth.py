@@ -224,7 +224,8 @@ def prepare(source: SourceMesh, weld_distance: float | None = None) -> ClothMesh
         raise MeshError(str(exc)) from None
     if not np.isfinite(points).all():
         bad = int(np.flatnonzero(~np.isfinite(points).all(axis=1))[0])
-        raise MeshError(f"{what}: vertex {bad} is not a finite point {tuple(points[bad])}")
+        shown = ", ".join(f"{float(v):g}" for v in points[bad])  # plain numbers, not numpy reprs
+        raise MeshError(f"{what}: vertex {bad} is not a finite point: ({shown})")
     unused = np.setdiff1d(np.arange(len(points)), faces.indices)
     if len(unused):
         raise MeshError(f"{what}: vertex {int(unused[0])} is used by no face ({len(unused)} such vertices); a "
