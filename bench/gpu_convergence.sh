@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Issue 17's GPU measurements in one batch on the lent GPU machine (../shared/tools/gpu-warp/README.md):
+# The convergence measurements (tethers, small steps, the budget) in one batch on the lent GPU machine (../shared/tools/gpu-warp/README.md):
 # PART=hanging  the hanging cloth at 256^2, 1024^2 and 2048^2, every method, with Newton Style3D and VBD in the
 #               same run;
 # PART=rest     the drape (1024^2, no pins), the torn net (512^2), throughput for the README, and the shipped

@@ -1,4 +1,4 @@
-"""Four integrators on the same problems: the seed article's claims, checked with numbers.
+"""Four integrators on the same problems: the textbook claims about Verlet integration, checked with numbers.
 
     python -m bench.integrators [--out bench/results/integrators] [--quick] [--no-plots]
 

@@ -1,8 +1,8 @@
 """A substep budget chosen from a target stretch (``[simulation] target_stretch``).
 
 Why substeps and not sweeps: at the same cost, smaller steps leave a hanging cloth far less stretched than
-more sweeps per step (Macklin et al. 2019, "Small Steps"; measured here on 256^2 with tethers: 64 x 1 gives
-0.008% RMS where 16 x 4 gives 0.030%). So the sweeps stay as the scene says (2 by default with a target), and
+more sweeps per step (Macklin et al. 2019, "Small Steps"; at the same sweeps per frame, 32 x 1 leaves a 256^2
+hanging cloth with tethers half as stretched as 16 x 2: bench/results/convergence/h100.md). So the sweeps stay as the scene says (2 by default with a target), and
 the budget doubles or halves the substeps of the next frame from the RMS structural stretch of the last one:
 
 - over the target: double (a step may shrink by at most ``max_dt_ratio``, so doubling is the largest move);
