@@ -31,13 +31,12 @@ import math
 import os
 import re
 import shutil
-import stat
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Iterable, Sequence
 
 from .errors import DiskFullError, OutputBusyError, OutputError
+from .private_dir import make_private_directory, user_directory
 
 
 class OutputNameError(OutputError):
@@ -178,24 +177,17 @@ def input_files(scene) -> list[Path]:
 
 
 def lock_directory() -> Path:
-    """Where this user's output locks live: ``$XDG_RUNTIME_DIR/warp-verlet`` (the per-user runtime directory,
-    private and emptied at logout), else ``<temp dir>/warp-verlet-<user>``. Created private (0700); one that is
-    a symlink, another user's or open to others is refused (another user could otherwise hold or swap the
-    locks)."""
-    runtime = os.environ.get("XDG_RUNTIME_DIR")
-    user = str(os.getuid()) if hasattr(os, "getuid") else re.sub(r"\W", "_", os.environ.get("USERNAME", "user"))
-    directory = Path(runtime) / "warp-verlet" if runtime else Path(tempfile.gettempdir()) / f"warp-verlet-{user}"
+    """Where this user's output locks live: this user's private directory (private_dir.user_directory,
+    ``$XDG_RUNTIME_DIR/warp-verlet`` or ``<temp dir>/warp-verlet-<user>``), created 0700. One that is a symlink,
+    another user's or open to others is refused: another user could otherwise hold or swap the locks."""
+    directory, below = user_directory()
     try:
-        directory.mkdir(mode=0o700, parents=bool(runtime), exist_ok=True)
-        info = os.lstat(directory)
+        problem = make_private_directory(directory, below)
     except OSError as exc:
         raise OutputError(f"cannot create the output lock directory {directory}: {exc.strerror or exc}") from None
-    private = stat.S_ISDIR(info.st_mode) and not info.st_mode & 0o077
-    if hasattr(os, "getuid"):
-        private = private and info.st_uid == os.getuid()
-    if not private:
-        raise OutputError(f"the output lock directory {directory} is not a private directory of this user's "
-                          "(a symlink, another user's, or open to others): remove it, or set XDG_RUNTIME_DIR")
+    if problem is not None:
+        raise OutputError(f"cannot use the output lock directory {directory}: {problem}; remove it, or set "
+                          "XDG_RUNTIME_DIR")
     return directory
 
 

@@ -2,8 +2,9 @@
 
 Warp compiles kernels into a cache directory (``~/.cache/warp/<version>`` on Linux) and fails with a bare
 ``PermissionError`` when it cannot create it, for example when HOME is not writable. :func:`ensure_kernel_cache`
-checks first: when the default is not writable it uses a private directory under the system's temporary
-directory instead (with a note), and when an explicitly chosen one (``WARP_CACHE_PATH`` or
+checks first: when the default is not writable it uses ``kernels`` in this user's private directory instead
+(with a note; private_dir.py: created 0700, and refused when another user made it first, when it is a symlink
+or open to others), and when an explicitly chosen one (``WARP_CACHE_PATH`` or
 ``warp.config.kernel_cache_dir``) is not writable it raises one clear :class:`WarpVerletError`.
 
 On a machine without an NVIDIA driver, Warp's native library prints "Warp CUDA warning: Could not find or load
@@ -23,6 +24,7 @@ from pathlib import Path
 from typing import Callable, Iterator
 
 from .errors import WarpVerletError
+from .private_dir import make_private_directory, user_directory
 
 CUDA_DRIVER_WARNING = "Could not find or load the NVIDIA CUDA driver"
 
@@ -51,8 +53,10 @@ def _default_cache_dir(version: str) -> Path:
 
 
 def fallback_cache_dir() -> Path:
-    uid = os.getuid() if hasattr(os, "getuid") else "user"
-    return Path(tempfile.gettempdir()) / f"warp-verlet-kernels-{uid}"
+    """Where kernels go when Warp's default cache is not writable: ``kernels`` in this user's private directory
+    (private_dir.user_directory), which only this user can write, so that no other user can swap a compiled
+    kernel this user's runs load."""
+    return user_directory()[0] / "kernels"
 
 
 def ensure_kernel_cache(note: Callable[[str], None] | None = None) -> None:
@@ -72,14 +76,22 @@ def ensure_kernel_cache(note: Callable[[str], None] | None = None) -> None:
     if problem is None:
         return
     fallback = fallback_cache_dir()
-    if _not_writable(fallback) is None:
+    directory, below = user_directory()
+    # Every directory from the system's one down to the fallback must be private; a fallback elsewhere (a test's)
+    # is checked from its parent on.
+    try:
+        unusable = make_private_directory(fallback, below if fallback.is_relative_to(directory) else fallback.parent)
+    except OSError as exc:
+        unusable = exc.strerror or str(exc)
+    unusable = unusable or _not_writable(fallback)
+    if unusable is None:
         wp.config.kernel_cache_dir = str(fallback)
         if note is not None:
             note(f"Warp's kernel cache directory {default} is not writable ({problem}); compiled kernels go to "
                  f"{fallback} instead (set WARP_CACHE_PATH to choose another)")
         return
     raise WarpVerletError(f"Warp's kernel cache directory {default} is not writable ({problem}), nor is "
-                          f"{fallback}: set WARP_CACHE_PATH to a directory this user can write")
+                          f"{fallback} usable ({unusable}): set WARP_CACHE_PATH to a directory this user can write")
 
 
 @contextlib.contextmanager
