@@ -131,3 +131,23 @@ def test_a_usd_parse_error_names_no_cpp_symbol(asset, capfd):
     err = capfd.readouterr().err
     assert "torn.usda: cannot open as USD (" in err and "parse error" in err
     assert "pxrInternal" not in err and "pxrReserved" not in err and ".cpp" not in err and ".h " not in err
+
+
+def test_a_layer_the_asset_names_but_does_not_compose_yet_is_an_input_and_a_plain_warning(asset, capfd):
+    """A reference in a variant that is not selected, to a file that does not exist: the asset composes without
+    it (so it is no error), but a cache written there would become part of the asset the next time that variant
+    is chosen. USD's report of the unresolved path is one plain warning."""
+    (asset.parent / "variant.usda").write_text(
+        '#usda 1.0\n(\n    defaultPrim = "Set"\n    subLayers = [@./base.usda@]\n)\n'
+        'over "Set" (\n    variants = { string look = "plain" }\n    prepend variantSets = "look"\n) {\n'
+        '    variantSet "look" = {\n        "plain" {}\n'
+        '        "fancy" {\n            def Xform "Trim" (prepend references = @./later.usda@) {}\n        }\n    }\n}\n')
+    (asset.parent / "scene.toml").write_text(scene_text("variant.usda", "out.usdc"))
+    assert main(["validate", "scene.toml"]) == 0
+    err = capfd.readouterr().err
+    assert err.strip() == (f"warning: variant.usda: Failed to resolve reference @./later.usda@ with computed asset "
+                           f"path @{asset.parent / 'later.usda'}@ found in layer @{asset.parent / 'variant.usda'}@.")
+    before = contents(asset.parent)
+    assert run("scene.toml", "-o", "later.usda") == 2
+    assert f"would overwrite the input file {asset.parent / 'later.usda'}" in capfd.readouterr().err
+    assert contents(asset.parent) == before

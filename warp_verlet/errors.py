@@ -9,6 +9,7 @@ closed cache) a :class:`StateError` (a RuntimeError too).
 from __future__ import annotations
 
 import re
+from contextlib import contextmanager
 
 
 class WarpVerletError(Exception):
@@ -95,3 +96,19 @@ def usd_cause(exc: BaseException) -> str:
     # "Error in 'f' at line N in file F : 'cause'": keep the causes.
     quoted = [plain_usd_text(chunk.rsplit(" : ", 1)[-1]) for chunk in text.split("\n") if chunk.strip()]
     return "; ".join(q for q in quoted if q) or plain_usd_text(text)
+
+
+@contextmanager
+def usd_diagnostics():
+    """While open, USD's warnings and status messages are collected (into the list it yields, as their plain
+    commentary) instead of printed: USD prints them with its C++ function, source file and line, which mean
+    nothing to a user. Errors still raise (pxr.Tf.ErrorException). Imports pxr when entered."""
+    from pxr import UsdUtils
+
+    delegate = UsdUtils.CoalescingDiagnosticDelegate()
+    collected: list[str] = []
+    try:
+        yield collected
+    finally:
+        collected.extend(plain_usd_text(d.commentary) for d in delegate.TakeUncoalescedDiagnostics())
+        del delegate  # unregisters it: USD prints its diagnostics again

@@ -19,16 +19,21 @@ to install, not as a mesh that cannot be read.
 from __future__ import annotations
 
 import re
-from contextlib import contextmanager
+import warnings
 from pathlib import Path
 
 import numpy as np
 
-from .errors import plain_usd_text, usd_cause
+from .errors import plain_usd_text, usd_cause, usd_diagnostics
 from .faces import Faces
 from .mesh_cloth import MeshError, SourceMesh
 
 USD_SUFFIXES = (".usd", ".usda", ".usdc", ".usdz")
+
+
+class UsdWarning(UserWarning):
+    """Something USD reported while a USD mesh was read that does not stop the read (an asset path it names
+    that cannot be resolved, say), in USD's words without its C++ function, file and line."""
 
 
 def transform_matrix(translate=(0.0, 0.0, 0.0), rotate_degrees=(0.0, 0.0, 0.0), scale=(1.0, 1.0, 1.0)) -> np.ndarray:
@@ -114,8 +119,11 @@ def _read_mesh(path: Path, prim: str | None, transform: np.ndarray, named: tuple
     if is_usd:
         if prim is None:
             raise MeshError(f"{path}: a USD file holds many prims; name the mesh with prim = \"/path/to/Mesh\"")
-        with usd_diagnostics():  # a composition problem is read from the stage and raised as a MeshError
-            return _read_usd(path, prim, transform, named)
+        with usd_diagnostics() as reported:  # a composition problem is read from the stage: a MeshError
+            mesh = _read_usd(path, prim, transform, named)
+        for text in dict.fromkeys(reported):  # what else USD had to say, without its C++ locations
+            warnings.warn(f"{path}: {text}", UsdWarning, stacklevel=4)
+        return mesh
     if prim is not None:
         raise MeshError(f"{path}: prim is for USD files only; this is a {path.suffix or 'suffix-less'} file")
     if named:
@@ -150,22 +158,6 @@ def _read_trimesh(path: Path, transform: np.ndarray) -> SourceMesh:
                       uvs=uvs, uv_interpolation="vertex" if uvs is not None else None)
 
 
-@contextmanager
-def usd_diagnostics():
-    """While open, USD's warnings and status messages are collected (into the list it yields, as their plain
-    commentary) instead of printed: USD prints them with its C++ function, source file and line, which mean
-    nothing to a user. Errors still raise (pxr.Tf.ErrorException)."""
-    from pxr import UsdUtils
-
-    delegate = UsdUtils.CoalescingDiagnosticDelegate()
-    collected: list[str] = []
-    try:
-        yield collected
-    finally:
-        collected.extend(plain_usd_text(d.commentary) for d in delegate.TakeUncoalescedDiagnostics())
-        del delegate  # unregisters it: USD prints its diagnostics again
-
-
 def composition_problems(stage) -> list[str]:
     """What USD could not compose on an open stage, one plain line each: sublayer cycles, reference or payload
     cycles, and sublayers, references or payloads that are missing or not USD layers (USD skips each with a
@@ -179,7 +171,7 @@ def layer_dependencies(path: Path) -> tuple[Path, ...]:
     do not exist yet (a file written there later would become part of the asset). None may be a run's output."""
     from pxr import UsdUtils
 
-    with usd_diagnostics():  # an unresolved path is reported as a warning; it is returned as well
+    with usd_diagnostics():  # an unresolved path is returned (and reported to any enclosing usd_diagnostics)
         layers, assets, unresolved = UsdUtils.ComputeAllDependencies(str(path))
     found = [Path(layer.realPath) for layer in layers if layer.realPath]
     found += [Path(asset) for asset in (*assets, *unresolved) if asset]
