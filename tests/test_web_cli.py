@@ -4,6 +4,7 @@ use, binding beyond localhost), bad caches, and a player that never imports Warp
 import socket
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -123,3 +124,15 @@ class _Stopped:
 
     def run(self, seconds):
         pass
+
+
+def test_live_refuses_a_record_directory_that_takes_no_new_file():
+    # /proc passes the permission check (as root, every directory does) but creates no file: live learns it at
+    # start, not at the first Save.
+    if not Path("/proc/self").is_dir():
+        pytest.skip("needs Linux's /proc")
+    result = cli("live", REPO / "scenes" / "rope.toml", "--record", "/proc/x.usdc", "--port", free_port(),
+                 "--seconds", 1)
+    assert result.returncode == 2, result.stderr
+    assert "error: --record: cannot write /proc/x.usdc: cannot create a file in /proc" in result.stderr
+    assert "open http" not in result.stdout and "Traceback" not in result.stderr

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .cache_reader import FrameGeometry, open_cache, read_frame
+from .cache_reader import FrameGeometry, PreviewError, open_cache, read_frame
 from .display_mesh import DisplayMesh, rope_segments
 from .web_view import (CLOTH_COLOURS, DEFAULT_PORT, LOCALHOST, ROPE_COLOUR, ROPE_THICKNESS_M, ClothDrawing,
                        add_plane, add_sphere, frame_camera, start_server)
@@ -28,6 +28,10 @@ class CachePlayer:
                  max_grid_quads: int | None = None):
         self.cache = cache = open_cache(cache_path)  # PreviewError for anything that is not a cache
         first = read_frame(cache, cache.frames[0])  # a damaged first frame fails before the server starts
+        if not any(len(c.points) for c in first.cloth_frames) and not any(len(r) for r in first.ropes):
+            # The camera is framed on the first frame's points; a cache with none there has nothing to show.
+            raise PreviewError(f"{cache.path}: frame {cache.frames[0]}, the first, holds no readable points for "
+                               "any cloth or rope: a damaged or empty cache, nothing to draw")
         self.server = start_server(host, port, up_axis=cache.up_axis)
         self.url = f"http://{host}:{self.server.get_port()}"
         self._stop = threading.Event()

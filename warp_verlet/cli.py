@@ -238,7 +238,9 @@ def _live(args) -> int:
     check_port(args.host, args.port)
     record = args.record or default_record_path(scene)
     try:
+        check_output_names(record)
         CacheOutput(record, inputs=input_files(scene))  # checks the path only: nothing is written
+        _check_creatable(record)
     except OutputError as exc:
         raise ServerError(f"{'--record' if args.record else 'the default recording path'}: {exc}") from None
     start_warp(verbose=False, cpu=args.device in (None, "cpu"), note=_note)
@@ -249,6 +251,21 @@ def _live(args) -> int:
     session = LiveSession(scene, args.device, waiting=True, **limit)  # starts when the first page connects
     app = LiveApp(session, args.host, args.port, record, args.max_grid_quads)
     return _serve(app, f"{args.scene}: live (the simulation starts when a page connects)", args.seconds)
+
+
+def _check_creatable(path: Path) -> None:
+    """Create and remove a file beside ``path``: a directory can pass the permission check and still refuse a
+    new file (/proc, a read-only mount seen by root), which live would only learn at the first Save."""
+    import tempfile
+
+    from .errors import OutputError
+
+    try:
+        with tempfile.NamedTemporaryFile(dir=Path(path).parent, prefix=".warp-verlet-probe-"):
+            pass
+    except OSError as exc:
+        raise OutputError(f"cannot write {path}: cannot create a file in {Path(path).parent} "
+                          f"({exc.strerror or exc})") from None
 
 
 def _view(args) -> int:
@@ -263,8 +280,31 @@ def _view(args) -> int:
     return _serve(app, f"{args.cache}", args.seconds)
 
 
+def check_output_names(path: Path, what: str = "") -> None:
+    """Refuse, as a bad argument, an output whose file names are longer than its file system allows (255 bytes
+    on most): the operating system's 'File name too long' would otherwise surface as a traceback from the first
+    look at the path, or fail the run after it simulated. The names a run writes are the output's, its partial
+    file's (NAME.partial.EXT) and USD's temporary file for that (NAME.partial.XXXXXX, renamed once saved), the
+    longest. ``what`` names where the path came from."""
+    from .output_file import partial_path
+
+    path = Path(path)
+    try:
+        longest = os.pathconf(path.parent if str(path.parent) else ".", "PC_NAME_MAX")
+    except (OSError, ValueError):  # no such directory (refused later, by name), or no limit to ask for
+        longest = 255
+    partial = partial_path(path)
+    for name in (path.name, partial.name, f"{partial.stem}.XXXXXX"):
+        size = len(os.fsencode(name))
+        if size > longest:
+            raise OutputNameError(f"cannot write {path}{what}: the file name is too long: the run writes through "
+                                  f"{name[:24]}...{name[-16:]}, {size} bytes, more than the {longest} its file "
+                                  "system allows; choose a shorter name")
+
+
 def _validate(args) -> int:
     scene = load_scene(args.scene)
+    check_output_names(scene.output.path, f" (output.path in {args.scene})")
     sim = scene.simulation
     print(f"{args.scene}: valid scene, {len(scene.cloths)} cloth(s), {scene.particle_count} particles, "
           f"{sim.frames} frames at {sim.fps:g} fps, {sim.substeps} substeps x {sim.iterations} iterations, "
@@ -307,6 +347,7 @@ def _run(args) -> int:
     from .output_file import CacheOutput, input_files
 
     # A bad output path is refused before Warp starts (a second or more); it only checks: nothing is written.
+    check_output_names(args.output if args.output is not None else scene.output.path)
     CacheOutput(args.output if args.output is not None else scene.output.path, inputs=input_files(scene))
     from .warp_setup import start_warp
 

@@ -194,7 +194,7 @@ def _check_weld_fits(candidates: int, largest_group: int, distance: float, what:
     if need > budget:
         raise MeshError(f"{what}: {largest_group} distinct vertices lie in one cell of {2 * distance:.3g} m (twice "
                         f"the weld distance): welding would compare {candidates} pairs of vertices, about "
-                        f"{gib(need)} GiB, more than the {gib(budget)} GiB it may take here; lower weld_distance "
+                        f"{gib(need)}, more than the {gib(budget)} it may take here; lower weld_distance "
                         "or remove the crowded vertices")
 
 

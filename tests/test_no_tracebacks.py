@@ -1,0 +1,145 @@
+"""What a user can type never ends in a traceback: each input below once did, and now gives one clear error (exit
+2 for bad input) or the documented result.
+
+- an output file name longer than its file system allows, from the scene (validate and run) or from -o;
+- a sweep range of more values than a float can count;
+- a mesh of a million vertices in coincident triangles, and a dense cluster of distinct vertices, for the welding;
+- `view` of a cache that opens but holds no readable points.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from browser import REPO, free_port
+from sweep_helpers import BASE_SCENE
+from test_cli import SCENE
+from test_mesh_cloth import brute_force_weld
+from warp_verlet.cli import main
+from warp_verlet.errors import SceneError
+from warp_verlet.faces import Faces
+from warp_verlet.mesh_cloth import MeshError, SourceMesh, prepare, weld
+
+LONG_NAME = "a" * 300 + ".usdc"  # 305 bytes: every common file system stops at 255
+
+
+@pytest.fixture
+def work(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "small.toml").write_text(SCENE)
+    return tmp_path
+
+
+# -- output names -------------------------------------------------------------------------------------------------
+
+def test_an_output_name_too_long_in_the_scene_is_refused_by_validate_and_run(work, capsys):
+    (work / "long.toml").write_text(SCENE.replace('path = "small.usdc"', f'path = "{LONG_NAME}"'))
+    for command in (["validate", "long.toml"], ["run", "long.toml", "--device", "cpu", "-q"]):
+        rc = main(command)
+        err = capsys.readouterr().err
+        assert rc == 2, err
+        assert f"error: cannot write {LONG_NAME}" in err and "the file name is too long" in err and "more than the 255" in err, err
+    assert sorted(p.name for p in work.iterdir()) == ["long.toml", "small.toml"]  # nothing written
+
+
+@pytest.mark.parametrize("stem_bytes, refused", [(240, False), (241, True), (251, True)])
+def test_every_name_a_run_writes_through_counts(work, capsys, stem_bytes, refused):
+    # NAME.usdc is saved as USD's temporary NAME.partial.XXXXXX, renamed to NAME.partial.usdc: 15 bytes more than
+    # the stem. A 240-byte stem makes a 255-byte temporary name (taken); 241 one of 256 bytes (refused, though
+    # the output's own name, 246 bytes, and the partial's, 254, would fit).
+    output = "b" * stem_bytes + ".usdc"
+    rc = main(["run", "small.toml", "-o", output, "--device", "cpu", "-q", "--frames", "1"])
+    err = capsys.readouterr().err
+    if refused:
+        assert rc == 2 and "more than the 255 its file system allows" in err, err
+        assert sorted(p.name for p in work.iterdir()) == ["small.toml"]
+    else:
+        assert rc == 0 and (work / output).is_file(), err
+
+
+# -- sweep ranges -------------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("axis_range, made", [
+    ("{ start = 0.1, stop = 1e300, step = 1e-300 }", "more than a float can count"),  # (stop - start) / step = inf
+    ("{ start = -1e308, stop = 1e308, step = 1.0 }", "more than a float can count"),  # stop - start = inf
+    ("{ start = 0.1, stop = 1e9, step = 0.5 }", "got 2000000000"),  # finite: counted
+])
+def test_a_sweep_range_of_too_many_values_is_one_error(work, capsys, axis_range, made):
+    (work / "base.toml").write_text(BASE_SCENE)
+    (work / "sweep.toml").write_text(f'[sweep]\nscene = "base.toml"\n[axes]\n"simulation.damping" = {axis_range}\n')
+    rc = main(["sweep", "sweep.toml"])
+    err = capsys.readouterr().err
+    assert rc == 2, err
+    assert "error: sweep.toml: axes.simulation.damping: expected at most 100000 values in a range" in err, err
+    assert made in err, err
+
+
+# -- welding ------------------------------------------------------------------------------------------------------
+
+def stacked_triangles(count: int) -> SourceMesh:
+    """``count`` copies of one triangle, each with its own three vertices."""
+    corner = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    faces = Faces(np.full(count, 3, np.int32), np.arange(3 * count, dtype=np.int32))
+    return SourceMesh("stack.obj", Path("stack.obj"), np.tile(corner, (count, 1)), faces)
+
+
+def test_a_million_coincident_vertices_weld_into_three_particles_in_little_memory(monkeypatch):
+    # Coincident vertices collapse before the close-pair search, so even a 64 MiB allowance takes them (the
+    # search over all pairs would have asked for 103 GiB).
+    monkeypatch.setattr("warp_verlet.memory.available_host_bytes", lambda: 64 * 2**20)
+    with pytest.warns(UserWarning, match="shared by more than two faces"):  # 333,334 faces on each edge
+        mesh = prepare(stacked_triangles(333_334))
+    assert mesh.vertex_count == 1_000_002 and mesh.particle_count == 3
+    np.testing.assert_array_equal(mesh.particle_points, [[0, 0, 0], [1, 0, 0], [0, 1, 0]])
+
+
+def test_a_dense_cluster_of_distinct_vertices_is_refused_before_the_search_allocates(monkeypatch):
+    # 1000 distinct vertices within 1e-6 m, welded at 1e-3 m: 8 grids x 499,500 candidate pairs x 128 bytes is
+    # about 0.48 GiB, over the 32 MiB that a 64 MiB machine allows.
+    monkeypatch.setattr("warp_verlet.memory.available_host_bytes", lambda: 64 * 2**20)
+    rng = np.random.default_rng(1)
+    points = rng.uniform(0.0, 1e-6, (1000, 3))
+    with pytest.raises(MeshError, match=r"cluster\.obj: 1000 distinct vertices lie in one cell .* 3996000 pairs"):
+        weld(points, 1e-3, "cluster.obj")
+    monkeypatch.setattr("warp_verlet.memory.available_host_bytes", lambda: 64 * 2**30)  # 32 GiB allowed: welded
+    np.testing.assert_array_equal(weld(points, 1e-3), np.zeros(1000))
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_welding_with_exact_duplicates_matches_brute_force(seed):
+    # Duplicates collapse first: the particles and their numbering (first occurrence) are as before.
+    rng = np.random.default_rng(seed)
+    centres = rng.uniform(-1, 1, (30, 3))
+    near = np.repeat(centres, rng.integers(1, 4, 30), axis=0)
+    near = near + rng.normal(0, 3e-3, near.shape)  # some within 1e-2 of each other, some chained
+    points = np.concatenate([near, near[rng.integers(0, len(near), 40)]])  # 40 exact copies, anywhere
+    rng.shuffle(points)
+    for distance in (1e-2, 0.0):
+        np.testing.assert_array_equal(weld(points, distance), brute_force_weld(points, distance))
+
+
+# -- view ---------------------------------------------------------------------------------------------------------
+
+def test_view_of_a_cache_with_no_readable_points_is_one_error(tmp_path):
+    pytest.importorskip("viser", reason="view needs viser: pip install 'warp-verlet[live]'")
+    from pxr import Usd, UsdGeom
+
+    # Faces but no points at any time: what 40 flipped bytes left of a real cache (it opens; no sample reads).
+    path = tmp_path / "empty.usdc"
+    stage = Usd.Stage.CreateNew(str(path))
+    stage.SetStartTimeCode(1)
+    stage.SetEndTimeCode(3)
+    mesh = UsdGeom.Mesh.Define(stage, "/World/sheet")
+    mesh.GetFaceVertexCountsAttr().Set([3])
+    mesh.GetFaceVertexIndicesAttr().Set([0, 1, 2])
+    stage.GetRootLayer().Save()
+    result = subprocess.run([sys.executable, "-m", "warp_verlet", "view", str(path), "--port", str(free_port()),
+                             "--seconds", "0.5"], capture_output=True, text=True, timeout=120, cwd=REPO)
+    assert result.returncode == 2, result.stderr
+    assert f"error: {path}: frame 1, the first, holds no readable points for any cloth or rope" in result.stderr
+    assert "Traceback" not in result.stderr and "open http" not in result.stdout
