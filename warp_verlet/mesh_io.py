@@ -11,6 +11,13 @@ trimesh triangulates every polygon as it loads (its OBJ and PLY readers split qu
 triangles), so a mesh read through it is made of triangles and gets no shear sticks. USD keeps the faces as
 authored, quads and n-gons included.
 
+A USD asset must compose cleanly: a sublayer, reference or payload that is missing, is not a USD layer, or
+closes a cycle (USD warns, skips it and goes on) is a MeshError naming the asset and the broken layer. Every
+file the asset composes or names (:func:`layer_dependencies`: sublayers, references and payloads, recursively,
+including unselected variants and paths not created yet) is kept in ``SourceMesh.dependencies``, so that no run
+output may replace one. USD's own diagnostics are captured while a USD file is read (errors.usd_diagnostics) and
+shown without its C++ function names, source files and line numbers.
+
 Only the reader a scene needs is imported: trimesh for mesh files, pxr for USD. A reader may need a package
 that is not installed (trimesh reads an OBJ with UVs through Pillow); that is said as such, naming the package
 to install, not as a mesh that cannot be read.

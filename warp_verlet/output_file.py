@@ -150,7 +150,8 @@ def partial_path(path: Path) -> Path:
 
 def input_files(scene) -> list[Path]:
     """The files a scene reads: the scene file itself and every path-valued field of its cloths and colliders
-    (mesh files, override layers), so that the output can never overwrite one of them."""
+    (mesh files, override layers, and every layer a USD mesh composes, recursively: the mesh's
+    ``SourceMesh.dependencies``), so that the output can never overwrite one of them."""
     found = []
     source = Path(scene.source)
     if source.is_file():
