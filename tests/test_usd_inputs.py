@@ -102,6 +102,14 @@ BROKEN = {
     "a sublayer that is not a USD file": (
         {"passwd.usda": '#usda 1.0\n(\n    subLayers = [@/etc/passwd@, @./base.usda@]\n)\n'},
         "passwd.usda", "Could not load sublayer @/etc/passwd@ of layer @passwd.usda@ -- Cannot determine file format"),
+    "a torn layer in a variant that is not selected": (
+        {"variant.usda": '#usda 1.0\n(\n    defaultPrim = "Set"\n    subLayers = [@./base.usda@]\n)\n'
+                         'over "Set" (\n    variants = { string look = "plain" }\n    prepend variantSets = "look"\n) {\n'
+                         '    variantSet "look" = {\n        "plain" {}\n'
+                         '        "fancy" {\n            def Xform "Trim" (prepend references = @./torn.usda@) {}\n'
+                         '        }\n    }\n}\n',
+         "torn.usda": '#usda 1.0\ndef Xform "Trim" {\n    double3 xformOp:translate = (0, 0,\n'},
+        "variant.usda", "a layer it names cannot be read ({dir}/torn.usda:4:1: parse error"),
 }
 
 

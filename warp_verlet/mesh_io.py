@@ -176,10 +176,13 @@ def layer_dependencies(path: Path) -> tuple[Path, ...]:
     """Every file the USD file at ``path`` composes or names, recursively: its sublayers, references and payloads
     (unloaded payloads and unselected variants included), the other assets they name, and the paths it names that
     do not exist yet (a file written there later would become part of the asset). None may be a run's output."""
-    from pxr import UsdUtils
+    from pxr import Tf, UsdUtils
 
-    with usd_diagnostics():  # an unresolved path is returned (and reported to any enclosing usd_diagnostics)
-        layers, assets, unresolved = UsdUtils.ComputeAllDependencies(str(path))
+    try:
+        with usd_diagnostics():  # an unresolved path is returned (and reported to any enclosing usd_diagnostics)
+            layers, assets, unresolved = UsdUtils.ComputeAllDependencies(str(path))
+    except Tf.ErrorException as exc:  # a layer that is not composed now (an unselected variant's) cannot be read
+        raise MeshError(f"{path}: a broken USD asset: a layer it names cannot be read ({usd_cause(exc)})") from None
     found = [Path(layer.realPath) for layer in layers if layer.realPath]
     found += [Path(asset) for asset in (*assets, *unresolved) if asset]
     return tuple(dict.fromkeys(found))
