@@ -136,3 +136,42 @@ def test_live_refuses_a_record_directory_that_takes_no_new_file():
     assert result.returncode == 2, result.stderr
     assert "error: --record: cannot write /proc/x.usdc: cannot create a file in /proc" in result.stderr
     assert "open http" not in result.stdout and "Traceback" not in result.stderr
+
+
+def test_a_page_of_another_origin_cannot_open_the_websocket(viser, caplog):
+    # Any page in the user's browser may open a websocket to 127.0.0.1; only this server's own page (its Origin
+    # is the Host it connected to, a loopback name) and clients that are no page (no Origin) are let in. A
+    # refused one is closed with 1008 before anything it sent is read.
+    from websockets.exceptions import ConnectionClosed
+    from websockets.sync.client import connect
+
+    from warp_verlet.web_view import start_server
+
+    server = start_server(port=free_port())
+    port = server.get_port()
+    protocol = [f"viser-v{viser.__version__}"]
+
+    def opened(uri: str, origin: str | None) -> bool:
+        """Whether the server keeps the connection and sends it the scene; False when it closes it with 1008."""
+        sock = socket.create_connection(("127.0.0.1", port))  # whatever name the URI gives, as DNS rebinding would
+        with connect(uri, sock=sock, origin=origin, subprotocols=protocol, open_timeout=10) as ws:
+            try:
+                ws.recv(timeout=10)
+                return True
+            except ConnectionClosed as closed:
+                assert closed.rcvd is not None and closed.rcvd.code == 1008, closed
+                return False
+
+    try:
+        local = f"ws://127.0.0.1:{port}"
+        assert opened(local, f"http://127.0.0.1:{port}")  # the served page
+        assert opened(f"ws://localhost:{port}", f"http://localhost:{port}")
+        assert opened(local, None)  # no page: a script on this machine
+        assert not opened(local, "https://example.com")  # any other site
+        assert not opened(local, "null")  # a local file or a sandboxed frame
+        assert not opened(local, f"http://127.0.0.1:{port + 1}")  # another port is another origin
+        assert not opened(f"ws://rebound.example:{port}", f"http://rebound.example:{port}")  # DNS rebinding
+    finally:
+        server.stop()
+    logged = [r.getMessage() for r in caplog.records if r.name.startswith("websockets")]
+    assert "connection handler failed" not in logged, logged  # a refusal is no error: no traceback is printed

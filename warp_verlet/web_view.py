@@ -19,6 +19,7 @@ import os
 import socket
 import warnings
 from typing import Sequence
+from urllib.parse import urlsplit
 
 import numpy as np
 
@@ -89,9 +90,68 @@ def start_server(host: str = LOCALHOST, port: int = DEFAULT_PORT, up_axis: str =
     if server.get_port() != port:  # taken between the check and the bind
         server.stop()
         raise ServerError(f"port {port} on {host} was taken while starting: choose another with --port")
+    refuse_foreign_origins(server, is_loopback(host))
     server.scene.set_up_direction("+z" if up_axis == "Z" else "+y")
     server.gui.configure_theme(control_width="large")
     return server
+
+
+class ForeignOriginError(Exception):
+    """A websocket opened by a page of another web origin: raised to end viser's handler for that connection
+    before it reads a message (never seen by the user: its log record is filtered out)."""
+
+
+def same_origin(origin: str | None, host_header: str | None, loopback: bool) -> bool:
+    """Whether a websocket handshake comes from this server's own page, or from no page at all.
+
+    A browser lets any page open a websocket to any address, 127.0.0.1 included, and sends the page's Origin;
+    only a page this server served has an Origin whose host and port are the Host it connected to. A client
+    that is no browser page sends no Origin and is let in: it runs on a machine that can reach the port, which
+    on the loopback is this user's own. On the loopback the host must also be a loopback name: a page whose
+    own name resolves to 127.0.0.1 (DNS rebinding) would otherwise have matching Origin and Host."""
+    if origin is None:
+        return True
+    parts = urlsplit(origin)
+    if parts.scheme not in ("http", "https") or not parts.netloc or host_header is None:
+        return False  # "null" (a file or a sandboxed frame), or no Host to compare with
+    if parts.netloc.lower() != host_header.strip().lower():
+        return False
+    return not loopback or is_loopback((parts.hostname or "").strip("[]"))
+
+
+def refuse_foreign_origins(server, loopback: bool) -> None:
+    """Close, before it is read, every websocket that :func:`same_origin` refuses (code 1008, policy).
+
+    viser 1.1 offers no hook into the handshake, so the check runs as the first of its connection callbacks
+    (its internal ``WebsockServer``), which run before the connection's first message is read; raising there
+    ends its handler, so nothing the page sent is ever handled."""
+    import logging
+
+    sockets = server._websock_server
+
+    async def check(connection) -> None:
+        live = sockets._live_connections.get(connection.client_id)
+        if live is None:
+            return
+        headers = live.request.headers
+        if same_origin(headers.get("Origin"), headers.get("Host"), loopback):
+            return
+        sockets._client_state_from_id.pop(connection.client_id, None)
+        sockets._live_connections.pop(connection.client_id, None)
+        await live.close(1008, "a page of another origin may not drive this session")
+        raise ForeignOriginError(headers.get("Origin"))
+
+    sockets._client_connect_cb.insert(0, check)
+    logger = logging.getLogger("websockets.server")
+    if not any(isinstance(f, _DropForeignOrigin) for f in logger.filters):
+        logger.addFilter(_DropForeignOrigin())
+
+
+class _DropForeignOrigin:
+    """A logging filter: websockets logs a handler's exception with its traceback; a refused origin is none."""
+
+    def filter(self, record) -> bool:
+        return not (record.exc_info and isinstance(record.exc_info[1], ForeignOriginError))
 
 
 def frame_camera(server, lo: np.ndarray, hi: np.ndarray, up_axis: str = "Y") -> None:
