@@ -9,14 +9,18 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from sweep_helpers import (DIVERGING_SWEEP, GRID_SWEEP, read_cache, read_rows, square_or_die, square_unless_killed,
                            structural_stretch, write_sweep)
 from warp_verlet.cli import main
+from warp_verlet.errors import OutputBusyError, OutputError
+from warp_verlet.output_file import OutputNameError
 from warp_verlet.sweep import cache_problems, load_sweep, run_sweep
 from warp_verlet.sweep_backends import InlineBackend, LocalBackend, Slot, device_slots
 
@@ -267,10 +271,103 @@ def test_ctrl_c_stops_cleanly_and_the_sweep_resumes(tmp_path):
             assert cache_problems(Path(r["output"]), 400) == [] and json.loads(sidecar.read_text())["status"] == "ok"
         else:
             assert not sidecar.exists() and "interrupted" in r["error"]
+            # It names where its frames are (the partial file), or nothing: never a cache that does not exist.
+            assert r["output"] == "" or (r["output"].endswith(".partial.usdc") and Path(r["output"]).is_file()), r
     done = [int(r["index"]) for r in rows if r["status"] == "ok"]
     again = run_sweep(load_sweep(path), InlineBackend("cpu"), progress=False)
     assert again.resumed == done and sorted(again.ran) == [i for i in range(6) if i not in done]
     assert [r["status"] for r in again.rows] == ["ok"] * 6
+
+
+# ---------------------------------------------------------------------------------------------- the output directory
+
+class PausedBackend(InlineBackend):
+    """Runs inline once ``release`` is set; sets ``started`` when the sweep hands it its variants."""
+
+    def __init__(self):
+        super().__init__("cpu")
+        self.started, self.release = threading.Event(), threading.Event()
+
+    def run(self, fn, items):
+        self.started.set()
+        assert self.release.wait(120)
+        yield from super().run(fn, items)
+
+
+def test_a_second_sweep_into_the_same_output_directory_is_refused_at_once(tmp_path):
+    path = write_sweep(tmp_path)
+    out = tmp_path / "out"
+    first_backend, first = PausedBackend(), {}
+    thread = threading.Thread(target=lambda: first.update(result=run_sweep(load_sweep(path), first_backend,
+                                                                           progress=False)))
+    thread.start()
+    try:
+        assert first_backend.started.wait(120)
+        before = (out / "sweep.csv").read_bytes()
+        (tmp_path / "alias").symlink_to(out)  # the same directory by another path
+        for where in (None, tmp_path / "alias"):
+            with pytest.raises(OutputBusyError, match=r"another sweep is writing that directory now"):
+                run_sweep(load_sweep(path), InlineBackend("cpu"), out=where, progress=False)
+        done = subprocess.run([sys.executable, "-m", "warp_verlet", "sweep", str(path), "--device", "cpu", "-q"],
+                              capture_output=True, text=True, timeout=300)
+        assert done.returncode == 1 and done.stderr.count("error:") == 1, done.stderr
+        assert "another sweep is writing that directory now" in done.stderr
+        assert (out / "sweep.csv").read_bytes() == before and list(out.glob("*.usdc")) == []  # nothing ran
+    finally:
+        first_backend.release.set()
+        thread.join(300)
+    assert first["result"].ran == [0, 1, 2, 3] and not first["result"].failed
+    check_rows_match_caches(out, 4)
+    assert run_sweep(load_sweep(path), InlineBackend("cpu"), progress=False).resumed == [0, 1, 2, 3]  # released
+
+
+def test_an_output_directory_holding_the_sweep_file_is_refused(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # the output directory "." is the working directory's
+    path = write_sweep(tmp_path, GRID_SWEEP.replace('output = "{out}"', 'output = "."'))
+    text = path.read_text()
+    with pytest.raises(OutputNameError, match=r"the output directory \S+ is the sweep file's own directory"):
+        run_sweep(load_sweep(path), InlineBackend("cpu"), progress=False)
+    assert main(["sweep", str(path), "--device", "cpu", "-q"]) == 2
+    assert "is the sweep file's own directory" in capsys.readouterr().err
+    assert path.read_text() == text
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["base.toml", "falling.toml", "sweep.toml"]
+
+
+@pytest.mark.parametrize("name", ["sweep.csv", "sweep.md"])
+def test_a_summary_file_this_sweep_did_not_write_is_never_overwritten(tmp_path, name):
+    path = write_sweep(tmp_path)
+    out = tmp_path / "out"
+    out.mkdir()
+    theirs = out / name
+    theirs.write_text("index,name\nmy own table\n")
+    with pytest.raises(OutputError, match=f"{theirs} is not a summary of {path}"):
+        run_sweep(load_sweep(path), InlineBackend("cpu"), progress=False)
+    assert theirs.read_text() == "index,name\nmy own table\n" and sorted(p.name for p in out.iterdir()) == [name]
+    theirs.unlink()
+    run_sweep(load_sweep(path), InlineBackend("cpu"), progress=False)
+    again = run_sweep(load_sweep(path), InlineBackend("cpu"), progress=False, resume=False)  # its own: replaced
+    assert again.ran == [0, 1, 2, 3] and len(read_rows(out / "sweep.csv")) == 4
+
+
+def test_a_cache_swapped_in_from_another_variant_is_run_again(tmp_path):
+    path = write_sweep(tmp_path)
+    out = tmp_path / "out"
+    first = run_sweep(load_sweep(path), InlineBackend("cpu"), progress=False)
+    rows = first.rows
+    # Variants 0 and 1 differ in substeps only: the other's cache is a valid cache of as many points and frames.
+    mine, other = Path(rows[0]["output"]), Path(rows[1]["output"])
+    assert cache_problems(other, 3) == [] and not np.array_equal(read_cache(mine)["points"], read_cache(other)["points"])
+    kept = mine.read_bytes()
+    mine.write_bytes(other.read_bytes())
+    again = run_sweep(load_sweep(path), InlineBackend("cpu"), progress=False)
+    assert again.ran == [0] and again.resumed == [1, 2, 3]
+    assert np.array_equal(read_cache(mine)["points"], read_cache_bytes(kept, tmp_path)["points"])
+
+
+def read_cache_bytes(data: bytes, tmp_path: Path) -> dict:
+    copy = tmp_path / "copy.usdc"
+    copy.write_bytes(data)
+    return read_cache(copy)
 
 
 # ---------------------------------------------------------------------------------------------- command line

@@ -21,10 +21,22 @@ then validated by :func:`warp_verlet.scene.parse_scene` like any scene file; so 
 :class:`SceneError` naming the sweep file, the axis and the variant, before anything runs.
 
 Running (``run_sweep``): each variant writes ``<output>/<name>.<format>`` and a sidecar ``<name>.json`` with its
-parameter hash and its result row; ``sweep.csv`` and ``sweep.md`` list every variant. A re-run skips the variants
-whose sidecar says ok with the same hash and whose cache validates with the expected frames. The hash is of the
-variant's whole scene document, frames included, so a run with another ``--frames`` runs every variant again. The backends that run
-the variants are in ``sweep_backends.py``.
+parameter hash, the SHA-256 of its cache and its result row; ``sweep.csv`` and ``sweep.md`` list every variant. A
+re-run skips the variants whose sidecar says ok with the same hash and whose cache is the one the sidecar names (its
+SHA-256: a cache copied in from another variant is run again) and validates with the expected frames. The hash is of
+the variant's whole scene document, frames included, so a run with another ``--frames`` runs every variant again.
+The backends that run the variants are in ``sweep_backends.py``.
+
+The output directory is the sweep's own while it runs:
+
+* **One sweep per output directory.** A sweep holds an exclusive lock on its output directory (filelock, in this
+  user's private lock directory, as a run holds one on its output file: output_file.py) until its summary is
+  written; a second sweep into the same directory, by whatever path, is refused at once (:class:`OutputBusyError`).
+* **No file of the user's is overwritten.** An output directory that holds the sweep file is refused. ``sweep.csv``
+  and ``sweep.md`` are replaced only when they are this sweep's summary, written by an earlier run of it: the csv's
+  header row is this sweep's columns, the markdown's first line is ``# Sweep <sweep file's name>`` followed by its
+  ``- sweep file:`` line. Any other file by those names is refused (:class:`OutputError`); move it away, or choose
+  another output directory.
 """
 
 from __future__ import annotations
@@ -38,13 +50,14 @@ import json
 import math
 import os
 import re
+import stat
 import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
-from .errors import SceneError, WarpVerletError
+from .errors import OutputBusyError, OutputError, SceneError, WarpVerletError
 from .scene import (Scene, _describe, _Invalid, _Table, choice, integer, load_scene, parse_scene, read_toml_file, real,
                     text)
 
@@ -724,17 +737,37 @@ def cache_path(sweep: Sweep, variant: Variant, out: Path | None = None) -> Path:
     return (out or sweep.output) / f"{variant.name}.{sweep.format}"
 
 
+MAX_SIDECAR_BYTES = 2**20  # a sidecar holds one row (well under 10 kB): a larger file is not one of ours
+
+
+def file_sha256(path: Path) -> str | None:
+    """The SHA-256 of a file's bytes, read in chunks (a cache may be GBs), or None when it cannot be read."""
+    digest = hashlib.sha256()
+    try:
+        with open(path, "rb") as f:
+            while chunk := f.read(2**20):
+                digest.update(chunk)
+    except OSError:
+        return None
+    return digest.hexdigest()
+
+
 def done_row(sweep: Sweep, variant: Variant, out: Path) -> dict | None:
-    """The row of a variant an earlier run finished, when its sidecar says ok with this parameter hash and its
-    cache validates with the expected frames; otherwise None (it runs again)."""
+    """The row of a variant an earlier run finished, when its sidecar says ok with this parameter hash, its cache
+    is the file the sidecar recorded (SHA-256) and validates with the expected frames; otherwise None (it runs
+    again)."""
     sidecar = out / f"{variant.name}.json"
     try:
-        saved = json.loads(sidecar.read_text())
-    except (OSError, ValueError):
+        with open(sidecar, "rb") as f:
+            saved = json.loads(f.read(MAX_SIDECAR_BYTES + 1))
+    except (OSError, ValueError):  # a truncated, oversized or foreign file is no sidecar of ours
         return None
     if not isinstance(saved, dict) or saved.get("hash") != variant.hash or saved.get("status") != "ok":
         return None
-    if cache_problems(cache_path(sweep, variant, out), variant.scene.simulation.frames):
+    cache = cache_path(sweep, variant, out)
+    if saved.get("cache_sha256") is None or saved.get("cache_sha256") != file_sha256(cache):
+        return None
+    if cache_problems(cache, variant.scene.simulation.frames):
         return None
     row = _base_row(sweep, variant, cache_path(sweep, variant, out))
     row.update({k: saved.get(k) for k in COLUMNS_AFTER if k in saved and k not in ("output", "resumed", "hash")})
@@ -748,7 +781,88 @@ def run_sweep(sweep: Sweep, backend, out: Path | None = None, resume: bool = Tru
     summary as results come in. Ctrl-C stops the backend, marks what did not finish "interrupted", writes the
     summary and re-raises KeyboardInterrupt."""
     out = Path(out) if out is not None else sweep.output
-    out.mkdir(parents=True, exist_ok=True)
+    _refuse_the_sweep_files_directory(sweep, out)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(f"cannot create the sweep's output directory {out}: {exc.strerror or exc}") from None
+    lock = _lock_output_directory(out)
+    try:
+        _refuse_foreign_summaries(sweep, out)
+        return _run_sweep(sweep, backend, out, resume, progress, log, summary_interval)
+    finally:
+        lock.release()
+
+
+SWEEP_LOCK_NAME = "sweep-output-directory"  # no run's output has this name: a run's ends in .usd, .usda, .usdc
+
+
+def _lock_output_directory(out: Path):
+    """The held lock of a sweep's output directory (filelock, in output_file.lock_directory, named by the
+    directory's device and inode, so every path to it finds the same lock), or OutputBusyError at once."""
+    from filelock import FileLock, Timeout
+
+    from .output_file import lock_path
+
+    path = lock_path(Path(os.path.realpath(out)) / SWEEP_LOCK_NAME)
+    lock = FileLock(str(path), timeout=0)
+    try:
+        lock.acquire(timeout=0)
+    except Timeout:
+        raise OutputBusyError(f"cannot run the sweep into {out}: another sweep is writing that directory now (it "
+                              f"holds the lock {path}); wait for it to finish, or choose another output directory"
+                              ) from None
+    except OSError as exc:
+        raise OutputError(f"cannot create the lock of the sweep's output directory {out}, {path}: "
+                          f"{exc.strerror or exc}") from None
+    return lock
+
+
+def _refuse_the_sweep_files_directory(sweep: Sweep, out: Path) -> None:
+    from .output_file import OutputNameError
+
+    try:
+        holds = os.path.samefile(out, Path(sweep.file).parent)
+    except OSError:  # the output directory does not exist yet: it holds nothing
+        return
+    if holds:
+        raise OutputNameError(f"{sweep.file}: the output directory {out} is the sweep file's own directory, where "
+                              "the summary and the caches could overwrite it or its scene: choose another output "
+                              "directory ([sweep] output, or --output)")
+
+
+def _summary_markers(sweep: Sweep) -> dict[str, bytes]:
+    """How each summary file of this sweep starts (see the module's docstring)."""
+    empty = _Summary(sweep, Path("."), [], "", "")
+    md_head = empty.md_text().split("`", 1)[0] + "`"  # "# Sweep NAME", "", "- sweep file: `" (then its path)
+    return {"sweep.csv": empty.csv_text().encode(), "sweep.md": md_head.encode()}
+
+
+def _refuse_foreign_summaries(sweep: Sweep, out: Path) -> None:
+    """Refuse to run when ``sweep.csv`` or ``sweep.md`` in ``out`` is not this sweep's summary."""
+    for name, marker in _summary_markers(sweep).items():
+        path = out / name
+        try:
+            info = os.lstat(path)
+        except FileNotFoundError:
+            continue
+        except OSError as exc:
+            raise OutputError(f"cannot check {path}: {exc.strerror or exc}") from None
+        ours = False
+        if stat.S_ISREG(info.st_mode):
+            try:
+                with open(path, "rb") as f:
+                    ours = f.read(len(marker)) == marker
+            except OSError:
+                pass
+        if not ours:
+            raise OutputError(f"{path} is not a summary of {sweep.file} (this sweep writes its summary there and "
+                              "would overwrite it): move it away, or choose another output directory "
+                              "([sweep] output, or --output)")
+
+
+def _run_sweep(sweep: Sweep, backend, out: Path, resume: bool, progress: bool, log: Callable[[str], None] | None,
+               summary_interval: float) -> SweepResult:
     started = time.perf_counter()
     rows: list[dict] = []
     todo = []
@@ -797,9 +911,11 @@ def run_sweep(sweep: Sweep, backend, out: Path | None = None, resume: bool = Tru
             if not Path(row["output"]).exists():
                 row["output"] = ""  # nothing was written (a failure before the first frame)
             result.ran.append(v.index)
+            # The cache's digest ties the sidecar to this cache: a cache swapped in later is not vouched for.
+            digest = file_sha256(Path(row["output"])) if row["status"] == "ok" else None
             _atomic_write(out / f"{v.name}.json", json.dumps(
-                {"hash": v.hash, "params": v.params, **{k: row.get(k) for k in COLUMNS_AFTER}}, indent=1,
-                default=repr))
+                {"hash": v.hash, "params": v.params, "cache_sha256": digest,
+                 **{k: row.get(k) for k in COLUMNS_AFTER}}, indent=1, default=repr))
             summary.update()
             if bar is not None:
                 bar.update(1)
@@ -808,9 +924,14 @@ def run_sweep(sweep: Sweep, backend, out: Path | None = None, resume: bool = Tru
     except KeyboardInterrupt:
         outcomes.close()  # stops the backend's workers
         result.interrupted = True
+        from .output_file import partial_path
+
         for row in rows:
             if row["status"] == "pending":
-                row.update(status="interrupted", error="the sweep was interrupted before this variant finished")
+                # Its frames so far, if any, are in the partial file (output_file.py); the cache was not written.
+                partial = partial_path(Path(row["output"]))
+                row.update(status="interrupted", error="the sweep was interrupted before this variant finished",
+                           output=str(partial) if partial.exists() else "")
         raise
     finally:
         if bar is not None:
