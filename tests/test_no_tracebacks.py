@@ -143,3 +143,38 @@ def test_view_of_a_cache_with_no_readable_points_is_one_error(tmp_path):
     assert result.returncode == 2, result.stderr
     assert f"error: {path}: frame 1, the first, holds no readable points for any cloth or rope" in result.stderr
     assert "Traceback" not in result.stderr and "open http" not in result.stdout
+
+
+# -- live's Save ----------------------------------------------------------------------------------------------------
+
+def test_a_save_path_typed_in_the_live_page_is_refused_in_its_log_not_with_a_traceback(tmp_path, monkeypatch):
+    pytest.importorskip("viser", reason="live needs viser: pip install 'warp-verlet[live]'")
+    from conftest import make_scene
+    from warp_verlet.live_app import LiveApp
+    from warp_verlet.live_session import LiveSession
+
+    app = LiveApp(LiveSession(make_scene(resolution=[4, 4]), "cpu", waiting=False), port=free_port(),
+                  record_path=tmp_path / "live.usdc")
+    errors = []
+    monkeypatch.setattr("threading.excepthook", lambda hook: errors.append(hook.exc_value))
+
+    def save(path) -> str:
+        app.record_path.value = str(path)
+        app._save()
+        for thread in app._saves:
+            thread.join()
+        return app.session.event_lines()[-1]
+
+    try:
+        app.session.tick(1 / 60)
+        assert "refused: cannot write" in save(tmp_path / LONG_NAME) and "the file name is too long" in \
+            app.session.event_lines()[-1]
+        # Whatever else the system refuses is said in the log too (a name the checks let through, here faked).
+        monkeypatch.setattr(app.session, "save", lambda path: open(tmp_path / "missing" / "x", "w"))
+        line = save(tmp_path / "other.usdc")
+        assert f"refused: cannot write {tmp_path / 'missing' / 'x'}: No such file or directory" in line, line
+        assert not errors, errors  # no thread ended in an exception
+        assert sorted(p.name for p in tmp_path.iterdir()) == []  # nothing written
+    finally:
+        app.server.stop()
+        app.session.close()

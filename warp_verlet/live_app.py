@@ -163,6 +163,9 @@ class LiveApp:
             action()
         except WarpVerletError as exc:
             self.session.log(f"refused: {exc}")
+        except OSError as exc:  # a path the checks let through that the system refuses: said, not a traceback
+            where = f" {exc.filename}" if exc.filename else ""
+            self.session.log(f"refused: cannot write{where}: {exc.strerror or exc}")
 
     def _substeps_edited(self, _) -> None:
         # viser calls this also when show_readouts sets the slider to what the target-stretch budget chose: that
@@ -189,8 +192,14 @@ class LiveApp:
             self.session.release_pin(pin)  # the dropdown follows once the release has applied (show_readouts)
 
     def _save(self) -> None:
+        from .cli import check_output_names  # the checks `live --record` had at start, for a path typed in the page
+
         path = Path(self.record_path.value).expanduser()
-        thread = threading.Thread(target=self._guard, args=(lambda: self.session.save(path),), daemon=True)
+
+        def save() -> None:
+            check_output_names(path)
+            self.session.save(path)
+        thread = threading.Thread(target=self._guard, args=(save,), daemon=True)
         self._saves.append(thread)
         thread.start()
 
