@@ -62,6 +62,19 @@ def test_every_name_a_run_writes_through_counts(work, capsys, stem_bytes, refuse
         assert rc == 0 and (work / output).is_file(), err
 
 
+def test_view_and_preview_of_names_too_long_are_one_error(work, capsys):
+    pytest.importorskip("viser", reason="view needs viser: pip install 'warp-verlet[live]'")
+    pytest.importorskip("mitsuba", reason="preview needs Mitsuba, part of the base install")
+    assert main(["view", LONG_NAME, "--port", str(free_port())]) == 2
+    assert f"error: {LONG_NAME}: cannot look at it (File name too long)" in capsys.readouterr().err
+    # The image is written as .NAME.PID.partial.png: a 245-byte stem fits as NAME.png (249 bytes), not so.
+    for image in ("c" * 300 + ".png", "c" * 245 + ".png"):
+        assert main(["preview", "any.usdc", "-o", image]) == 2
+        err = capsys.readouterr().err
+        assert f"error: cannot write {image}: the file name is too long" in err, err
+    assert sorted(p.name for p in work.iterdir()) == ["small.toml"]
+
+
 # -- sweep ranges -------------------------------------------------------------------------------------------------
 
 @pytest.mark.parametrize("axis_range, made", [

@@ -129,9 +129,13 @@ def _face_polygons(points: np.ndarray, faces: Faces, keep: np.ndarray) -> Polygo
 def open_cache(path: str | os.PathLike[str]) -> PointCache:
     """Open a point cache and find its cloths and colliders; PreviewError when it is not one."""
     path = Path(path)
-    if not path.exists():
+    try:
+        found, regular = path.exists(), path.is_file()
+    except OSError as exc:  # a name too long, a directory on the way that cannot be searched
+        raise PreviewError(f"{path}: cannot look at it ({exc.strerror or exc})") from None
+    if not found:
         raise PreviewError(f"{path}: no such file")
-    if not path.is_file():
+    if not regular:
         raise PreviewError(f"{path}: not a file")
     try:
         stage = Usd.Stage.Open(str(path))

@@ -288,16 +288,21 @@ def check_output_names(path: Path, what: str = "") -> None:
     longest. ``what`` names where the path came from."""
     from .output_file import partial_path
 
-    path = Path(path)
+    partial = partial_path(Path(path))
+    refuse_long_names(Path(path), (Path(path).name, partial.name, f"{partial.stem}.XXXXXX"), what)
+
+
+def refuse_long_names(path: Path, names, what: str = "") -> None:
+    """OutputNameError when one of ``names``, the files written in ``path``'s directory on the way to ``path``,
+    is longer than that directory's file system allows."""
     try:
         longest = os.pathconf(path.parent if str(path.parent) else ".", "PC_NAME_MAX")
     except (OSError, ValueError):  # no such directory (refused later, by name), or no limit to ask for
         longest = 255
-    partial = partial_path(path)
-    for name in (path.name, partial.name, f"{partial.stem}.XXXXXX"):
+    for name in names:
         size = len(os.fsencode(name))
         if size > longest:
-            raise OutputNameError(f"cannot write {path}{what}: the file name is too long: the run writes through "
+            raise OutputNameError(f"cannot write {path}{what}: the file name is too long: it is written through "
                                   f"{name[:24]}...{name[-16:]}, {size} bytes, more than the {longest} its file "
                                   "system allows; choose a shorter name")
 
@@ -433,6 +438,9 @@ def _preview_module():
 
 def _preview(args) -> int:
     preview = _preview_module()
+    # preview.render_preview writes the image as .NAME.PID.partial.EXT, renamed when it is complete.
+    output = Path(args.output)
+    refuse_long_names(output, (output.name, f".{output.stem}.{os.getpid()}.partial{output.suffix}"))
     try:
         image = preview.render_preview(args.cache, args.output, frames=args.frames, size=args.size)
     except preview.PreviewError as exc:  # a bad cache or option: the same exit code as a bad scene
