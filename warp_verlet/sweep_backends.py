@@ -284,10 +284,7 @@ class LocalBackend:
             exc = future.exception()  # waits; a KeyboardInterrupt here is the driver's own
             latency = time.perf_counter() - t0
             if isinstance(exc, BrokenProcessPool):
-                code = None
-                for p in processes:
-                    p.join(timeout=5)
-                    code = p.exitcode if p.exitcode is not None else code
+                code = _died(processes)  # waits out the pool's own thread, which may reap the worker first
                 outcome = Outcome(key, "killed", error=f"its worker process died ({_signal_name(code)}), twice: "
                                   "once beside others, once alone", latency=latency)
             elif isinstance(exc, KeyboardInterrupt):
