@@ -77,8 +77,8 @@ def ensure_kernel_cache(note: Callable[[str], None] | None = None) -> None:
         return
     fallback = fallback_cache_dir()
     directory, below = user_directory()
-    # Every directory from the system's one down to the fallback must be private; a fallback elsewhere (a test's)
-    # is checked from its parent on.
+    # Every directory from the system's one down to the fallback must be private; a fallback outside this user's
+    # directory (fallback_cache_dir replaced) is checked from its own parent on.
     try:
         unusable = make_private_directory(fallback, below if fallback.is_relative_to(directory) else fallback.parent)
     except OSError as exc:
