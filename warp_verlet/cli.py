@@ -293,18 +293,34 @@ def check_output_names(path: Path, what: str = "") -> None:
 
 
 def refuse_long_names(path: Path, names, what: str = "") -> None:
-    """OutputNameError when one of ``names``, the files written in ``path``'s directory on the way to ``path``,
-    is longer than that directory's file system allows."""
+    """OutputNameError when a directory on the way to ``path``, or one of ``names`` (the files written in its
+    directory on the way to ``path``), is a longer name than the file system allows, or the whole path longer
+    than the system's path limit (PATH_MAX)."""
+    path = Path(path)
+    directory = Path(os.path.abspath(path.parent))
+    existing = next(p for p in (directory, *directory.parents) if os.path.isdir(p))  # the root at least
     try:
-        longest = os.pathconf(path.parent if str(path.parent) else ".", "PC_NAME_MAX")
-    except (OSError, ValueError):  # no such directory (refused later, by name), or no limit to ask for
-        longest = 255
+        longest_name, longest_path = (os.pathconf(existing, "PC_NAME_MAX"), os.pathconf(existing, "PC_PATH_MAX"))
+    except (OSError, ValueError):  # no limit to ask for: Linux's
+        longest_name, longest_path = 255, 4096
+
+    def refuse(problem: str) -> OutputNameError:
+        shown = str(path) if len(str(path)) <= 120 else f"{str(path)[:56]}...{str(path)[-56:]}"
+        return OutputNameError(f"cannot write {shown}{what}: {problem}; choose a shorter path")
+
+    for part in directory.parts[1:]:
+        if len(os.fsencode(part)) > longest_name:
+            raise refuse(f"the directory name {part[:24]}... is {len(os.fsencode(part))} bytes, more than the "
+                         f"{longest_name} its file system allows")
     for name in names:
         size = len(os.fsencode(name))
-        if size > longest:
-            raise OutputNameError(f"cannot write {path}{what}: the file name is too long: it is written through "
-                                  f"{name[:24]}...{name[-16:]}, {size} bytes, more than the {longest} its file "
-                                  "system allows; choose a shorter name")
+        if size > longest_name:
+            raise refuse(f"the file name is too long: it is written through {name[:24]}...{name[-16:]}, {size} "
+                         f"bytes, more than the {longest_name} its file system allows")
+        full = len(os.fsencode(str(directory / name)))
+        if full >= longest_path:  # PATH_MAX counts the terminating NUL
+            raise refuse(f"the path is too long: {full} bytes with {name[:24]}..., more than the "
+                         f"{longest_path - 1} this system allows")
 
 
 def _validate(args) -> int:
