@@ -225,5 +225,8 @@ def test_a_dt_too_large_for_the_position_bound_is_refused_before_it_moves_anythi
         with pytest.raises(ArgumentError, match="dt = .* is too large"):
             sim.step(dt)
         assert np.array_equal(sim.positions(), start) and sim.steps == 0
+    for dt in ("fast", [1e-3], float("nan"), -1e-3, 0.0):  # no number, or no positive finite one
+        with pytest.raises(ArgumentError, match="dt must be a"):
+            sim.step(dt)
     sim.step(0.5 * largest)  # within the bound: taken, and every position stays finite and inside it
     assert sim.steps == 1 and np.isfinite(sim.positions()).all() and np.abs(sim.positions()).max() <= 1.0e4

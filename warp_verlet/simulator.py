@@ -255,7 +255,10 @@ class Simulator:
     # ------------------------------------------------------------------ stepping
     def step(self, dt: float | None = None) -> None:
         """Advance by one substep of ``dt`` seconds (the scene's fixed dt by default)."""
-        dt = self.dt if dt is None else float(dt)
+        try:
+            dt = self.dt if dt is None else float(dt)
+        except (TypeError, ValueError):
+            raise ArgumentError(f"dt must be a number of seconds, got {dt!r}") from None
         self.solver.check_step(self.state, dt)
         self._check_dt_fits(dt)
         self.solver.step(self.state, dt)
