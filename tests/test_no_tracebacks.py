@@ -210,3 +210,31 @@ def test_a_save_path_typed_in_the_live_page_is_refused_in_its_log_not_with_a_tra
     finally:
         app.server.stop()
         app.session.close()
+
+
+def test_view_says_a_damaged_frame_on_the_page_and_plays_on(tmp_path):
+    pytest.importorskip("viser", reason="view needs viser: pip install 'warp-verlet[live]'")
+    from pxr import Gf, Usd, UsdGeom, Vt
+
+    from warp_verlet.cache_player import CachePlayer
+
+    path = tmp_path / "holed.usda"
+    stage = Usd.Stage.CreateNew(str(path))
+    stage.SetStartTimeCode(1)
+    stage.SetEndTimeCode(3)
+    mesh = UsdGeom.Mesh.Define(stage, "/World/sheet")
+    mesh.GetFaceVertexCountsAttr().Set([3])
+    mesh.GetFaceVertexIndicesAttr().Set([0, 1, 2])
+    nan = float("nan")
+    for frame, z in ((1, 0.0), (2, nan), (3, 0.5)):  # frame 2 holds NaN: it cannot be drawn
+        mesh.GetPointsAttr().Set(Vt.Vec3fArray([Gf.Vec3f(0, 0, z), Gf.Vec3f(1, 0, z), Gf.Vec3f(0, 1, z)]), frame)
+    stage.GetRootLayer().Save()
+    player = CachePlayer(path, port=free_port())
+    try:
+        player.show(2)
+        assert player.frame == 2 and "cannot draw it" in player.time_text.value
+        assert "frame 2 is damaged" in player.time_text.value, player.time_text.value
+        player.show(3)  # the next good frame draws as ever
+        assert player.frame == 3 and player.time_text.value == f"{3 / player.cache.fps:.3f} s"
+    finally:
+        player.server.stop()

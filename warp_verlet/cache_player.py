@@ -32,6 +32,7 @@ class CachePlayer:
             # The camera is framed on the first frame's points; a cache with none there has nothing to show.
             raise PreviewError(f"{cache.path}: frame {cache.frames[0]}, the first, holds no readable points for "
                                "any cloth or rope: a damaged or empty cache, nothing to draw")
+        last = read_frame(cache, cache.frames[-1]) if len(cache.frames) > 1 else first  # as the first frame
         self.server = start_server(host, port, up_axis=cache.up_axis)
         self.url = f"http://{host}:{self.server.get_port()}"
         self._stop = threading.Event()
@@ -51,7 +52,6 @@ class CachePlayer:
                         for i, (centre, radius) in enumerate(first.spheres)]
         for i, corners in enumerate(first.planes):
             add_plane(self.server, f"plane{i}", corners)
-        last = read_frame(cache, cache.frames[-1]) if len(cache.frames) > 1 else first
         everything = np.concatenate([g for frame in (first, last) for g in
                                      [c.points for c in frame.cloth_frames] + list(frame.ropes)
                                      + [c[None] for c, _ in frame.spheres]])
@@ -90,7 +90,13 @@ class CachePlayer:
         frames = self.cache.frames
         frame = min(max(frame, frames[0]), frames[-1])
         with self._lock:
-            self._draw(read_frame(self.cache, frame))
+            try:
+                geometry = read_frame(self.cache, frame)
+            except PreviewError as exc:  # a damaged frame between good ones: said on the page, the last one kept
+                self.time_text.value = f"{frame / self.cache.fps:.3f} s: cannot draw it ({exc})"
+                self.frame = frame
+                return
+            self._draw(geometry)
             self.frame = frame
         self.time_text.value = f"{frame / self.cache.fps:.3f} s"
 
