@@ -175,3 +175,12 @@ def test_a_page_of_another_origin_cannot_open_the_websocket(viser, caplog):
         server.stop()
     logged = [r.getMessage() for r in caplog.records if r.name.startswith("websockets")]
     assert "connection handler failed" not in logged, logged  # a refusal is no error: no traceback is printed
+
+
+def test_a_viser_without_the_internals_the_origin_check_needs_warns_instead():
+    from types import SimpleNamespace
+
+    from warp_verlet.web_view import refuse_foreign_origins
+
+    with pytest.warns(UserWarning, match="no way to check a connection's web origin"):
+        refuse_foreign_origins(SimpleNamespace(), loopback=True)

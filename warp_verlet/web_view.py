@@ -127,7 +127,12 @@ def refuse_foreign_origins(server, loopback: bool) -> None:
     ends its handler, so nothing the page sent is ever handled."""
     import logging
 
-    sockets = server._websock_server
+    sockets = getattr(server, "_websock_server", None)
+    if not all(hasattr(sockets, name) for name in ("_live_connections", "_client_state_from_id",
+                                                      "_client_connect_cb")):
+        warnings.warn("this viser version gives no way to check a connection's web origin: any page open in "
+                      "this machine's browser can drive the session (viser 1.1 does)", stacklevel=3)
+        return
 
     async def check(connection) -> None:
         live = sockets._live_connections.get(connection.client_id)
