@@ -238,3 +238,21 @@ def test_view_says_a_damaged_frame_on_the_page_and_plays_on(tmp_path):
         assert player.frame == 3 and player.time_text.value == f"{3 / player.cache.fps:.3f} s"
     finally:
         player.server.stop()
+
+
+def test_view_keeps_usds_cpp_locations_from_stderr(tmp_path, capfd):
+    # A cache whose layer names a sublayer that is missing: USD warns at open, with its C++ source file and line.
+    from warp_verlet.cache_reader import open_cache, read_frame
+    from warp_verlet.runner import run_scene
+    from warp_verlet.scene import parse_scene
+
+    run_scene(parse_scene({"simulation": {"frames": 2}, "cloth": [{"resolution": [3, 3], "size": [1.0, 1.0]}]},
+                          file="<test>"), tmp_path / "cloth.usdc", device="cpu", frames=2)
+    wrapper = tmp_path / "wrapper.usda"
+    wrapper.write_text('#usda 1.0\n(\n    subLayers = [@./cloth.usdc@, @./missing.usda@]\n)\n')
+    capfd.readouterr()
+    cache = open_cache(wrapper)
+    geometry = read_frame(cache, cache.frames[-1])
+    assert len(geometry.cloth_frames) == 1  # the cloth reads as ever
+    err = capfd.readouterr().err
+    assert ".cpp" not in err and "line" not in err, err

@@ -6,17 +6,18 @@ with the same errors."""
 from __future__ import annotations
 
 import contextlib
+import functools
 import io
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 from pxr import Tf, Usd, UsdGeom
 
 from .display_mesh import grid_lines
-from .errors import WarpVerletError, usd_cause
+from .errors import WarpVerletError, usd_cause, usd_diagnostics
 from .faces import Faces, as_faces, grid_faces
 from .usd_writer import COLLIDERS_PATH
 
@@ -126,6 +127,17 @@ def _face_polygons(points: np.ndarray, faces: Faces, keep: np.ndarray) -> Polygo
     return np.split(corners, np.cumsum(counts)[:-1]) if len(counts) else []
 
 
+def quiet_usd(read: Callable) -> Callable:
+    """``read``, with USD's warnings about a damaged cache kept from stderr: USD prints them with its C++
+    function, source file and line, which mean nothing to a user (what cannot be read still raises)."""
+    @functools.wraps(read)
+    def wrapper(*args, **kwargs):
+        with usd_diagnostics():
+            return read(*args, **kwargs)
+    return wrapper
+
+
+@quiet_usd
 def open_cache(path: str | os.PathLike[str]) -> PointCache:
     """Open a point cache and find its cloths and colliders; PreviewError when it is not one."""
     path = Path(path)
@@ -226,6 +238,7 @@ class ClothFrame:
     grid: tuple[int, int] | None  # (rows, cols) when this frame's points form the writer's grid
 
 
+@quiet_usd
 def read_cloths(cache: PointCache, frame: int) -> list[ClothFrame]:
     """Each cloth's points and torn faces at ``frame`` (holeIndices held between their samples); a cloth with
     no points or no faces at that frame is left out."""
@@ -277,6 +290,7 @@ def _removed_faces(path: Path, cloth: ClothPrim, time: Usd.TimeCode, where: str)
     return np.flatnonzero(~kept)
 
 
+@quiet_usd
 def read_frame(cache: PointCache, frame: int) -> FrameGeometry:
     """One frame of the cache as numpy, with holeIndices applied (held between their samples)."""
     time = Usd.TimeCode(frame)
