@@ -21,7 +21,6 @@ from sweep_helpers import BASE_SCENE
 from test_cli import SCENE
 from test_mesh_cloth import brute_force_weld
 from warp_verlet.cli import main
-from warp_verlet.errors import SceneError
 from warp_verlet.faces import Faces
 from warp_verlet.mesh_cloth import MeshError, SourceMesh, prepare, weld
 
