@@ -156,19 +156,27 @@ def test_welding_with_exact_duplicates_matches_brute_force(seed):
 
 # -- view ---------------------------------------------------------------------------------------------------------
 
-def test_view_of_a_cache_with_no_readable_points_is_one_error(tmp_path):
-    pytest.importorskip("viser", reason="view needs viser: pip install 'warp-verlet[live]'")
-    from pxr import Usd, UsdGeom
+def one_triangle_cache(path, heights: dict[int, float]):
+    """A cache of frames 1 .. 3 holding one triangle, whose points are at height z = heights[frame] at the frames
+    given (none at the others)."""
+    from pxr import Gf, Usd, UsdGeom, Vt
 
-    # Faces but no points at any time: what 40 flipped bytes left of a real cache (it opens; no sample reads).
-    path = tmp_path / "empty.usdc"
     stage = Usd.Stage.CreateNew(str(path))
     stage.SetStartTimeCode(1)
     stage.SetEndTimeCode(3)
     mesh = UsdGeom.Mesh.Define(stage, "/World/sheet")
     mesh.GetFaceVertexCountsAttr().Set([3])
     mesh.GetFaceVertexIndicesAttr().Set([0, 1, 2])
+    for frame, z in heights.items():
+        mesh.GetPointsAttr().Set(Vt.Vec3fArray([Gf.Vec3f(0, 0, z), Gf.Vec3f(1, 0, z), Gf.Vec3f(0, 1, z)]), frame)
     stage.GetRootLayer().Save()
+    return path
+
+
+def test_view_of_a_cache_with_no_readable_points_is_one_error(tmp_path):
+    pytest.importorskip("viser", reason="view needs viser: pip install 'warp-verlet[live]'")
+    # Faces but no points at any time: what 40 flipped bytes left of a real cache (it opens; no sample reads).
+    path = one_triangle_cache(tmp_path / "empty.usdc", {})
     result = subprocess.run([sys.executable, "-m", "warp_verlet", "view", str(path), "--port", str(free_port()),
                              "--seconds", "0.5"], capture_output=True, text=True, timeout=120, cwd=REPO)
     assert result.returncode == 2, result.stderr
@@ -213,21 +221,10 @@ def test_a_save_path_typed_in_the_live_page_is_refused_in_its_log_not_with_a_tra
 
 def test_view_says_a_damaged_frame_on_the_page_and_plays_on(tmp_path):
     pytest.importorskip("viser", reason="view needs viser: pip install 'warp-verlet[live]'")
-    from pxr import Gf, Usd, UsdGeom, Vt
-
     from warp_verlet.cache_player import CachePlayer
 
-    path = tmp_path / "holed.usda"
-    stage = Usd.Stage.CreateNew(str(path))
-    stage.SetStartTimeCode(1)
-    stage.SetEndTimeCode(3)
-    mesh = UsdGeom.Mesh.Define(stage, "/World/sheet")
-    mesh.GetFaceVertexCountsAttr().Set([3])
-    mesh.GetFaceVertexIndicesAttr().Set([0, 1, 2])
-    nan = float("nan")
-    for frame, z in ((1, 0.0), (2, nan), (3, 0.5)):  # frame 2 holds NaN: it cannot be drawn
-        mesh.GetPointsAttr().Set(Vt.Vec3fArray([Gf.Vec3f(0, 0, z), Gf.Vec3f(1, 0, z), Gf.Vec3f(0, 1, z)]), frame)
-    stage.GetRootLayer().Save()
+    # Frame 2 holds NaN: it cannot be drawn.
+    path = one_triangle_cache(tmp_path / "holed.usda", {1: 0.0, 2: float("nan"), 3: 0.5})
     player = CachePlayer(path, port=free_port())
     try:
         player.show(2)
