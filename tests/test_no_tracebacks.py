@@ -252,3 +252,23 @@ def test_view_keeps_usds_cpp_locations_from_stderr(tmp_path, capfd):
     assert len(geometry.cloth_frames) == 1  # the cloth reads as ever
     err = capfd.readouterr().err
     assert ".cpp" not in err and "line" not in err, err
+
+
+def test_validate_cache_says_a_missing_layer_plainly_and_prints_nothing(tmp_path, capfd):
+    # The same wrapper as above: validate_cache (and a sweep's resume, through it) names the missing layer as a
+    # problem, without USD's C++ source file and line on stderr.
+    from warp_verlet.runner import run_scene
+    from warp_verlet.scene import parse_scene
+    from warp_verlet.usd_writer import validate_cache
+
+    run_scene(parse_scene({"simulation": {"frames": 2}, "cloth": [{"resolution": [3, 3], "size": [1.0, 1.0]}]},
+                          file="<test>"), tmp_path / "cloth.usdc", device="cpu", frames=2)
+    assert validate_cache(tmp_path / "cloth.usdc") == []
+    wrapper = tmp_path / "wrapper.usda"
+    wrapper.write_text('#usda 1.0\n(\n    subLayers = [@./cloth.usdc@, @./missing.usda@]\n)\n')
+    capfd.readouterr()
+    problems = validate_cache(wrapper)
+    assert len(problems) == 1 and "missing.usda" in problems[0], problems
+    assert ".cpp" not in problems[0] and " line " not in problems[0], problems
+    err = capfd.readouterr().err
+    assert ".cpp" not in err and "line" not in err, err

@@ -610,12 +610,14 @@ def cache_problems(path: Path, frames: int) -> list[str]:
     with pxr, pass ``validate_cache``, span time codes 0 .. frames, and hold points at every one of them."""
     from pxr import Usd, UsdGeom
 
+    from .errors import usd_diagnostics
     from .usd_writer import validate_cache
 
     problems = validate_cache(path)
     if problems:
         return problems
-    stage = Usd.Stage.Open(str(path))
+    with usd_diagnostics():  # validate_cache said what matters of them
+        stage = Usd.Stage.Open(str(path))
     if (stage.GetStartTimeCode(), stage.GetEndTimeCode()) != (0, frames):
         return [f"{path}: frames {stage.GetStartTimeCode():g} .. {stage.GetEndTimeCode():g}, expected 0 .. {frames}"]
     shapes = [p for p in stage.Traverse() if p.IsA(UsdGeom.PointBased) and UsdGeom.PointBased(p).GetPointsAttr().GetNumTimeSamples()]

@@ -41,7 +41,7 @@ from typing import Callable, Sequence
 import numpy as np
 from pxr import Sdf, Tf, Usd, UsdGeom, UsdValidation, Vt
 
-from .errors import ArgumentError, OutputError, StateError, usd_cause
+from .errors import ArgumentError, OutputError, StateError, usd_cause, usd_diagnostics
 from .faces import Faces, as_faces
 
 WORLD_PATH = Sdf.Path("/World")
@@ -451,9 +451,12 @@ def validate_cache(path: str | os.PathLike[str]) -> list[str]:
     if not path.is_file():
         return [f"{path}: no such file"]
     try:
-        stage = Usd.Stage.Open(str(path))
+        with usd_diagnostics() as warnings:  # USD's own text carries its C++ file and line: say it plainly
+            stage = Usd.Stage.Open(str(path))
     except Tf.ErrorException as e:
         return [f"{path}: cannot be opened as USD: {usd_cause(e)}"]
+    if warnings:  # a cache that warns as it opens (a missing or broken layer) does not play as written
+        return [f"{path}: {warning}" for warning in warnings]
 
     # USD's own validators: stage metadata, composition, attribute types. Warnings are advice; keep errors.
     context = UsdValidation.ValidationContext(UsdValidation.ValidationRegistry().GetOrLoadAllValidators())
