@@ -7,7 +7,7 @@ tool that signal ends; quietly, no traceback). A run that does not finish says w
 (``NAME.partial.EXT``) and that the previous output was left as it was.
 
 Heavy modules are imported by the command that needs them: validate imports none of warp, pxr and
-matplotlib, and preview imports pxr and its renderer (Mitsuba) but never warp.
+Mitsuba, and preview imports pxr and its renderer (Mitsuba) but never warp.
 """
 
 from __future__ import annotations
@@ -162,8 +162,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     preview = commands.add_parser(
         "preview", help="render a USD point cache to a PNG or an animated GIF (no simulator needed)",
-        description="Render a point cache headlessly with matplotlib: a .png shows up to 4 frames as panels, "
-                    "a .gif animates the frames.",
+        description="Render a point cache headlessly, ray traced on the CPU by Mitsuba 3: a .png shows up to 4 "
+                    "frames as panels, a .gif animates the frames.",
     )
     preview.add_argument("cache", type=Path, help="point cache (.usd, .usdc or .usda) written by `warp-verlet run`")
     preview.add_argument("-o", "--output", type=Path, required=True,
