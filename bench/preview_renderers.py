@@ -19,6 +19,7 @@ simulation is needed), with the sphere and a ground plane, in one 800 x 800 pane
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import platform
 import sys
 import time
@@ -50,8 +51,10 @@ def drape_geometry(n: int):
     prim = ClothPrim(prim=None, faces=faces, grid=(n + 1, n + 1), points_needed=(n + 1) ** 2)
     cloth = ClothFrame(prim, drape_points(n), np.zeros(0, np.int64), (n + 1, n + 1))
     ground = np.array([[-50.0, 0, -50], [50, 0, -50], [50, 0, 50], [-50, 0, 50]])
-    return FrameGeometry(frame=0, seconds=0.0, cloths=(), ropes=(), spheres=((np.array([0.0, 0.35, 0.0]), 0.35),),
-                         planes=(ground,), cloth_frames=(cloth,))
+    # The old preview's FrameGeometry also held the decimated polygons (``cloths``), which its caller fills in.
+    old = {"cloths": ()} if "cloths" in {f.name for f in dataclasses.fields(FrameGeometry)} else {}
+    return FrameGeometry(frame=0, seconds=0.0, ropes=(), spheres=((np.array([0.0, 0.35, 0.0]), 0.35),),
+                         planes=(ground,), cloth_frames=(cloth,), **old)
 
 
 def best_of(fn, repeats: int = REPEATS) -> float:

@@ -131,14 +131,13 @@ def test_hidden_faces_are_not_drawn_and_holes_are_held_between_samples(tmp_path)
     path = write_cache(tmp_path / "torn.usdc", rows=3, cols=3)  # 2 x 2 faces
     set_holes(path, {0: [], 3: [1]})
     cache = preview.open_cache(path)
-    faces = grid_faces(3, 3)
-    every = {f: as_set(grid_points(3, 3, sag=0.05 * f)[faces]) for f in range(FRAMES + 1)}
-    face1 = {f: as_set(grid_points(3, 3, sag=0.05 * f)[faces[[1]]]) for f in range(FRAMES + 1)}
-    for frame in (0, 2):
-        assert as_set(preview.read_frame(cache, frame).cloths[0]) == every[frame]
-    for frame in (3, 5):  # sampled at 3, held at 5
-        drawn = as_set(preview.read_frame(cache, frame).cloths[0])
-        assert len(drawn) == 3 and drawn == every[frame] - face1[frame]
+    for frame, hidden in ((0, []), (2, []), (3, [1]), (5, [1])):  # sampled at 3, held at 5
+        cloth = preview.read_frame(cache, frame).cloth_frames[0]
+        assert cloth.hidden.tolist() == hidden, frame
+        np.testing.assert_allclose(cloth.points, grid_points(3, 3, sag=0.05 * frame), rtol=0, atol=1e-7)
+        # What the renderer draws: every face but the hidden one, two triangles a quad.
+        drawn = render.frame_panel(preview.read_frame(cache, frame), "Y", 64, 64).cloths[0]
+        assert len(drawn.triangles) == 2 * (4 - len(hidden)), frame
 
 
 def test_a_corner_torn_out_renders_without_a_word_from_the_renderer(tmp_path, capfd):
@@ -156,42 +155,18 @@ def test_a_mesh_that_never_tears_draws_every_face(tmp_path):
     cache = preview.open_cache(path)
     assert not cache.cloths[0].prim.GetHoleIndicesAttr().HasAuthoredValue()
     assert cache.cloths[0].grid == (4, 5)
-    assert preview.read_frame(cache, 2).cloths[0].shape == (12, 4, 3)
+    cloth = preview.read_frame(cache, 2).cloth_frames[0]
+    assert cloth.hidden.size == 0 and cloth.grid == (4, 5) and cloth.points.shape == (20, 3)
 
 
-def test_decimation_keeps_the_outline_and_caps_the_quads():
-    rows = cols = 1025  # 1024 x 1024 faces
-    faces, points = grid_faces(rows, cols), grid_points(rows, cols, sag=0.2)
-    assert preview.grid_shape(faces, len(points)) == (rows, cols)
-    quads = preview.visible_polygons(points, faces, grid=(rows, cols))
-    assert quads.shape == (64 * 64, 4, 3)
-    fine = points.reshape(rows, cols, 3)
-    # Coarse quad 0 starts at the fine grid's top-left corner and the last one ends at its bottom-right;
-    # the first row's last quad and the last row's first quad reach the other two corners.
-    np.testing.assert_array_equal(quads[0, 0], fine[0, 0])
-    np.testing.assert_array_equal(quads[63, 3], fine[0, -1])
-    np.testing.assert_array_equal(quads[-64, 1], fine[-1, 0])
-    np.testing.assert_array_equal(quads[-1, 2], fine[-1, -1])
-    # A coarse quad is hidden if any fine face under it is: one torn face costs exactly one coarse quad.
-    r, c = 500, 700
-    torn = preview.visible_polygons(points, faces, hidden=[r * (cols - 1) + c], grid=(rows, cols))
-    assert len(torn) == 64 * 64 - 1
-    missing = as_set(quads) - as_set(torn)
-    assert len(missing) == 1
-    (corners,) = [np.array(q) for q in missing]
-    assert corners[:, 0].min() <= fine[r, c, 0] and fine[r, c + 1, 0] <= corners[:, 0].max()
-    assert corners[:, 1].min() <= fine[r + 1, c, 1] and fine[r, c, 1] <= corners[:, 1].max()
-
-
-def test_small_grids_are_drawn_whole_and_other_meshes_face_by_face():
+def test_only_the_writer_s_own_grid_is_taken_for_a_grid():
     faces, points = grid_faces(10, 12), grid_points(10, 12)
-    whole = preview.visible_polygons(points, faces, grid=preview.grid_shape(faces, len(points)))
-    assert as_set(whole) == as_set(points[faces])
+    assert preview.grid_shape(faces, len(points)) == (10, 12)
     shuffled = faces[np.random.default_rng(0).permutation(len(faces))]
     assert preview.grid_shape(shuffled, len(points)) is None
     assert preview.grid_shape(np.zeros((0, 4), int), 5) is None
-    drawn = preview.visible_polygons(points, shuffled, hidden=[0, 1])
-    assert as_set(drawn) == as_set(points[shuffled[2:]])
+    triangles = Faces.uniform(np.array([[0, 1, 2], [0, 2, 4], [1, 5, 6]]))
+    assert preview.grid_shape(triangles, len(HOUSE_POINTS)) is None
 
 
 def house_points(frame: int) -> np.ndarray:
@@ -217,14 +192,13 @@ def write_house_cache(path):
 def test_a_mixed_mesh_is_drawn_face_by_face_and_its_hidden_pentagon_left_out(tmp_path):
     cache = preview.open_cache(write_house_cache(tmp_path / "house.usdc"))
     assert cache.cloths[0].grid is None and cache.cloths[0].faces == HOUSE
-    for frame in (0, 2):
-        drawn = preview.read_frame(cache, frame).cloths[0]
-        assert [len(p) for p in drawn] == [5, 4, 3]
-        assert as_set(drawn) == house_polygons(frame, [0, 1, 2])
-    for frame in (3, 6):  # the pentagon is hidden from frame 3 on: sampled at 3, held at 6
-        drawn = preview.read_frame(cache, frame).cloths[0]
-        assert [len(p) for p in drawn] == [4, 3]
-        assert as_set(drawn) == house_polygons(frame, [1, 2])
+    # The pentagon is hidden from frame 3 on: sampled at 3, held at 6. The renderer fans each face it draws
+    # into corners - 2 triangles: 3 + 2 + 1 whole, 2 + 1 without the pentagon.
+    for frame, hidden, triangles in ((0, [], 6), (2, [], 6), (3, [0], 3), (6, [0], 3)):
+        geometry = preview.read_frame(cache, frame)
+        assert geometry.cloth_frames[0].hidden.tolist() == hidden, frame
+        np.testing.assert_allclose(geometry.cloth_frames[0].points, house_points(frame), rtol=0, atol=1e-7)
+        assert len(render.frame_panel(geometry, "Y", 64, 64).cloths[0].triangles) == triangles, frame
 
 
 @pytest.mark.slow
@@ -251,15 +225,6 @@ def test_a_mixed_mesh_renders_to_png(tmp_path, capsys):
     assert is_cloth_red(load_rgb(whole)[title:title + height][hole]).mean() > 0.5  # (its own framing)
 
 
-def test_uniform_non_grid_faces_stay_one_array():
-    triangles = Faces.uniform(np.array([[0, 1, 2], [0, 2, 4], [1, 5, 6]]))
-    drawn = preview.visible_polygons(HOUSE_POINTS, triangles, hidden=[1])
-    assert isinstance(drawn, np.ndarray) and drawn.shape == (2, 3, 3)
-    np.testing.assert_array_equal(drawn, HOUSE_POINTS[[[0, 1, 2], [1, 5, 6]]])
-    assert preview.grid_shape(triangles, len(HOUSE_POINTS)) is None
-    assert preview.visible_polygons(HOUSE_POINTS, HOUSE, hidden=[0, 1, 2]) == []
-
-
 def geometry_of(points, faces, hidden=(), spheres=(), planes=(), frame=0) -> "preview.FrameGeometry":
     """A FrameGeometry of one cloth, built without a cache: what the renderer is handed for one frame."""
     faces = faces if isinstance(faces, Faces) else Faces.uniform(np.asarray(faces))
@@ -267,7 +232,7 @@ def geometry_of(points, faces, hidden=(), spheres=(), planes=(), frame=0) -> "pr
     prim = ClothPrim(prim=None, faces=faces, grid=preview.grid_shape(faces, len(points)),
                      points_needed=int(faces.indices.max()) + 1)
     cloth = ClothFrame(prim, points, np.asarray(sorted(hidden), np.int64), prim.grid)
-    return preview.FrameGeometry(frame=frame, seconds=frame / 30, cloths=(), ropes=(), spheres=tuple(spheres),
+    return preview.FrameGeometry(frame=frame, seconds=frame / 30, ropes=(), spheres=tuple(spheres),
                                  planes=tuple(planes), cloth_frames=(cloth,))
 
 

@@ -1,5 +1,5 @@
 """Reading a point cache the project wrote: its cloths (faces, points per frame, torn faces as holeIndices),
-ropes and colliders, as plain numpy. Imports ``pxr`` and numpy only (no Warp, no matplotlib), so that the PNG/GIF
+ropes and colliders, as plain numpy. Imports ``pxr`` and numpy only (no Warp, no renderer), so that the PNG/GIF
 preview (warp_verlet/preview.py) and the browser player (warp_verlet/cache_player.py) read caches the same way,
 with the same errors."""
 
@@ -11,28 +11,19 @@ import io
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import Callable
 
 import numpy as np
 from pxr import Tf, Usd, UsdGeom
 
-from .display_mesh import grid_lines
 from .errors import WarpVerletError, usd_cause, usd_diagnostics
 from .faces import Faces, as_faces, grid_faces
 from .usd_writer import COLLIDERS_PATH
-
-# A coarse grid of at most this many quads a side: enough to show folds, and a 1024 x 1024 cloth then costs
-# matplotlib what a 64 x 64 one does.
-MAX_GRID_QUADS = 64
-
 
 class PreviewError(WarpVerletError):
     """The cache or the preview's options cannot be used as given: a bad argument or input (exit code 2)."""
 
 
-# The polygons of one cloth, in 3D: a (Q, k, 3) array when every face has the same k corners (every grid,
-# the large case, handled whole by numpy), else a list of (k_i, 3) arrays, which matplotlib also draws.
-Polygons = np.ndarray | list[np.ndarray]
 
 
 # --------------------------------------------------------------------------------------------- reading
@@ -69,7 +60,6 @@ class FrameGeometry:
 
     frame: int
     seconds: float
-    cloths: tuple[Polygons, ...]  # visible polygons of each cloth, decimated when large, in stage coordinates
     ropes: tuple[np.ndarray, ...]  # (N, 3) polyline of each curve
     spheres: tuple[tuple[np.ndarray, float], ...]  # (centre, radius)
     planes: tuple[np.ndarray, ...]  # (4, 3) corners as authored (drawing clips them to the cloth's box)
@@ -93,38 +83,6 @@ def grid_shape(faces: Faces | np.ndarray, point_count: int) -> tuple[int, int] |
     if rows < 2 or len(faces) != (rows - 1) * (cols - 1):  # also keeps a bogus cols from building a huge grid
         return None
     return (rows, cols) if faces == grid_faces(rows, cols) else None
-
-
-def visible_polygons(points: np.ndarray, faces: Faces | np.ndarray, hidden: Sequence[int] = (),
-                     grid: tuple[int, int] | None = None, max_quads: int = MAX_GRID_QUADS) -> Polygons:
-    """The polygons to draw: every face not in ``hidden``, or, for a grid, a coarse grid of at most
-    ``max_quads`` x ``max_quads`` quads in which a quad is hidden if any fine face it covers is.
-
-    ``faces`` is Faces or an (F, k) array. The result is a (Q, k, 3) array when every face has k corners
-    (one fancy index, however many faces), else a list of (k_i, 3) arrays in face order."""
-    faces = as_faces(faces)
-    hidden_mask = np.zeros(len(faces), bool)
-    hidden = np.asarray(hidden, dtype=np.int64)
-    hidden_mask[hidden[(hidden >= 0) & (hidden < len(faces))]] = True  # out-of-range indices hide nothing
-    if grid is None:
-        return _face_polygons(points, faces, ~hidden_mask)
-    rows, cols = grid
-    ri, ci = grid_lines(rows - 1, max_quads), grid_lines(cols - 1, max_quads)
-    p = points.reshape(rows, cols, 3)[np.ix_(ri, ci)]
-    quads = np.stack([p[:-1, :-1], p[1:, :-1], p[1:, 1:], p[:-1, 1:]], axis=2)  # the writer's winding
-    fine_hidden = hidden_mask.reshape(rows - 1, cols - 1)
-    coarse_hidden = np.logical_or.reduceat(np.logical_or.reduceat(fine_hidden, ri[:-1], axis=0), ci[:-1], axis=1)
-    return quads[~coarse_hidden]
-
-
-def _face_polygons(points: np.ndarray, faces: Faces, keep: np.ndarray) -> Polygons:
-    """The corner positions of the faces where ``keep`` is True, as ``visible_polygons`` returns them."""
-    uniform = faces.as_uniform()
-    if uniform is not None:
-        return points[uniform[keep]]
-    corners = points[faces.indices[np.repeat(keep, faces.counts)]]
-    counts = faces.counts[keep]
-    return np.split(corners, np.cumsum(counts)[:-1]) if len(counts) else []
 
 
 def quiet_usd(read: Callable) -> Callable:
@@ -296,7 +254,6 @@ def read_frame(cache: PointCache, frame: int) -> FrameGeometry:
     time = Usd.TimeCode(frame)
     where = f"frame {frame}"
     cloth_frames = read_cloths(cache, frame)
-    cloths = [visible_polygons(c.points, c.cloth.faces, c.hidden, c.grid) for c in cloth_frames]
     ropes = []
     for curves in cache.ropes:
         points = _read(cache.path, curves, "points", lambda: curves.GetPointsAttr().Get(time), where)
@@ -318,5 +275,5 @@ def read_frame(cache: PointCache, frame: int) -> FrameGeometry:
             corners = np.asarray(points, dtype=np.float64)
             if np.isfinite(corners).all():  # older caches of an overflowing normal hold NaN corners
                 planes.append(_to_world(plane, time, corners))
-    return FrameGeometry(frame=frame, seconds=frame / cache.fps, cloths=tuple(cloths), ropes=tuple(ropes),
+    return FrameGeometry(frame=frame, seconds=frame / cache.fps, ropes=tuple(ropes),
                          spheres=tuple(spheres), planes=tuple(planes), cloth_frames=tuple(cloth_frames))

@@ -22,10 +22,9 @@ from PIL import Image, ImageDraw, ImageFont
 
 from .errors import OutputError
 from .memory import available_host_bytes
-# Reading is shared with the browser player; grid_shape and visible_polygons are re-exported for callers of
-# this module.
-from .cache_reader import (FrameGeometry, Polygons, PointCache, PreviewError, grid_shape,  # noqa: F401
-                           open_cache, read_frame, visible_polygons)
+# Reading is shared with the browser player; grid_shape is re-exported for callers of this module.
+from .cache_reader import (FrameGeometry, PointCache, PreviewError, grid_shape,  # noqa: F401
+                           open_cache, read_frame)
 from .preview_render import render_frame
 
 SUFFIXES = (".png", ".gif")
