@@ -186,6 +186,18 @@ def split_tasks(make: Callable[[int, int], Task], first: int, count: int, thread
 
 
 # ---------------------------------------------------------------------------------------------- stages
+def start_compliant_substep(launches: list, tension) -> Callable[["State", float], None]:
+    """A Bound's prepare for soft (XPBD) sticks: each substep gives ``launches`` its 1 / dt^2 and restarts the
+    tension from zero."""
+    def prepare(state: "State", dt: float) -> None:
+        inv_dt2 = 1.0 / (dt * dt)
+        for launch in launches:
+            launch.set_param_by_name("inv_dt2", inv_dt2)
+        tension.zero_()
+
+    return prepare
+
+
 class Integrate:
     """The Verlet step (kernels/integrate.py): gravity and wind in one acceleration, damping per second."""
 
@@ -355,13 +367,7 @@ class Sticks:
             phases = [split_tasks(make_soft, first, count, threads) for first, count in m.colour_ranges]
             launches = [task.launch for phase in phases for task in phase if task is not None]
 
-            def prepare(state: "State", dt: float) -> None:
-                inv_dt2 = 1.0 / (dt * dt)
-                for launch in launches:
-                    launch.set_param_by_name("inv_dt2", inv_dt2)
-                tension.zero_()
-
-            return Bound(prepare, phases)
+            return Bound(start_compliant_substep(launches, tension), phases)
 
         weight = state.stick_weight if m.tears else m.neighbour_weight
         scratch = solver.scratch("jacobi_positions", m.particle_count, m.position_dtype)
@@ -525,13 +531,7 @@ class GridSticks:
         if tension is None:
             return Bound(None, phases)
 
-        def prepare(state: "State", dt: float) -> None:
-            inv_dt2 = 1.0 / (dt * dt)
-            for launch in soft_launches:
-                launch.set_param_by_name("inv_dt2", inv_dt2)
-            tension.zero_()
-
-        return Bound(prepare, phases)
+        return Bound(start_compliant_substep(soft_launches, tension), phases)
 
 
 CONSTRAINT_SETS = (Multilevel(), Tethers(), GridTethers(), Sticks(), GridSticks())
