@@ -272,3 +272,15 @@ def test_validate_cache_says_a_missing_layer_plainly_and_prints_nothing(tmp_path
     assert ".cpp" not in problems[0] and " line " not in problems[0], problems
     err = capfd.readouterr().err
     assert ".cpp" not in err and "line" not in err, err
+
+
+def test_run_scene_from_python_refuses_a_name_too_long_as_the_command_line_does(tmp_path):
+    from warp_verlet.output_file import OutputNameError
+    from warp_verlet.runner import run_scene
+    from warp_verlet.scene import parse_scene
+
+    scene = parse_scene({"simulation": {"frames": 1}, "cloth": [{"resolution": [3, 3], "size": [1.0, 1.0]}]},
+                        file="<test>")
+    with pytest.raises(OutputNameError, match="the file name is too long"):
+        run_scene(scene, tmp_path / LONG_NAME, device="cpu")
+    assert list(tmp_path.iterdir()) == []

@@ -24,7 +24,7 @@ from pathlib import Path
 from . import __version__
 from .cpu_team import MAX_THREADS, usable_cores
 from .errors import SceneError, ServerError, WarpVerletError
-from .output_file import OutputNameError, output_report
+from .output_file import OutputNameError, check_output_names, output_report, refuse_long_names
 from .scene import load_scene
 
 
@@ -238,7 +238,6 @@ def _live(args) -> int:
     check_port(args.host, args.port)
     record = args.record or default_record_path(scene)
     try:
-        check_output_names(record)
         CacheOutput(record, inputs=input_files(scene))  # checks the path only: nothing is written
         _check_creatable(record)
     except OutputError as exc:
@@ -278,49 +277,6 @@ def _view(args) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     return _serve(app, f"{args.cache}", args.seconds)
-
-
-def check_output_names(path: Path, what: str = "") -> None:
-    """Refuse, as a bad argument, an output whose file names are longer than its file system allows (255 bytes
-    on most): the operating system's 'File name too long' would otherwise surface as a traceback from the first
-    look at the path, or fail the run after it simulated. The names a run writes are the output's, its partial
-    file's (NAME.partial.EXT) and USD's temporary file for that (NAME.partial.XXXXXX, renamed once saved), the
-    longest. ``what`` names where the path came from."""
-    from .output_file import partial_path
-
-    partial = partial_path(Path(path))
-    refuse_long_names(Path(path), (Path(path).name, partial.name, f"{partial.stem}.XXXXXX"), what)
-
-
-def refuse_long_names(path: Path, names, what: str = "") -> None:
-    """OutputNameError when a directory on the way to ``path``, or one of ``names`` (the files written in its
-    directory on the way to ``path``), is a longer name than the file system allows, or the whole path longer
-    than the system's path limit (PATH_MAX)."""
-    path = Path(path)
-    directory = Path(os.path.abspath(path.parent))
-    existing = next(p for p in (directory, *directory.parents) if os.path.isdir(p))  # the root at least
-    try:
-        longest_name, longest_path = (os.pathconf(existing, "PC_NAME_MAX"), os.pathconf(existing, "PC_PATH_MAX"))
-    except (OSError, ValueError):  # no limit to ask for: Linux's
-        longest_name, longest_path = 255, 4096
-
-    def refuse(problem: str) -> OutputNameError:
-        shown = str(path) if len(str(path)) <= 120 else f"{str(path)[:56]}...{str(path)[-56:]}"
-        return OutputNameError(f"cannot write {shown}{what}: {problem}; choose a shorter path")
-
-    for part in directory.parts[1:]:
-        if len(os.fsencode(part)) > longest_name:
-            raise refuse(f"the directory name {part[:24]}... is {len(os.fsencode(part))} bytes, more than the "
-                         f"{longest_name} its file system allows")
-    for name in names:
-        size = len(os.fsencode(name))
-        if size > longest_name:
-            raise refuse(f"the file name is too long: it is written through {name[:24]}...{name[-16:]}, {size} "
-                         f"bytes, more than the {longest_name} its file system allows")
-        full = len(os.fsencode(str(directory / name)))
-        if full >= longest_path:  # PATH_MAX counts the terminating NUL
-            raise refuse(f"the path is too long: {full} bytes with {name[:24]}..., more than the "
-                         f"{longest_path - 1} this system allows")
 
 
 def _validate(args) -> int:
@@ -368,7 +324,6 @@ def _run(args) -> int:
     from .output_file import CacheOutput, input_files
 
     # A bad output path is refused before Warp starts (a second or more); it only checks: nothing is written.
-    check_output_names(args.output if args.output is not None else scene.output.path)
     CacheOutput(args.output if args.output is not None else scene.output.path, inputs=input_files(scene))
     from .warp_setup import start_warp
 

@@ -192,7 +192,7 @@ class LiveApp:
             self.session.release_pin(pin)  # the dropdown follows once the release has applied (show_readouts)
 
     def _save(self) -> None:
-        from .cli import check_output_names  # the checks `live --record` had at start, for a path typed in the page
+        from .output_file import check_output_names  # the checks `live --record` had at start, for a path typed in the page
 
         path = Path(self.record_path.value).expanduser()
 
