@@ -71,7 +71,7 @@ def hanging_sheet(n: int, **cloth) -> dict:
 def hanging_cloth(n: int, substeps: int = 4, iterations: int = 8, solver: str = "coloured", frames: int = 60) -> Scene:
     """The benchmark scene: the hanging sheet, vertical, damping HANGING_DAMPING."""
     return scene({"frames": frames, "substeps": substeps, "iterations": iterations, "damping": HANGING_DAMPING,
-                  "solver": solver}, hanging_sheet(n), name=f"<hanging cloth {n}x{n}>")
+                  "relaxation": solver}, hanging_sheet(n), name=f"<hanging cloth {n}x{n}>")
 
 
 def cloth_size(scene: Scene) -> float:

@@ -16,7 +16,7 @@ frames; the median batch gives ms/frame, and stick projections/s = sticks x subs
 - warp coloured, N threads: the same with the relaxation cut over N threads (``--threads N``; by default
   what the simulator picks by itself for this grid on this machine, and no such row when that is 1); its
   positions must equal the 1-thread run's bit for bit.
-- warp jacobi, 1 and N threads: the same with ``solver = "jacobi"``, the like-for-like peer of numpy Jacobi.
+- warp jacobi, 1 and N threads: the same with ``relaxation = "jacobi"``, the like-for-like peer of numpy Jacobi.
 - C: bench/c_reference/relax.c, compiled here with ``cc -O3 -march=native -shared -fPIC`` (``$CC`` if set) into
   a temporary directory and called through ctypes once per frame: Verlet plus Gauss-Seidel sweeps over the
   simulator's own sticks in its colour order, one thread. Skipped, with a message, if there is no compiler.
@@ -89,7 +89,7 @@ class CCloth:
         if scene.colliders:
             raise ValueError("the C reference has no colliders")
         s = scene.simulation
-        coloured = dataclasses.replace(scene, simulation=dataclasses.replace(s, solver="coloured"))
+        coloured = dataclasses.replace(scene, simulation=dataclasses.replace(s, relaxation="coloured"))
         m = Simulator(coloured, device="cpu", sticks="explicit").model  # the stick arrays the C code reads
         self.lib, self.n, self.stick_count = lib, m.particle_count, m.stick_count
         self.substeps, self.iterations = s.substeps, s.iterations

@@ -50,7 +50,7 @@ def sheet(n: int, substeps: int, iterations: int, **simulation):
 def explicit_bytes_per_sweep(sim: Simulator) -> int:
     """What one sweep of the explicit form reads and writes at least: 64 B per stick projection, the tether
     table (particle, pins and lengths) and each tethered particle's position read and written."""
-    need = sim.solver.need
+    need = sim.solver.req
     tethers = need.tethered * (4 + need.tethers_per_particle * 8 + 2 * need.position_bytes)
     return sim.model.stick_count * RELAX_BYTES_PER_PROJECTION + tethers
 

@@ -112,7 +112,7 @@ def triangulate(quads: Faces) -> np.ndarray:
 def simulation_table(substeps: int, iterations: int, frames: int = FRAMES) -> dict:
     """bench.common.hanging_cloth's [simulation] table (grid_and_meshes checks that the scenes agree)."""
     return {"frames": frames, "substeps": substeps, "iterations": iterations, "damping": HANGING_DAMPING,
-            "solver": "coloured"}
+            "relaxation": "coloured"}
 
 
 def pin_boxes(grid: Scene) -> list[dict]:

@@ -67,7 +67,7 @@ class NumpyCloth:
 
         if scene.colliders:
             raise ValueError("the numpy baseline has no colliders")
-        settings = dataclasses.replace(scene.simulation, solver="coloured")
+        settings = dataclasses.replace(scene.simulation, relaxation="coloured")
         sim = Simulator(dataclasses.replace(scene, simulation=settings), device="cpu")
         m = sim.model
         if m.compliant or m.tether_table is not None:
@@ -151,7 +151,7 @@ def compare_with_warp(scene, solver: str, frames: int) -> dict:
     and RMS particle distance, and both structural stretch figures."""
     from warp_verlet.simulator import Simulator
 
-    scene = dataclasses.replace(scene, simulation=dataclasses.replace(scene.simulation, solver=solver))
+    scene = dataclasses.replace(scene, simulation=dataclasses.replace(scene.simulation, relaxation=solver))
     sim = Simulator(scene, device="cpu")
     ref = NumpyCloth.from_scene(scene, solver)
     for _ in range(frames):

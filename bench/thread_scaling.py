@@ -48,7 +48,7 @@ def main(argv=None) -> int:
             scene = hanging_cloth(n, 4, 8, solver)
             auto = Simulator(scene, "cpu").threads
             one, reference = None, None
-            row = {"solver": solver, "grid": f"{n}x{n}", "auto": auto}
+            row = {"relaxation": solver, "grid": f"{n}x{n}", "auto": auto}
             for t in counts:
                 per_frame, points = measure(scene, t, args.frames, args.repeats)
                 if t == 1:

@@ -93,7 +93,7 @@ def array_bytes(sim: Simulator) -> tuple[int, int]:
     colliders', the State's and the solver's scratch (common.device_arrays; each array once)."""
     m = sim.model
     arrays = device_arrays(sim).values()
-    rows = {m.particle_count, m.particle_count + 1, sim.solver.need.tethered or m.particle_count}
+    rows = {m.particle_count, m.particle_count + 1, sim.solver.req.tethered or m.particle_count}
     particle = sum(a.capacity for a in arrays if a.shape[0] in rows)
     return particle, sum(a.capacity for a in arrays) - particle
 

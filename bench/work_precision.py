@@ -91,7 +91,7 @@ def point_scene(base, substeps: int, iterations: int, solver: str, frames: int):
     if solver == "jacobi" and base.compliant:
         raise ValueError("the Jacobi solver has rigid sticks only, and this scene has a compliance: "
                          "run it through rigid_for(scene, solvers) first")
-    settings = dataclasses.replace(base.simulation, substeps=substeps, iterations=iterations, solver=solver,
+    settings = dataclasses.replace(base.simulation, substeps=substeps, iterations=iterations, relaxation=solver,
                                    frames=frames)
     return dataclasses.replace(base, simulation=settings)
 

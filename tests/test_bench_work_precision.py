@@ -112,7 +112,7 @@ def test_point_scene_changes_the_budget_and_nothing_else():
     coarse = wpb.point_scene(base, s0, 3, "coloured", 5)
     fine = wpb.point_scene(base, 4 * s0, 8, "coloured", 5)
     assert (coarse.simulation.substeps, coarse.simulation.iterations, coarse.simulation.frames) == (s0, 3, 5)
-    assert (fine.simulation.substeps, fine.simulation.iterations, fine.simulation.solver) == (4 * s0, 8, "coloured")
+    assert (fine.simulation.substeps, fine.simulation.iterations, fine.simulation.relaxation) == (4 * s0, 8, "coloured")
     for point in (coarse, fine):
         assert point.simulation.damping == base.simulation.damping
         assert [c.compliance for c in point.cloths] == [c.compliance for c in base.cloths]
@@ -127,7 +127,7 @@ def test_jacobi_points_of_a_soft_scene_run_it_rigid_and_say_so():
     rigid, note = wpb.rigid_for(base, ["coloured", "jacobi"])
     assert [c.compliance for c in rigid.cloths] == [{}] and "bend = 0.7 m/N" in note
     assert rigid.simulation == base.simulation
-    assert wpb.point_scene(rigid, 4, 8, "jacobi", 5).simulation.solver == "jacobi"
+    assert wpb.point_scene(rigid, 4, 8, "jacobi", 5).simulation.relaxation == "jacobi"
 
 
 def test_newton_absent_message(tmp_path, capsys, monkeypatch):

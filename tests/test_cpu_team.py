@@ -49,7 +49,7 @@ def busy_scene(solver: str):
     coloured one), tethers, a moving ball, the ground and tearing: every stage and constraint set runs."""
     soft = {"compliance": {"shear": 0.02, "bend": 0.2}} if solver == "coloured" else {}
     return parse_scene({
-        "simulation": {"fps": 60, "substeps": 3, "iterations": 6, "solver": solver, "wind": [8.0, 0.0, 3.0]},
+        "simulation": {"fps": 60, "substeps": 3, "iterations": 6, "relaxation": solver, "wind": [8.0, 0.0, 3.0]},
         "cloth": [{"resolution": [20, 24], "size": [1.0, 1.2], "pins": ["top-left", "top-right"], "tear_threshold": 1.4,
                    "tethers": True, "tether_scale": 1.5, "sticks": ["structural", "shear", "bend"], **soft}],
         "collider": [{"type": "sphere", "radius": 0.2, "path": [[0.0, 0.0, 0.3, 1.0], [0.5, 0.0, 0.3, -1.0]]},

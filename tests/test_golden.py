@@ -59,7 +59,7 @@ def rigid_scene(case: str):
         cloth["tethers"] = False  # a new constraint, which the old code did not have
     scene = parse_scene(data, str(path), path)
     return replace(scene, simulation=replace(scene.simulation, frames=record["frames"],
-                                             solver=record.get("solver", "coloured")))
+                                             relaxation=record.get("solver", "coloured")))
 
 
 @pytest.mark.parametrize("case", [pytest.param(c, marks=pytest.mark.slow) if c.startswith("big_grid") else c for c in CASES])

@@ -105,7 +105,7 @@ def test_the_rule_picks_implicit_sticks_for_one_grid_cloth_that_cannot_tear(devi
     assert Simulator(edge, device, sticks="implicit").constraint_sets == ("tethers", "grid sticks")
     for other, reason in [
         (make_scene(resolution=[6, 6], tear_threshold=1.5), "can tear"),
-        (make_scene({"solver": "jacobi"}, resolution=[6, 6]), "Jacobi"),
+        (make_scene({"relaxation": "jacobi"}, resolution=[6, 6]), "Jacobi"),
         (parse_scene({"cloth": [{"name": "a", "resolution": [4, 4], "size": [1.0, 1.0]},
                                 {"name": "b", "resolution": [4, 4], "size": [1.0, 1.0], "origin": [2.0, 0.0, 0.0]}]},
                      file="<test>"), "several cloths"),

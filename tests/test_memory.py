@@ -51,32 +51,32 @@ BALL = {"type": "sphere", "radius": 0.2, "centre": [0.3, -0.5, 0.2]}
 SWEEP = {"type": "sphere", "radius": 0.1, "path": [[0.0, 0.0, 0.0, 0.5], [0.5, 1.0, 0.0, 0.5], [1.0, 1.0, -1.0, 0.5]]}
 CASES = {
     "coloured": ({}, {}),
-    "jacobi": ({"solver": "jacobi"}, {}),
+    "jacobi": ({"relaxation": "jacobi"}, {}),
     "coloured-tear": ({}, {"tear_threshold": 1.5}),
-    "jacobi-tear": ({"solver": "jacobi"}, {"tear_threshold": 1.5}),
+    "jacobi-tear": ({"relaxation": "jacobi"}, {"tear_threshold": 1.5}),
     "tethers": ({}, {"pins": ["top-left", "top-right"]}),
-    "jacobi-tethers": ({"solver": "jacobi"}, {"pins": ["top-edge"]}),
+    "jacobi-tethers": ({"relaxation": "jacobi"}, {"pins": ["top-edge"]}),
     "tethers-tear": ({}, {"pins": ["top-left", "top-right"], "tear_threshold": 1.5, "tethers": True,
                           "tether_scale": 2.0}),
     "compliance": ({}, {"compliance": {"bend": 1e-3}}),
     "compliance-tear": ({}, {"compliance": {"shear": 1e-4, "bend": 1e-3}, "tear_threshold": 1.5}),
     "multilevel": ({"multilevel": True}, {"pins": ["top-left", "top-right"]}),
-    "jacobi-multilevel": ({"solver": "jacobi", "multilevel": True}, {}),
+    "jacobi-multilevel": ({"relaxation": "jacobi", "multilevel": True}, {}),
     "planes": ({}, {}, [GROUND, WALL]),
     "still-sphere": ({}, {}, [BALL]),
     "moving-sphere": ({}, {}, [SWEEP, GROUND]),
     "everything": ({}, {"pins": ["top-edge"], "compliance": {"bend": 1e-3}, "tear_threshold": 1.5,
                         "tethers": True, "tether_scale": 2.0}, [SWEEP, BALL, GROUND, WALL]),
-    "jacobi-everything": ({"solver": "jacobi"}, {"pins": ["top-edge"], "tear_threshold": 1.5, "tethers": True,
+    "jacobi-everything": ({"relaxation": "jacobi"}, {"pins": ["top-edge"], "tear_threshold": 1.5, "tethers": True,
                                                  "tether_scale": 2.0}, [SWEEP, BALL, GROUND]),
     # float64 positions: 24 bytes for each of the State's three and the Jacobi scratch, the rest float32 as before
     "float64": ({"precision": "float64"}, {}),
     "float64-everything": ({"precision": "float64"}, {"pins": ["top-edge"], "compliance": {"bend": 1e-3},
                                                       "tear_threshold": 1.5, "tethers": True, "tether_scale": 2.0},
                            [SWEEP, BALL, GROUND, WALL]),
-    "float64-jacobi-everything": ({"solver": "jacobi", "precision": "float64"}, {"pins": ["top-edge"],
+    "float64-jacobi-everything": ({"relaxation": "jacobi", "precision": "float64"}, {"pins": ["top-edge"],
                                   "tear_threshold": 1.5, "tethers": True, "tether_scale": 2.0}, [SWEEP, BALL, GROUND]),
-    "auto-float64": ({"substeps": 1000, "solver": "jacobi"}, {}),  # "auto" below the float32 floor
+    "auto-float64": ({"substeps": 1000, "relaxation": "jacobi"}, {}),  # "auto" below the float32 floor
 }
 
 
@@ -98,7 +98,7 @@ def test_estimate_matches_the_arrays_allocated(case):
     assert sim.precision == ("float64" if "float64" in case else "float32")
     # The only arrays not in the estimate are one-element counters: the tear counter (4 bytes), and the
     # Jacobi CSR's extra row start (4 bytes). A moving sphere's key starts are counted (spheres + 1 of them).
-    counters = 4 * (scene.tears + (scene.simulation.solver == "jacobi"))
+    counters = 4 * (scene.tears + (scene.simulation.relaxation == "jacobi"))
     assert simulator_bytes(sim) - estimate(scene, sim.model.sticks_form).device_bytes == counters
 
 
@@ -112,14 +112,14 @@ def test_a_scene_too_big_for_the_machine_is_refused_before_allocating():
 
 def test_device_and_host_limits_are_named():
     scene = make_scene(resolution=[64, 64])
-    need = estimate(scene)
+    req = estimate(scene)
     with pytest.raises(WarpVerletError, match="cuda:0 has only"):
-        check_fits(scene, "cuda:0", device_free=need.device_bytes - 1, host_free=None)
+        check_fits(scene, "cuda:0", device_free=req.device_bytes - 1, host_free=None)
     with pytest.raises(WarpVerletError, match="this machine has only"):
-        check_fits(scene, "cpu", device_free=None, host_free=need.device_bytes + need.host_bytes - 1)
-    assert check_fits(scene, "cpu", device_free=None, host_free=need.device_bytes + need.host_bytes) == need
+        check_fits(scene, "cpu", device_free=None, host_free=req.device_bytes + req.host_bytes - 1)
+    assert check_fits(scene, "cpu", device_free=None, host_free=req.device_bytes + req.host_bytes) == req
     # Per particle three positions and an inverse mass; stick arrays keep ends, rest and weight per stick, where
     # implicit grid sticks keep rest lengths 1 and 2 columns and rows apart (float32) and squared steps 1 column
     # and 1 row apart (float64, for shear sticks).
     assert estimate(scene, "explicit").device_bytes == 64 * 64 * 40 + 2 * 64 * 63 * 16
-    assert estimate(scene, "implicit").device_bytes == need.device_bytes == 64 * 64 * 40 + 250 * 4 + 126 * 8
+    assert estimate(scene, "implicit").device_bytes == req.device_bytes == 64 * 64 * 40 + 250 * 4 + 126 * 8

@@ -84,7 +84,7 @@ def test_quad_mesh_of_a_grid_moves_as_the_grid(tmp_path, solver):
     rows, cols = 8, 10
     points, faces = grid_mesh(rows, cols)
     asset = write_usd_mesh(tmp_path / "grid.usda", points, faces)
-    simulation = {"solver": solver, "frames": 30, "substeps": 8, "iterations": 40, "wind": [0.0, 0.0, 3.0]}
+    simulation = {"relaxation": solver, "frames": 30, "substeps": 8, "iterations": 40, "wind": [0.0, 0.0, 3.0]}
     common = {"sticks": ALL, "tethers": False}
     mesh_cloth = mesh_scene(tmp_path, {"mesh": asset.name, "prim": "/Set/Cloth", "mass_distribution": "even",
                                        "pins": [0, cols - 1], **common}, simulation)

@@ -110,7 +110,7 @@ def test_auto_picks_float64_below_the_float32_floor_only(substeps, iterations, e
 def test_the_memory_estimate_counts_24_bytes_per_float64_position():
     # Positions, prediction and increment per particle, plus the Jacobi scratch position: 12 bytes more each.
     for solver, positions in (("coloured", 3), ("jacobi", 4)):
-        f32, f64 = (estimate(make_scene({"solver": solver, "precision": p}, resolution=[10, 12]))
+        f32, f64 = (estimate(make_scene({"relaxation": solver, "precision": p}, resolution=[10, 12]))
                     for p in ("float32", "float64"))
         assert f64.device_bytes - f32.device_bytes == 120 * positions * 12
 
@@ -323,7 +323,7 @@ def busy(precision: str, solver: str = "coloured"):
         cloth["compliance"] = {"bend": 1e-3}
     colliders = [{"type": "sphere", "radius": 0.2, "friction": 0.3, "path": [[0.0, 0.0, 0.0, 0.6], [0.4, 0.0, 1.2, 0.6]]},
                  {"type": "plane", "point": [0.0, -0.4, 0.0], "friction": 0.5, "thickness": 0.01}]
-    return parse_scene({"simulation": {"fps": 60, "substeps": 8, "iterations": 6, "solver": solver,
+    return parse_scene({"simulation": {"fps": 60, "substeps": 8, "iterations": 6, "relaxation": solver,
                                        "precision": precision}, "cloth": [cloth], "collider": colliders},
                        file="<test>")
 

@@ -61,7 +61,7 @@ def test_jacobi_gather_matches_analytic_average(device):
 def test_stretch_falls_as_iterations_rise(device, solver):
     rms = []
     for iterations in (1, 4, 16, 64):
-        scene = make_scene({"iterations": iterations, "solver": solver, "damping": 2.4}, resolution=[12, 12],
+        scene = make_scene({"iterations": iterations, "relaxation": solver, "damping": 2.4}, resolution=[12, 12],
                            pins=["top-left", "top-right"], sticks=["structural", "shear"])
         sim = Simulator(scene, device)
         for _ in range(20):
@@ -75,7 +75,7 @@ def test_gauss_seidel_converges_faster_than_jacobi():
     # The point of colouring: for the same iteration count, Gauss-Seidel removes more error than Jacobi.
     rms = {}
     for solver in ("coloured", "jacobi"):
-        scene = make_scene({"iterations": 8, "solver": solver}, resolution=[12, 12], pins=["top-edge"])
+        scene = make_scene({"iterations": 8, "relaxation": solver}, resolution=[12, 12], pins=["top-edge"])
         sim = Simulator(scene, "cpu")
         for _ in range(20):
             sim.step_frame()

@@ -112,7 +112,7 @@ def full_scene() -> dict:
     Its pins and particle masses stay on row 0, so that any row count keeps them valid."""
     return {
         "simulation": {"fps": 60.0, "frames": 10, "substeps": 2, "iterations": 4, "gravity": [0.0, -9.81, 0.0],
-                       "wind": [1.0, 0.0, 0.5], "damping": 0.5, "solver": "coloured", "max_dt_ratio": 2.0,
+                       "wind": [1.0, 0.0, 0.5], "damping": 0.5, "relaxation": "coloured", "max_dt_ratio": 2.0,
                        "max_frame_time": 0.1, "position_bound": 100.0, "precision": "float64"},
         "output": {"path": "fuzz.usdc", "save_every": 5, "up_axis": "Y", "meters_per_unit": 1.0, "kind": "cache",
                    "torn_faces": "holes"},
@@ -450,10 +450,10 @@ def test_unicode_names(tmp_path, name, which):
 
 @FUZZ
 @given(value=st.text(st.characters(codec="utf-8"), max_size=12),
-       which=st.sampled_from([("simulation", "solver"), ("output", "up_axis"), ("cloth", 0, "orientation"),
+       which=st.sampled_from([("simulation", "relaxation"), ("output", "up_axis"), ("cloth", 0, "orientation"),
                               ("collider", 0, "type"), ("cloth", 0, "pins", 0)]))
 def test_unicode_choices_are_exact(tmp_path, value, which):
-    options = {"solver": {"coloured", "jacobi"}, "up_axis": {"Y", "Z"}, "orientation": {"vertical", "horizontal"},
+    options = {"relaxation": {"coloured", "jacobi"}, "up_axis": {"Y", "Z"}, "orientation": {"vertical", "horizontal"},
                "type": {"plane", "sphere"}, 0: set(NAMED_PINS)}[which[-1]]
     doc = full_scene()
     put(doc, which, value)
@@ -635,7 +635,7 @@ def valid_scenes(draw) -> dict:
         "simulation": {"fps": draw(positive), "frames": draw(st.integers(1, 10**6)),
                        "substeps": draw(st.integers(1, 10_000)),
                        "iterations": draw(st.integers(0, 100_000)), "gravity": draw(vec3), "wind": draw(vec3),
-                       "damping": draw(st.floats(0.0, 1e6)), "solver": solver,
+                       "damping": draw(st.floats(0.0, 1e6)), "relaxation": solver,
                        "max_dt_ratio": draw(st.floats(1.0, 1e6)), "max_frame_time": draw(positive),
                        "position_bound": draw(positive),
                        "precision": draw(st.sampled_from(["auto", "float32", "float64"]))},

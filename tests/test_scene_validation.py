@@ -112,6 +112,13 @@ def test_drag_is_refused_with_the_equivalent_damping(tmp_path):
     check(tmp_path, "[simulation]\ndrag = 1.5\n" + CLOTH, "simulation.drag", "damping = -ln(drag) x fps x substeps")
 
 
+def test_the_old_solver_key_names_relaxation(tmp_path):
+    # "solver" named both the scheme and the stepping object; the scheme's key is relaxation now.
+    err = check(tmp_path, "[simulation]\nsolver = 'jacobi'\n" + CLOTH, "simulation.solver", "renamed relaxation",
+                'relaxation = "coloured"', '"jacobi"')
+    assert str(err).count("simulation.solver") == 1
+
+
 def test_drag_of_one_suggests_no_damping(tmp_path):
     # drag = 1 kept all the velocity: the equivalent is damping = 0, written as a user would write it (not "-0",
     # the sign of -ln(1.0) x fps x substeps = -0.0).
@@ -138,10 +145,10 @@ def test_compliance_needs_its_family_built(tmp_path):
 
 
 def test_compliance_needs_the_coloured_solver(tmp_path):
-    check(tmp_path, "[simulation]\nsolver = 'jacobi'\n" + CLOTH + "compliance = { structural = 1e-3 }\n",
+    check(tmp_path, "[simulation]\nrelaxation = 'jacobi'\n" + CLOTH + "compliance = { structural = 1e-3 }\n",
           "cloth[0].compliance", "coloured solver")
     # Rigid (compliance 0) is fine with Jacobi: it is the default.
-    scene = load_scene(write(tmp_path, "[simulation]\nsolver = 'jacobi'\n" + CLOTH
+    scene = load_scene(write(tmp_path, "[simulation]\nrelaxation = 'jacobi'\n" + CLOTH
                              + "compliance = { structural = 0 }\n"))
     assert scene.cloths[0].compliance == {} and not scene.compliant
 
@@ -171,7 +178,7 @@ def test_compliance_needs_the_coloured_solver(tmp_path):
                                                                            "an array of 2"]),
         (CLOTH + "origin = 1.0\n", "cloth[0].origin", ["expected an array of 3 numbers", "float 1.0"]),
         # strings and choices
-        ("[simulation]\nsolver = 'gauss'\n" + CLOTH, "simulation.solver", ["'coloured', 'jacobi'", "'gauss'"]),
+        ("[simulation]\nrelaxation = 'gauss'\n" + CLOTH, "simulation.relaxation", ["'coloured', 'jacobi'", "'gauss'"]),
         ("[output]\nup_axis = 'X'\n" + CLOTH, "output.up_axis", ["'Y', 'Z'"]),
         (CLOTH + "orientation = 'diagonal'\n", "cloth[0].orientation", ["'vertical', 'horizontal'"]),
         (CLOTH + "name = 5\n", "cloth[0].name", ["expected a non-empty string", "int 5"]),
@@ -512,7 +519,7 @@ def has_raw(v) -> bool:
 
 KNOWN_KEYS = [
     "simulation", "output", "cloth", "fps", "frames", "substeps", "iterations", "gravity", "wind", "damping",
-    "drag", "solver", "max_dt_ratio", "max_frame_time", "position_bound", "precision", "path", "save_every", "up_axis",
+    "drag", "solver", "relaxation", "max_dt_ratio", "max_frame_time", "position_bound", "precision", "path", "save_every", "up_axis",
     "meters_per_unit", "name", "resolution", "size", "origin", "orientation", "mass", "sticks", "compliance",
     "pins", "tear_threshold", "particle_masses", "tethers", "tether_scale", "structural", "shear", "bend",
 ]

@@ -41,7 +41,7 @@ def test_render_positions_interpolate_between_the_last_two_substeps():
 @pytest.mark.parametrize("solver", ["coloured", "jacobi"])
 def test_same_scene_same_device_is_bit_identical(device, solver):
     def run():
-        sim = Simulator(make_scene({"solver": solver, "wind": [2.0, 0.0, 1.0], "damping": 2.4}, **HANGING), device)
+        sim = Simulator(make_scene({"relaxation": solver, "wind": [2.0, 0.0, 1.0], "damping": 2.4}, **HANGING), device)
         for _ in range(15):
             sim.step_frame()
         return sim.positions()
@@ -56,7 +56,7 @@ def test_cpu_and_cuda_agree(solver):
     # Same kernels, same launch order; only the compilers' floating-point contraction differs. Tolerance:
     # 1e-5 of the cloth size after 30 frames of a hanging cloth.
     def run(device):
-        sim = Simulator(make_scene({"solver": solver}, **HANGING), device)
+        sim = Simulator(make_scene({"relaxation": solver}, **HANGING), device)
         for _ in range(30):
             sim.step_frame()
         return sim.positions()
@@ -93,7 +93,7 @@ def test_a_step_launches_only_what_the_scene_uses(launches):
     assert one_step(soft, launches) == ["verlet_step", "zero"] + ["relax_colour_compliant"] * (12 * k)
 
     # Jacobi: a gather into the scratch buffer and a copy back per sweep.
-    jacobi = Simulator(make_scene({"iterations": k, "solver": "jacobi"}, resolution=[8, 8]), "cpu", use_graph=False)
+    jacobi = Simulator(make_scene({"iterations": k, "relaxation": "jacobi"}, resolution=[8, 8]), "cpu", use_graph=False)
     assert one_step(jacobi, launches) == ["verlet_step"] + ["relax_jacobi", "copy"] * k
 
     # A pinned cloth that cannot tear gets tethers: one launch per sweep, before the sticks' 4 colours.
@@ -122,7 +122,7 @@ def test_arrays_are_allocated_only_for_the_solver_in_use():
     coloured = Simulator(make_scene(resolution=[8, 8]), "cpu")
     coloured.step()
     assert coloured.solver._scratch == {} and not hasattr(coloured.model, "neighbour")
-    jacobi = Simulator(make_scene({"solver": "jacobi"}, resolution=[8, 8]), "cpu")
+    jacobi = Simulator(make_scene({"relaxation": "jacobi"}, resolution=[8, 8]), "cpu")
     jacobi.step()
     assert set(jacobi.solver._scratch) == {"jacobi_positions"} and not hasattr(jacobi.model, "stick_ends")
     soft = Simulator(make_scene(resolution=[8, 8], compliance={"structural": 1e-4}), "cpu")
@@ -191,7 +191,7 @@ def test_divergence_check_finds_the_lowest_bad_particle(device):
 def test_device_readbacks_match_the_host(device, solver):
     """render_points and device_stretch (a viewer's readbacks) give what the host computes from every position:
     the same interpolated points, and the same stretch over the untorn structural sticks."""
-    scene = make_scene({"solver": solver, "iterations": 2}, resolution=[20, 20], pins=["top-left", "top-right"],
+    scene = make_scene({"relaxation": solver, "iterations": 2}, resolution=[20, 20], pins=["top-left", "top-right"],
                        tear_threshold=1.05)
     sim = Simulator(scene, device)
     for _ in range(40):

@@ -24,7 +24,7 @@ def busy(solver: str = "coloured", tethers: bool = False):
     soft = {"compliance": {"shear": 0.03}} if solver == "coloured" else {}
     extra = {"tethers": True, "tether_scale": 1.25} if tethers else {}
     return parse_scene({
-        "simulation": {"fps": 60, "substeps": 4, "iterations": 6, "solver": solver, "wind": [60.0, 0.0, 40.0],
+        "simulation": {"fps": 60, "substeps": 4, "iterations": 6, "relaxation": solver, "wind": [60.0, 0.0, 40.0],
                        "damping": 0.5},
         "cloth": [{"resolution": [12, 16], "size": [0.6, 0.8], "pins": ["left-edge"], "mass": 0.1,
                    "sticks": ["structural", "shear"], "tear_threshold": 1.2, **soft, **extra}],

@@ -138,10 +138,10 @@ def test_an_invalid_base_scene_is_named(tmp_path):
 
 def test_a_combination_the_scene_refuses_names_the_variant(tmp_path):
     # Each value alone is fine; together, the jacobi solver refuses soft sticks.
-    text = HEAD + '[axes]\n"simulation.solver" = ["coloured", "jacobi"]\n"cloth.0.compliance" = [{}, { structural = 0.001 }]\n'
+    text = HEAD + '[axes]\n"simulation.relaxation" = ["coloured", "jacobi"]\n"cloth.0.compliance" = [{}, { structural = 0.001 }]\n'
     err = error(tmp_path, text)
     assert err.key == "axes.cloth.0.compliance"
-    assert ('the value { structural = 0.001 } gives an invalid scene (variant 3: simulation.solver = "jacobi", '
+    assert ('the value { structural = 0.001 } gives an invalid scene (variant 3: simulation.relaxation = "jacobi", '
             "cloth.0.compliance = { structural = 0.001 }): cloth[0].compliance: soft sticks") in err.problem
     assert "soft sticks need the coloured solver" in err.problem
 

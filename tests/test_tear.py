@@ -44,7 +44,7 @@ def test_free_falling_rows_tear_from_the_pins_at_the_analytic_time(device, solve
     spacing = height / (rows - 1)
     fps, substeps = 60, 4
     dt = 1.0 / (fps * substeps)
-    scene = make_scene({"fps": fps, "substeps": substeps, "iterations": 0, "solver": solver},
+    scene = make_scene({"fps": fps, "substeps": substeps, "iterations": 0, "relaxation": solver},
                        resolution=[rows, cols], size=[height, 1.0], pins=["top-edge"],
                        sticks=["structural"], tear_threshold=threshold)
     sim = Simulator(scene, device)
@@ -166,7 +166,7 @@ def test_only_tearing_scenes_launch_and_allocate_the_tear_kernel(launches):
     tearing.step()
     assert launches.of(tearing.step) == ["verlet_step"] + ["relax_colour"] * (4 * k) + ["tear_sticks"]
     # Jacobi tears per stick end: still one launch.
-    jacobi = Simulator(make_scene({"iterations": k, "solver": "jacobi"}, resolution=[8, 8], tear_threshold=1.5),
+    jacobi = Simulator(make_scene({"iterations": k, "relaxation": "jacobi"}, resolution=[8, 8], tear_threshold=1.5),
                        "cpu", use_graph=False)
     jacobi.step()
     assert launches.of(jacobi.step) == ["verlet_step"] + ["relax_jacobi", "copy"] * k + ["tear_sticks"]
@@ -202,7 +202,7 @@ def test_cache_hides_exactly_the_faces_beside_torn_sticks(tmp_path, solver, torn
     soft = {"compliance": {"shear": 0.03}} if solver == "coloured" else {}
     data = {
         "simulation": {"fps": 60, "frames": 30, "substeps": 4, "iterations": 8, "wind": [60.0, 0.0, 40.0],
-                       "solver": solver},
+                       "relaxation": solver},
         "output": {"torn_faces": torn_faces},
         "cloth": [
             {"name": "flag", "resolution": [rows, cols], "size": [0.6, 0.9], "pins": ["left-edge"], "mass": 0.1,

@@ -99,4 +99,4 @@ def test_a_stale_tether_would_hold_the_torn_piece():
 def test_a_cloth_without_pins_or_with_tethers_off_gets_none():
     assert Simulator(make_scene(resolution=[8, 8]), "cpu").model.tether_table is None
     assert Simulator(hanging(False), "cpu").model.tether_table is None
-    assert Simulator(hanging(True), "cpu").solver.need.tethered == 16 * 16 - 2
+    assert Simulator(hanging(True), "cpu").solver.req.tethered == 16 * 16 - 2

@@ -285,7 +285,7 @@ def _validate(args) -> int:
     sim = scene.simulation
     print(f"{args.scene}: valid scene, {len(scene.cloths)} cloth(s), {scene.particle_count} particles, "
           f"{sim.frames} frames at {sim.fps:g} fps, {sim.substeps} substeps x {sim.iterations} iterations, "
-          f"solver {sim.solver}")
+          f"relaxation {sim.relaxation}")
     for spec in scene.cloths:
         if spec.mesh is not None:
             mesh = spec.mesh.mesh

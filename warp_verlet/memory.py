@@ -40,15 +40,15 @@ def gib(n: float) -> str:
 
 def estimate(scene: Scene, sticks: str = "auto") -> MemoryNeed:
     """``sticks``: the sticks' form the simulator is asked for ("auto", "explicit", "implicit")."""
-    from .stages import Need, device_bytes
+    from .stages import Requirements, device_bytes
 
-    need = Need.of(scene, sticks)
+    req = Requirements.of(scene, sticks)
     return MemoryNeed(
-        particles=need.particles,
-        sticks=need.sticks,
-        device_bytes=device_bytes(need),
-        host_bytes=need.sticks * HOST_BUILD_BYTES_PER_STICK + need.particles * 64,
-        precision=need.precision,
+        particles=req.particles,
+        sticks=req.sticks,
+        device_bytes=device_bytes(req),
+        host_bytes=req.sticks * HOST_BUILD_BYTES_PER_STICK + req.particles * 64,
+        precision=req.precision,
     )
 
 
@@ -70,13 +70,13 @@ def available_host_bytes() -> int | None:
 def check_fits(scene: Scene, device_name: str, device_free: int | None, host_free: int | None,
                sticks: str = "auto") -> MemoryNeed:
     """Raise one clear error when the scene cannot fit; ``device_free`` None means the device is the host."""
-    need = estimate(scene, sticks)
-    host_need = need.host_bytes + (need.device_bytes if device_free is None else 0)
-    what = f"{scene.source}: {need.particles:,} particles and {need.sticks:,} sticks need {need.describe()}"
-    if device_free is not None and need.device_bytes > device_free:
+    req = estimate(scene, sticks)
+    host_need = req.host_bytes + (req.device_bytes if device_free is None else 0)
+    what = f"{scene.source}: {req.particles:,} particles and {req.sticks:,} sticks need {req.describe()}"
+    if device_free is not None and req.device_bytes > device_free:
         raise WarpVerletError(f"{what}, but {device_name} has only {gib(device_free)} free; "
                               "lower the resolution or run on a larger device")
     if host_free is not None and host_need > host_free:
         raise WarpVerletError(f"{what}, but this machine has only {gib(host_free)} of memory available; "
                               "lower the resolution or run on a larger machine")
-    return need
+    return req

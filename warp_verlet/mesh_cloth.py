@@ -80,7 +80,7 @@ class ClothMesh:
     faces: Faces  # the source faces in particle indices (same face order)
     weld_distance: float  # m
     non_manifold_edges: int  # edges with more than two faces (no bend stick crosses them)
-    # stick_families' answers by family tuple: the scene's counts (stages.Need) and the topology ask for the
+    # stick_families' answers by family tuple: the scene's counts (stages.Requirements) and the topology ask for the
     # same sticks, seconds of work at 1024^2, so they are built once per mesh.
     _sticks: dict = field(default_factory=dict, repr=False)
 

@@ -25,7 +25,7 @@ from .errors import ArgumentError
 from .multilevel import grid_hierarchy, merge_levels
 from .tethers import TetherTable, build_tethers
 from .scene import Scene
-from .stages import MAX_UNIFORM_MASS_PINS, Need
+from .stages import MAX_UNIFORM_MASS_PINS, Requirements
 from .faces import edge_faces
 from .mesh_cloth import STRUCTURAL
 from .topology import (BEND_H, BEND_V, FAMILY_OF_CLASS, SHEAR_ANTI, SHEAR_DIAG, STRUCT_H, STRUCT_V, ClothTopology,
@@ -65,7 +65,7 @@ class DeviceLevel:
 
 
 def stick_form(sticks: str, colouring: str, device) -> str:
-    """The sticks' form asked of Need.of for a Model on ``device``. "auto" means implicit grid sticks where the
+    """The sticks' form asked of Requirements.of for a Model on ``device``. "auto" means implicit grid sticks where the
     scene allows them on a GPU, where a sweep is bound by memory traffic and they save it; on the CPU it means
     stick arrays, which measured faster there (the arrays stay in its caches, and the computed ends and rest
     lengths cost integer divisions and a square root per stick; bench/results/implicit_grid). Implicit sticks
@@ -160,7 +160,7 @@ class GridDevice:
         free = np.unique(weight[weight > 0])
         pinned = np.flatnonzero(weight == 0)
         # The kernels find a particle's weight without reading it when the free particles share one and the pins
-        # are few (Need.weight_pins, from the scene: no particle masses, at most MAX_UNIFORM_MASS_PINS pins).
+        # are few (Requirements.weight_pins, from the scene: no particle masses, at most MAX_UNIFORM_MASS_PINS pins).
         if uniform and not (len(free) <= 1 and len(pinned) <= MAX_UNIFORM_MASS_PINS):
             raise AssertionError(f"cloth {top.name!r}: its free particles do not share one weight")
         if uniform:
@@ -246,11 +246,11 @@ class Model:
             raise ArgumentError(f"colouring must be 'auto', 'grid' or 'graph', got {colouring!r}")
         sticks = stick_form(sticks, colouring, device)
         self.device = device
-        self.solver = scene.simulation.solver
-        need = Need.of(scene, sticks)
-        self.precision = need.precision
-        self.stick_request = sticks  # what Need.of was asked: the solver's Need must be asked the same
-        self.sticks_form = "implicit" if need.implicit_grid else "explicit"
+        self.relaxation = scene.simulation.relaxation
+        req = Requirements.of(scene, sticks)
+        self.precision = req.precision
+        self.stick_request = sticks  # what Requirements.of was asked: the solver's Requirements must be asked the same
+        self.sticks_form = "implicit" if req.implicit_grid else "explicit"
         double = self.precision == "float64"
         self.position_dtype = wp.vec3d if double else wp.vec3
         self.position_scalar = wp.float64 if double else wp.float32
@@ -287,7 +287,7 @@ class Model:
         self.stick_compliance = None
 
         csr_stick = csr_ends = None  # Jacobi only
-        if self.solver == "coloured":
+        if self.relaxation == "coloured":
             if colouring == "graph" or not all_grids:  # cloths own disjoint particles: one graph serves all
                 self.colouring: Colouring | None = graph_colouring(sticks)
             else:
@@ -299,8 +299,8 @@ class Model:
             family, owner, tear_length = family[order], owner[order], tear_length[order]
             sizes = self.colouring.sizes
             self.colour_ranges = [(int(a), int(n)) for a, n in zip(np.r_[0, np.cumsum(sizes)[:-1]], sizes) if n > 0]
-            if need.implicit_grid:  # the sticks are computed from the grid: no stick arrays on the device
-                self.grid = GridDevice(self.cloths[0], scene.cloths[0], device, uniform=need.weight_pins > 0)
+            if req.implicit_grid:  # the sticks are computed from the grid: no stick arrays on the device
+                self.grid = GridDevice(self.cloths[0], scene.cloths[0], device, uniform=req.weight_pins > 0)
                 self._hold(self.grid, "grid")
                 if [c.count for c in self.grid.colours] != [n for _, n in self.colour_ranges]:
                     raise AssertionError("implicit grid colours differ from the analytic colouring")
@@ -325,7 +325,7 @@ class Model:
         self.colliders = ColliderModel(scene, device)
         self.levels = self._build_levels(scene, device) if scene.simulation.multilevel else []
         self.tether_table: TetherTable | None = build_tethers(self.cloths, scene.cloths, scene.tethers_per_particle)
-        if need.grid_pins:  # computed in every sweep from the grid: the table stays on the host
+        if req.grid_pins:  # computed in every sweep from the grid: the table stays on the host
             self.grid_tethers = GridTethersDevice(self.cloths[0], scene.cloths[0], scene.tethers_per_particle, device)
             self._hold(self.grid_tethers, "grid_tethers")
         elif self.tether_table is not None:

@@ -31,7 +31,7 @@ from .scene_keys import (  # the table reader and value parsers, under the names
 if TYPE_CHECKING:  # the mesh modules (numpy) are imported only by a scene that has a mesh cloth
     from .mesh_scene import MeshSpec
 
-SOLVERS = ("coloured", "jacobi")
+RELAXATIONS = ("coloured", "jacobi")
 PRECISIONS = ("auto", "float32", "float64")  # positions' float type; "auto" is resolved in precision.py
 ORIENTATIONS = ("vertical", "horizontal")
 STICK_FAMILIES = ("structural", "shear", "bend")
@@ -65,7 +65,7 @@ class SimulationSettings:
     gravity: tuple[float, float, float] = (0.0, -9.81, 0.0)
     wind: tuple[float, float, float] = (0.0, 0.0, 0.0)
     damping: float = 0.0  # 1/s: the implicit velocity decays as exp(-damping t), whatever the substeps
-    solver: str = "coloured"
+    relaxation: str = "coloured"
     multilevel: bool = False  # a coarse-to-fine pass over each grid's hierarchy before every substep's sweeps
     multilevel_sweeps: int = 1  # sweeps per coarse level per substep
     target_stretch: float | None = None  # RMS structural stretch (fraction) the substeps are chosen to stay under
@@ -223,6 +223,9 @@ def _read_simulation(file: str, data: Any) -> SimulationSettings:
     d = SimulationSettings()
     if "drag" in t.data:
         raise t.error("drag", _drag_moved(t.data))
+    if "solver" in t.data:
+        raise t.error("solver", 'is renamed relaxation (the scheme that relaxes the sticks): write relaxation = '
+                      '"coloured" (graph-coloured Gauss-Seidel) or "jacobi"')
     settings = SimulationSettings(
         fps=t.take("fps", real(0.0, lo_open=True), d.fps),
         frames=t.take("frames", integer(1), d.frames),
@@ -231,7 +234,7 @@ def _read_simulation(file: str, data: Any) -> SimulationSettings:
         gravity=t.take("gravity", vector(3, _any_real), d.gravity),
         wind=t.take("wind", vector(3, _any_real), d.wind),
         damping=t.take("damping", real(0.0), d.damping),
-        solver=t.take("solver", choice(SOLVERS), d.solver),
+        relaxation=t.take("relaxation", choice(RELAXATIONS), d.relaxation),
         multilevel=t.take("multilevel", _boolean, d.multilevel),
         multilevel_sweeps=t.take("multilevel_sweeps", integer(1, 1000), d.multilevel_sweeps),
         max_dt_ratio=t.take("max_dt_ratio", real(1.0), d.max_dt_ratio),
@@ -527,12 +530,12 @@ def check_scene(scene: Scene) -> None:
     problem: run by parse_scene, and again on a scene edited in code (a live session's new tear threshold)."""
     file, simulation, output = scene.source, scene.simulation, scene.output
     cloth_specs, collider_specs = scene.cloths, scene.colliders
-    if simulation.solver == "jacobi":
+    if simulation.relaxation == "jacobi":
         for i, spec in enumerate(cloth_specs):
             if spec.compliance:
                 raise SceneError(file, f"cloth[{i}].compliance", 'soft sticks need the coloured solver (XPBD '
                                  'accumulates each stick\'s tension in order); remove compliance or set '
-                                 'simulation.solver = "coloured"')
+                                 'simulation.relaxation = "coloured"')
     if simulation.multilevel:
         for i, spec in enumerate(cloth_specs):
             if spec.mesh is not None:

@@ -34,7 +34,7 @@ from .model import Model
 from .scene import Scene
 from .solver import VerletSolver
 from .budget import FLOAT32_FLOOR, MAX_SUBSTEPS, Budget
-from .stages import CONSTRAINT_SETS, Need
+from .stages import CONSTRAINT_SETS, Requirements
 from .state import State
 from .warp_setup import ensure_kernel_cache
 
@@ -173,7 +173,7 @@ class Simulator:
             self.model = Model(scene, self.device, colouring, sticks)
             self.state = State(self.model)
         self._sticks = self.model.stick_request
-        self.solver = VerletSolver(self.model, self.settings, Need.of(scene, self._sticks), threads)
+        self.solver = VerletSolver(self.model, self.settings, Requirements.of(scene, self._sticks), threads)
         self.threads = self.solver.threads
         self.min_dt = self.solver.min_dt
         self.precision = self.model.precision  # "float32" or "float64": the scene's precision, "auto" resolved
@@ -240,7 +240,7 @@ class Simulator:
         tethers" where they are computed from the grid, "sticks" and "tethers" where they are arrays."""
         if "relax" not in self.solver.stage_names:
             return ()
-        return tuple(c.name for c in CONSTRAINT_SETS if c.needed(self.solver.need))
+        return tuple(c.name for c in CONSTRAINT_SETS if c.needed(self.solver.req))
 
     def reset(self) -> None:
         """Back to the state the simulator started from (rest positions, at rest, nothing torn)."""
@@ -394,11 +394,11 @@ class Simulator:
                              "(advance()'s on_frame, or after finish_frame())")
         settings = replace(self.settings, **changes)
         scene = replace(self.scene, simulation=settings)
-        need = Need.of(scene, self._sticks)
-        if need.precision != self.model.precision:
-            raise ArgumentError(f"these settings need {need.precision} positions and this model holds "
+        req = Requirements.of(scene, self._sticks)
+        if req.precision != self.model.precision:
+            raise ArgumentError(f"these settings need {req.precision} positions and this model holds "
                                 f"{self.model.precision}: build a new Simulator")
-        solver = VerletSolver(self.model, settings, need, self.threads if self.device.is_cpu else None)
+        solver = VerletSolver(self.model, settings, req, self.threads if self.device.is_cpu else None)
         if 1.0 / (settings.fps * settings.substeps) < solver.min_dt:
             raise WarpVerletError(solver.too_small(1.0 / (settings.fps * settings.substeps), scene_dt=True))
         self.solver.close()
@@ -528,7 +528,7 @@ class Simulator:
         torn = self.torn_sticks()
         for constraint_set in CONSTRAINT_SETS:
             react = getattr(constraint_set, "on_tear", None)
-            if react is not None and constraint_set.needed(self.solver.need):
+            if react is not None and constraint_set.needed(self.solver.req):
                 react(self.model, self.state, torn)
         return torn
 

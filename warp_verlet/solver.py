@@ -21,32 +21,32 @@ from .errors import ArgumentError, WarpVerletError
 from .model import Model
 from .precision import acceleration, smallest_dt
 from .scene import SimulationSettings
-from .stages import STAGES, Need, Task
+from .stages import STAGES, Requirements, PhaseTask
 from .state import State
 
 
 class VerletSolver:
     """Verlet integration with graph-coloured (or Jacobi) relaxation, collider clamping and tearing.
 
-    ``need`` (stages.Need) says which stages run; ``threads`` is the CPU relaxation's thread count (None:
+    ``req`` (stages.Requirements) says which stages run; ``threads`` is the CPU relaxation's thread count (None:
     chosen from the cores and the work per colour; CUDA always 1).
     """
 
-    def __init__(self, model: Model, settings: SimulationSettings, need: Need, threads: int | None = None):
-        self.model, self.settings, self.need = model, settings, need
-        if need.precision != model.precision:
-            raise ArgumentError(f"need.precision = {need.precision!r} but the model's positions are {model.precision}")
+    def __init__(self, model: Model, settings: SimulationSettings, req: Requirements, threads: int | None = None):
+        self.model, self.settings, self.req = model, settings, req
+        if req.precision != model.precision:
+            raise ArgumentError(f"req.precision = {req.precision!r} but the model's positions are {model.precision}")
         self.precision = model.precision
         implicit_tethers = hasattr(model, "grid_tethers")
-        if need.implicit_grid != (model.sticks_form == "implicit") or bool(need.grid_pins) != implicit_tethers:
-            raise ArgumentError(f"need (implicit sticks {need.implicit_grid}, implicit tethers {bool(need.grid_pins)}) "
-                                f"does not match the model's {model.sticks_form} sticks: ask Need.of with the model's "
+        if req.implicit_grid != (model.sticks_form == "implicit") or bool(req.grid_pins) != implicit_tethers:
+            raise ArgumentError(f"need (implicit sticks {req.implicit_grid}, implicit tethers {bool(req.grid_pins)}) "
+                                f"does not match the model's {model.sticks_form} sticks: ask Requirements.of with the model's "
                                 "stick_request")
         accel = np.add(settings.gravity, settings.wind)
         self.accel = model.position_dtype(*accel)  # in the positions' type, as every factor of the step
         self.accel_magnitude = acceleration(settings)
         self.threads = self._thread_count(threads)
-        self.stage_names = tuple(s.name for s in STAGES if s.needed(need))
+        self.stage_names = tuple(s.name for s in STAGES if s.needed(req))
         self._scratch: dict[str, wp.array] = {}
         self._bound: weakref.WeakKeyDictionary[State, list] = weakref.WeakKeyDictionary()
         # Held weakly: a team belongs to the launches bound for one state (the relaxation stage holds it), so a
@@ -68,7 +68,7 @@ class VerletSolver:
         if threads is not None:
             return threads
         m = self.model
-        if self.settings.solver == "coloured":
+        if self.settings.relaxation == "coloured":
             phase = m.stick_count / max(m.colour_count, 1) * COLOURED_SECONDS_PER_STICK
         else:
             phase = m.stick_count * JACOBI_SECONDS_PER_ENTRY  # two entries per stick over two phases per sweep
@@ -80,7 +80,7 @@ class VerletSolver:
             self._scratch[name] = wp.empty(count, dtype=dtype, device=self.model.device)
         return self._scratch[name]
 
-    def team(self, phases: list[list[Task | None]]) -> PhaseTeam | None:
+    def team(self, phases: list[list[PhaseTask | None]]) -> PhaseTeam | None:
         """A CPU thread team for the relaxation's phases, or None when it runs on one thread."""
         if self.threads <= 1 or not phases:
             return None
@@ -96,7 +96,7 @@ class VerletSolver:
             raise ArgumentError("this solver steps states of its own model only")
         if state not in self._bound:
             with wp.ScopedDevice(self.model.device):
-                self._bound[state] = [(s.name, s.bind(self.model, state, self)) for s in STAGES if s.needed(self.need)]
+                self._bound[state] = [(s.name, s.bind(self.model, state, self)) for s in STAGES if s.needed(self.req)]
         return [(name, bound.run) for name, bound in self._bound[state]]
 
     # ------------------------------------------------------------------ limits

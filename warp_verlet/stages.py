@@ -2,8 +2,8 @@
 
 Every stage and constraint set is declared once, here, as a class that says
 
-- ``needed(need)``: whether a scene uses it, from its counts alone (before anything is built);
-- ``device_bytes(need)``: the device arrays it allocates, in the Model, the State and the solver;
+- ``needed(req)``: whether a scene uses it, from its counts alone (before anything is built);
+- ``device_bytes(req)``: the device arrays it allocates, in the Model, the State and the solver;
 - ``bind(...)``: its launches, recorded against one State's arrays.
 
 From that one declaration the rest is derived: the solver runs the bound stages (the launches), the memory
@@ -33,12 +33,12 @@ VEC3D = 24  # a float64 position
 
 
 @dataclass(frozen=True)
-class Need:
+class Requirements:
     """What a scene asks of the step, known from its counts before anything is built."""
 
     particles: int
     sticks: int
-    solver: str
+    relaxation: str
     iterations: int
     free_particles: bool
     compliant: bool
@@ -68,7 +68,7 @@ class Need:
         return self.grid_rows > 0
 
     @classmethod
-    def of(cls, scene: "Scene", sticks: str = "auto") -> "Need":
+    def of(cls, scene: "Scene", sticks: str = "auto") -> "Requirements":
         """The scene's need, with ``simulation.precision`` resolved (warp_verlet/precision.py) and the sticks'
         form chosen (``sticks``: "auto", "explicit" or "implicit"; see :func:`implicit_grid_obstacle`)."""
         from dataclasses import replace
@@ -81,16 +81,16 @@ class Need:
         free = any(c.pin_count < c.particle_count for c in scene.cloths)
         counts = [hierarchy_counts(*c.resolution) for c in scene.cloths] if scene.simulation.multilevel else []
         coarse = (sum(n for n, _ in counts), sum(n for _, n in counts))
-        need = cls(
+        req = cls(
             particles=scene.particle_count, sticks=sum(stick_count(c) for c in scene.cloths),
-            solver=scene.simulation.solver, iterations=scene.simulation.iterations, free_particles=free,
+            relaxation=scene.simulation.relaxation, iterations=scene.simulation.iterations, free_particles=free,
             compliant=scene.compliant, tears=scene.tears, spheres=len(scene.spheres),
             sphere_keys=sum(len(s.keyframes) for s in scene.spheres) if moving else 0, planes=len(scene.planes),
             tethered=scene.tethered_particles, tethers_per_particle=scene.tethers_per_particle,
             coarse_sticks=coarse[0], coarse_children=coarse[1],
         )
-        need = replace(need, **grid_counts(scene, sticks))
-        return replace(need, precision=resolve(scene, relaxes=RELAX.needed(need)))
+        req = replace(req, **grid_counts(scene, sticks))
+        return replace(req, precision=resolve(scene, relaxes=RELAX.needed(req)))
 
 
 STICK_FORMS = ("auto", "explicit", "implicit")
@@ -107,7 +107,7 @@ def implicit_grid_obstacle(scene: "Scene") -> str | None:
     particles lie on a uniform lattice), relaxed by the coloured solver, that cannot tear."""
     from .topology import stick_count
 
-    if scene.simulation.solver != "coloured":
+    if scene.simulation.relaxation != "coloured":
         return "the Jacobi solver gathers each particle's sticks from a neighbour list"
     if len(scene.cloths) != 1:
         return "the scene has several cloths"
@@ -122,7 +122,7 @@ def implicit_grid_obstacle(scene: "Scene") -> str | None:
 
 
 def grid_counts(scene: "Scene", sticks: str) -> dict:
-    """Need's implicit-grid fields: all 0 when the sticks are arrays ("explicit", or "auto" where
+    """Requirements's implicit-grid fields: all 0 when the sticks are arrays ("explicit", or "auto" where
     :func:`implicit_grid_obstacle` names one); "implicit" where one is named raises ArgumentError. "auto"
     computes the sticks and keeps the tether table; "implicit" computes the tethers too (of a cloth with at most
     MAX_GRID_TETHER_PINS pins), so that no per-stick or per-particle table is left on the device."""
@@ -150,7 +150,7 @@ def grid_counts(scene: "Scene", sticks: str) -> dict:
 
 
 @dataclass(frozen=True)
-class Task:
+class PhaseTask:
     """One launch of a phase, named by its kernel (or "copy" / "zero" for a memory operation)."""
 
     kernel: str
@@ -159,26 +159,26 @@ class Task:
 
 
 @dataclass
-class Bound:
+class BoundStage:
     """A stage's work against one State: ``run(state, dt)`` does it (the closures hold that state's arrays,
     never the State itself, so a solver's cache does not keep a dropped state alive); ``phases`` (constraint
     sets only) are the per-thread tasks of one sweep, phase after phase, which the CPU thread team may run
     instead."""
 
     run: Callable[["State", float], None] | None
-    phases: list[list[Task | None]] | None = None
+    phases: list[list[PhaseTask | None]] | None = None
 
 
-def recorded(kernel, dim: int, inputs: list, outputs: list | None = None, block_dim: int = 256) -> Task:
+def recorded(kernel, dim: int, inputs: list, outputs: list | None = None, block_dim: int = 256) -> PhaseTask:
     """A launch recorded once (replaying it skips ``wp.launch``'s argument packing, which dominates small
-    grids on the CPU: measured at 64^2, 2.5 -> 1.4 ms per 8 sweeps), as a Task."""
+    grids on the CPU: measured at 64^2, 2.5 -> 1.4 ms per 8 sweeps), as a PhaseTask."""
     import warp as wp
 
     launch = wp.launch(kernel, dim, inputs=inputs, outputs=outputs or [], record_cmd=True, block_dim=block_dim)
-    return Task(kernel.key, launch.launch, launch)
+    return PhaseTask(kernel.key, launch.launch, launch)
 
 
-def split_tasks(make: Callable[[int, int], Task], first: int, count: int, threads: int) -> list[Task | None]:
+def split_tasks(make: Callable[[int, int], PhaseTask], first: int, count: int, threads: int) -> list[PhaseTask | None]:
     """``count`` items from ``first`` cut into one piece per thread (None for an empty piece)."""
     from .cpu_team import split
 
@@ -187,7 +187,7 @@ def split_tasks(make: Callable[[int, int], Task], first: int, count: int, thread
 
 # ---------------------------------------------------------------------------------------------- stages
 def start_compliant_substep(launches: list, tension) -> Callable[["State", float], None]:
-    """A Bound's prepare for soft (XPBD) sticks: each substep gives ``launches`` its 1 / dt^2 and restarts the
+    """A BoundStage's prepare for soft (XPBD) sticks: each substep gives ``launches`` its 1 / dt^2 and restarts the
     tension from zero."""
     def prepare(state: "State", dt: float) -> None:
         inv_dt2 = 1.0 / (dt * dt)
@@ -203,13 +203,13 @@ class Integrate:
 
     name = "integrate"
 
-    def needed(self, need: Need) -> bool:
-        return need.free_particles
+    def needed(self, req: Requirements) -> bool:
+        return req.free_particles
 
-    def device_bytes(self, need: Need) -> int:
+    def device_bytes(self, req: Requirements) -> int:
         return 0  # it updates the State's positions, prediction and increment, which every scene has
 
-    def bind(self, model: "Model", state: "State", solver) -> Bound:
+    def bind(self, model: "Model", state: "State", solver) -> BoundStage:
         import warp as wp
 
         from warp_verlet.kernels.integrate import verlet_step
@@ -227,7 +227,7 @@ class Integrate:
             accel_offset = accel * real(dt * (dt + state.dt_prev) * 0.5)
             wp.launch(kernel, n, inputs=[x, x_inertial, dq, inv_mass, velocity_scale, accel_offset])
 
-        return Bound(run)
+        return BoundStage(run)
 
 
 class Relax:
@@ -237,14 +237,14 @@ class Relax:
 
     name = "relax"
 
-    def needed(self, need: Need) -> bool:
-        return need.iterations > 0 and any(c.needed(need) for c in CONSTRAINT_SETS)
+    def needed(self, req: Requirements) -> bool:
+        return req.iterations > 0 and any(c.needed(req) for c in CONSTRAINT_SETS)
 
-    def device_bytes(self, need: Need) -> int:
-        return sum(c.device_bytes(need) for c in CONSTRAINT_SETS if c.needed(need))
+    def device_bytes(self, req: Requirements) -> int:
+        return sum(c.device_bytes(req) for c in CONSTRAINT_SETS if c.needed(req))
 
-    def bind(self, model: "Model", state: "State", solver) -> Bound:
-        sets = [c.bind(model, state, solver) for c in CONSTRAINT_SETS if c.needed(solver.need)]
+    def bind(self, model: "Model", state: "State", solver) -> BoundStage:
+        sets = [c.bind(model, state, solver) for c in CONSTRAINT_SETS if c.needed(solver.req)]
         phases = [phase for bound in sets for phase in bound.phases]
         before = [bound.run for bound in sets if bound.run is not None]  # per-substep set-up (dt, zeroing)
         team = solver.team(phases)
@@ -261,7 +261,7 @@ class Relax:
                 for task in sweep:
                     task()
 
-        return Bound(run, phases)
+        return BoundStage(run, phases)
 
 
 class Collide:
@@ -271,16 +271,16 @@ class Collide:
 
     name = "collide"
 
-    def needed(self, need: Need) -> bool:
-        return bool(need.spheres or need.planes)
+    def needed(self, req: Requirements) -> bool:
+        return bool(req.spheres or req.planes)
 
-    def device_bytes(self, need: Need) -> int:
-        planes = need.planes * (2 * VEC3 + 2 * FLOAT)  # points, normals, thickness, friction
-        spheres = need.spheres * (VEC3 + 2 * FLOAT + VEC3)  # start centre, reach, friction; the State's centre
-        moving = ((need.spheres + 1) * INT + need.sphere_keys * (FLOAT + VEC3) + FLOAT64) if need.sphere_keys else 0
+    def device_bytes(self, req: Requirements) -> int:
+        planes = req.planes * (2 * VEC3 + 2 * FLOAT)  # points, normals, thickness, friction
+        spheres = req.spheres * (VEC3 + 2 * FLOAT + VEC3)  # start centre, reach, friction; the State's centre
+        moving = ((req.spheres + 1) * INT + req.sphere_keys * (FLOAT + VEC3) + FLOAT64) if req.sphere_keys else 0
         return planes + spheres + moving
 
-    def bind(self, model: "Model", state: "State", solver) -> Bound:
+    def bind(self, model: "Model", state: "State", solver) -> BoundStage:
         import warp as wp
 
         from warp_verlet.kernels.collide import advance_clock, collide_planes, collide_spheres, place_spheres
@@ -305,7 +305,7 @@ class Collide:
             for task in tasks:
                 task.run()
 
-        return Bound(run)
+        return BoundStage(run)
 
 
 class Tear:
@@ -314,20 +314,20 @@ class Tear:
 
     name = "tear"
 
-    def needed(self, need: Need) -> bool:
-        return need.tears
+    def needed(self, req: Requirements) -> bool:
+        return req.tears
 
-    def device_bytes(self, need: Need) -> int:
+    def device_bytes(self, req: Requirements) -> int:
         # Per entry a tear length (Model) and a live weight (State); Jacobi has two entries per stick and keeps
         # their ends.
-        return need.sticks * (2 * FLOAT if need.solver == "coloured" else 2 * (2 * FLOAT + VEC2I))
+        return req.sticks * (2 * FLOAT if req.relaxation == "coloured" else 2 * (2 * FLOAT + VEC2I))
 
-    def bind(self, model: "Model", state: "State", solver) -> Bound:
+    def bind(self, model: "Model", state: "State", solver) -> BoundStage:
         from warp_verlet.kernels.tear import tear_sticks
 
         task = recorded(tear_sticks, model.tear_ends.shape[0], [state.particle_q, model.tear_ends, model.tear_length],
                         [state.stick_weight, state.torn_entries])
-        return Bound(lambda state, dt: task.run())
+        return BoundStage(lambda state, dt: task.run())
 
 
 # ------------------------------------------------------------------------------------- constraint sets
@@ -337,28 +337,28 @@ class Sticks:
 
     name = "sticks"
 
-    def needed(self, need: Need) -> bool:
-        return need.sticks > 0 and not need.implicit_grid
+    def needed(self, req: Requirements) -> bool:
+        return req.sticks > 0 and not req.implicit_grid
 
-    def device_bytes(self, need: Need) -> int:
-        if need.solver == "coloured":
+    def device_bytes(self, req: Requirements) -> int:
+        if req.relaxation == "coloured":
             # ends, rest, weight; soft sticks add a compliance (Model) and a tension (solver scratch)
-            return need.sticks * (VEC2I + 2 * FLOAT + (2 * FLOAT if need.compliant else 0))
+            return req.sticks * (VEC2I + 2 * FLOAT + (2 * FLOAT if req.compliant else 0))
         # neighbour, rest and weight for both ends; a scratch position and a row start per particle
-        return need.sticks * 2 * (INT + 2 * FLOAT) + need.particles * (need.position_bytes + INT)
+        return req.sticks * 2 * (INT + 2 * FLOAT) + req.particles * (req.position_bytes + INT)
 
-    def bind(self, model: "Model", state: "State", solver) -> Bound:
+    def bind(self, model: "Model", state: "State", solver) -> BoundStage:
         import warp as wp
 
         from warp_verlet.kernels.relax import relax_colour, relax_colour_compliant, relax_jacobi
 
         m, x, threads = model, state.particle_q, solver.threads
-        if m.solver == "coloured":
+        if m.relaxation == "coloured":
             weight = state.stick_weight if m.tears else m.stick_weight
             if not m.compliant:
                 def make(f, n):
                     return recorded(relax_colour, n, [x, m.inv_mass, m.stick_ends, m.stick_rest, weight, f])
-                return Bound(None, [split_tasks(make, first, count, threads) for first, count in m.colour_ranges])
+                return BoundStage(None, [split_tasks(make, first, count, threads) for first, count in m.colour_ranges])
             tension = solver.scratch("stick_tension", m.stick_count, float)
 
             def make_soft(f, n):
@@ -367,7 +367,7 @@ class Sticks:
             phases = [split_tasks(make_soft, first, count, threads) for first, count in m.colour_ranges]
             launches = [task.launch for phase in phases for task in phase if task is not None]
 
-            return Bound(start_compliant_substep(launches, tension), phases)
+            return BoundStage(start_compliant_substep(launches, tension), phases)
 
         weight = state.stick_weight if m.tears else m.neighbour_weight
         scratch = solver.scratch("jacobi_positions", m.particle_count, m.position_dtype)
@@ -379,9 +379,9 @@ class Sticks:
         def copy_back(f, n):
             # The task holds the arrays, not the solver: worker threads keep their tasks alive, and must not
             # keep a solver alive.
-            return Task("copy", lambda: wp.copy(x, scratch, dest_offset=f, src_offset=f, count=n))
+            return PhaseTask("copy", lambda: wp.copy(x, scratch, dest_offset=f, src_offset=f, count=n))
 
-        return Bound(None, [split_tasks(gather, 0, m.particle_count, threads),
+        return BoundStage(None, [split_tasks(gather, 0, m.particle_count, threads),
                             split_tasks(copy_back, 0, m.particle_count, threads)])
 
 
@@ -393,14 +393,14 @@ class Multilevel:
 
     name = "multilevel"
 
-    def needed(self, need: Need) -> bool:
-        return need.coarse_sticks > 0
+    def needed(self, req: Requirements) -> bool:
+        return req.coarse_sticks > 0
 
-    def device_bytes(self, need: Need) -> int:
+    def device_bytes(self, req: Requirements) -> int:
         # ends and limit per coarse stick; child, four parents and four weights per child
-        return need.coarse_sticks * (VEC2I + FLOAT) + need.coarse_children * (INT + 4 * INT + 4 * FLOAT)
+        return req.coarse_sticks * (VEC2I + FLOAT) + req.coarse_children * (INT + 4 * INT + 4 * FLOAT)
 
-    def bind(self, model: "Model", state: "State", solver) -> Bound:
+    def bind(self, model: "Model", state: "State", solver) -> BoundStage:
         from warp_verlet.kernels.multilevel import limit_coarse_colour, prolongate
 
         x, x_inertial, inv_mass = state.particle_q, state.particle_q_inertial, model.inv_mass
@@ -418,7 +418,7 @@ class Multilevel:
             for task in runs:
                 task()
 
-        return Bound(run, [])
+        return BoundStage(run, [])
 
 
 class Tethers:
@@ -428,15 +428,15 @@ class Tethers:
 
     name = "tethers"
 
-    def needed(self, need: Need) -> bool:
-        return need.tethered > 0 and need.grid_pins == 0
+    def needed(self, req: Requirements) -> bool:
+        return req.tethered > 0 and req.grid_pins == 0
 
-    def device_bytes(self, need: Need) -> int:
-        per_particle = INT + need.tethers_per_particle * (INT + FLOAT)  # particle; pin and length per tether
-        live = need.tethers_per_particle * FLOAT if need.tears else 0  # the State's lengths, cut by tears
-        return need.tethered * (per_particle + live)
+    def device_bytes(self, req: Requirements) -> int:
+        per_particle = INT + req.tethers_per_particle * (INT + FLOAT)  # particle; pin and length per tether
+        live = req.tethers_per_particle * FLOAT if req.tears else 0  # the State's lengths, cut by tears
+        return req.tethered * (per_particle + live)
 
-    def bind(self, model: "Model", state: "State", solver) -> Bound:
+    def bind(self, model: "Model", state: "State", solver) -> BoundStage:
         from warp_verlet.kernels.tether import pull_tethers
 
         length = state.tether_length if state.tether_length is not None else model.tether_length
@@ -445,7 +445,7 @@ class Tethers:
         def make(f, count):
             return recorded(pull_tethers, count, [x, model.tether_particle[f:f + count], model.tether_pin[f:f + count],
                                                   length[f:f + count]])
-        return Bound(None, [split_tasks(make, 0, n, solver.threads)])
+        return BoundStage(None, [split_tasks(make, 0, n, solver.threads)])
 
     @staticmethod
     def on_tear(model: "Model", state: "State", torn: "np.ndarray") -> None:
@@ -464,14 +464,14 @@ class GridTethers:
 
     name = "grid tethers"
 
-    def needed(self, need: Need) -> bool:
-        return need.tethered > 0 and need.grid_pins > 0
+    def needed(self, req: Requirements) -> bool:
+        return req.tethered > 0 and req.grid_pins > 0
 
-    def device_bytes(self, need: Need) -> int:
+    def device_bytes(self, req: Requirements) -> int:
         # the pins, and per pin the squared column and row differences to it (float64)
-        return need.grid_pins * (INT + (need.grid_cols + need.grid_rows) * FLOAT64)
+        return req.grid_pins * (INT + (req.grid_cols + req.grid_rows) * FLOAT64)
 
-    def bind(self, model: "Model", state: "State", solver) -> Bound:
+    def bind(self, model: "Model", state: "State", solver) -> BoundStage:
         import warp as wp
 
         from warp_verlet.kernels.grid_relax import pull_grid_tethers
@@ -482,7 +482,7 @@ class GridTethers:
             return recorded(pull_grid_tethers, rows << t.col_bits,
                             [x, model.inv_mass, t.first_particle, t.cols, t.pins, t.pin_col_sq, t.pin_row_sq, t.tethers,
                              wp.float64(t.scale), t.col_bits, f])
-        return Bound(None, [split_tasks(make, 0, t.rows, solver.threads)])
+        return BoundStage(None, [split_tasks(make, 0, t.rows, solver.threads)])
 
 
 GRID_BLOCK_DIM = 128
@@ -497,17 +497,17 @@ class GridSticks:
 
     name = "grid sticks"
 
-    def needed(self, need: Need) -> bool:
-        return need.sticks > 0 and need.implicit_grid
+    def needed(self, req: Requirements) -> bool:
+        return req.sticks > 0 and req.implicit_grid
 
-    def device_bytes(self, need: Need) -> int:
-        r, c = need.grid_rows, need.grid_cols
+    def device_bytes(self, req: Requirements) -> int:
+        r, c = req.grid_rows, req.grid_cols
         steps = max(c - 1, 0) + max(c - 2, 0) + max(r - 1, 0) + max(r - 2, 0)  # 1 and 2 columns, 1 and 2 rows apart
         tables = steps * FLOAT + (max(c - 1, 0) + max(r - 1, 0)) * FLOAT64  # rest lengths; squared steps (shear)
         # a tension per soft stick (solver scratch); the pins where the free particles weigh alike
-        return tables + need.soft_sticks * FLOAT + need.weight_pins * INT
+        return tables + req.soft_sticks * FLOAT + req.weight_pins * INT
 
-    def bind(self, model: "Model", state: "State", solver) -> Bound:
+    def bind(self, model: "Model", state: "State", solver) -> BoundStage:
         from warp_verlet.kernels.grid_relax import relax_grid_colour, relax_grid_colour_compliant
 
         g, x, threads = model.grid, state.particle_q, solver.threads
@@ -529,9 +529,9 @@ class GridSticks:
                 soft_launches += [task.launch for task in phase if task is not None]
             phases.append(phase)
         if tension is None:
-            return Bound(None, phases)
+            return BoundStage(None, phases)
 
-        return Bound(start_compliant_substep(soft_launches, tension), phases)
+        return BoundStage(start_compliant_substep(soft_launches, tension), phases)
 
 
 CONSTRAINT_SETS = (Multilevel(), Tethers(), GridTethers(), Sticks(), GridSticks())
@@ -542,12 +542,12 @@ STAGES = (Integrate(), RELAX, Collide(), Tear())
 """The stages of a substep, in order."""
 
 
-def particle_bytes(need: Need) -> int:
+def particle_bytes(req: Requirements) -> int:
     """Every scene's per-particle arrays: the State's positions, prediction and increment (12 bytes each in
     float32, 24 in float64), the Model's inverse mass (float32 either way)."""
-    return 3 * need.position_bytes + FLOAT
+    return 3 * req.position_bytes + FLOAT
 
 
-def device_bytes(need: Need) -> int:
+def device_bytes(req: Requirements) -> int:
     """The device memory a scene's arrays take: the sum of what its stages declare."""
-    return need.particles * particle_bytes(need) + sum(s.device_bytes(need) for s in STAGES if s.needed(need))
+    return req.particles * particle_bytes(req) + sum(s.device_bytes(req) for s in STAGES if s.needed(req))

@@ -88,7 +88,7 @@ def two_places(device: str = "cpu", size: str = "test") -> list[Check]:
             cloth["compliance"] = {"structural": alpha}
         label = f"alpha = {alpha:.3g} m/N (alpha~ = {ratio:g} w)" if alpha else "rigid"
         case = f"over-constrained: one particle pinned two ways ({solver}, {label})"
-        sim = Simulator(scene({"iterations": iterations, "gravity": [0.0, 0.0, 0.0], "solver": solver}, cloth),
+        sim = Simulator(scene({"iterations": iterations, "gravity": [0.0, 0.0, 0.0], "relaxation": solver}, cloth),
                         device)
         x = sim.positions()
         x[2, 0] = d
