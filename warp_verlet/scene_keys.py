@@ -15,6 +15,7 @@ import contextvars
 import math
 import re
 from contextlib import contextmanager
+from dataclasses import dataclass
 from typing import Any, Callable, Iterator
 
 from .errors import SceneError
@@ -98,6 +99,25 @@ class Table:
         if unknown:
             known = ", ".join(sorted(self.seen))
             raise self.error(unknown[0], f"unknown key (known keys here: {known})")
+
+
+@dataclass(frozen=True)
+class Key:
+    """One scene key, declared once where its kind lives: the loader takes it (:meth:`take`), docs/scenes.md's
+    tables are written from it, and the fuzz tests find it (:func:`recorded_keys`)."""
+
+    name: str
+    parse: Callable[[Any, str], Any]
+    default: Any = REQUIRED  # the value when the key is absent; REQUIRED: it must be given
+    type: str = ""  # as the docs name it: "number", "[x, y, z] numbers", "array of [row, col] pairs"
+    unit: str = "–"  # SI: "m", "kg", "s", "m/s²", "degrees", or "–" for none
+    default_text: str | None = None  # the docs' default where the value alone does not say it ("absent: ...")
+    allowed: str = ""  # the docs' range or choices: "> 0", "0 … 180"
+    doc: str = ""  # what it does, in a sentence or a few
+
+    def take(self, table: "Table") -> Any:
+        """The key's value from ``table``, parsed, or its default."""
+        return table.take(self.name, self.parse, self.default)
 
 
 class Invalid(Exception):
