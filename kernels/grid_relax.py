@@ -177,7 +177,7 @@ def pull_grid_tethers(
 ):
     """pull_tethers for a free particle of a grid cloth (2^col_bits threads per row from ``first_row``, the
     surplus returning at once), whose tethers are computed: its
-    ``tethers`` nearest pins (ties to the lower pin, as warp_verlet/tethers.nearest_pins chooses them) at
+    ``tethers`` nearest pins (ties to the lower pin, as warp_verlet/constraints/tethers.nearest_pins chooses them) at
     their rest-pose distances times ``scale``, from the squared column and row differences to each pin
     (pin_col_sq[pin, column], pin_row_sq[pin, row]), rounded to float32 as the tether table is."""
     t = wp.tid()

@@ -1,4 +1,4 @@
-"""The multilevel pass (warp_verlet/multilevel.py): unilateral coarse sticks, and the prolongation of a
+"""The multilevel pass (warp_verlet/constraints/multilevel.py): unilateral coarse sticks, and the prolongation of a
 level's moves to the particles of the next finer level.
 
 Both run at the start of a substep's relaxation, when every free particle still sits at the position the

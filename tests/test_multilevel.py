@@ -7,7 +7,7 @@ import warp as wp
 
 from warp_verlet.errors import SceneError
 from warp_verlet.kernels.multilevel import limit_coarse_colour, prolongate
-from warp_verlet.multilevel import grid_hierarchy, hierarchy_counts, level_axes
+from warp_verlet.constraints.multilevel import grid_hierarchy, hierarchy_counts, level_axes
 from warp_verlet.scene import parse_scene
 from warp_verlet.simulator import Simulator
 

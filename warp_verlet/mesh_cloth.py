@@ -30,7 +30,6 @@ import numpy as np
 
 from .errors import WarpVerletError
 from .faces import Faces, edge_keys, next_corner, side_table
-from .tethers import connected_labels
 
 # The default weld distance, as a fraction of the mesh's bounding-box diagonal: far below any edge a cloth
 # simulation can use, far above float32 rounding of coordinates written by a DCC.
@@ -106,6 +105,23 @@ class ClothMesh:
         p = self.particle_points
         inside = ((p >= np.asarray(lo)) & (p <= np.asarray(hi))).all(axis=1)
         return np.flatnonzero(inside).astype(np.int32)
+
+
+def connected_labels(particle_count: int, sticks: np.ndarray) -> np.ndarray:
+    """Label of each particle's connected component through ``sticks`` (the lowest particle index in it):
+    label propagation with pointer jumping, vectorised."""
+    labels = np.arange(particle_count, dtype=np.int64)
+    if len(sticks) == 0:
+        return labels
+    a, b = sticks[:, 0].astype(np.int64), sticks[:, 1].astype(np.int64)
+    while True:
+        low = np.minimum(labels[a], labels[b])
+        before = labels.copy()
+        np.minimum.at(labels, a, low)
+        np.minimum.at(labels, b, low)
+        labels = labels[labels]  # jump to the label's own label: halves the remaining path each round
+        if np.array_equal(labels, before):
+            return labels
 
 
 def default_weld_distance(points: np.ndarray) -> float:

@@ -22,8 +22,8 @@ import warp as wp
 from .colliders import ColliderModel
 from .colouring import Colouring, check_partition, graph_colouring, grid_colouring
 from .errors import ArgumentError
-from .multilevel import grid_hierarchy, merge_levels
-from .tethers import TetherTable, build_tethers
+from .constraints.multilevel import grid_hierarchy, merge_levels
+from .constraints.tethers import TetherTable, build_tethers
 from .scene import Scene
 from .stages import MAX_UNIFORM_MASS_PINS, Requirements
 from .faces import edge_faces
@@ -54,7 +54,7 @@ class ClothSlot:
 
 @dataclass(frozen=True)
 class DeviceLevel:
-    """One level of the multilevel hierarchy on the device (see warp_verlet/multilevel.Level)."""
+    """One level of the multilevel hierarchy on the device (see warp_verlet/constraints/multilevel.Level)."""
 
     ends: wp.array  # (Mc,) vec2i
     limit: wp.array  # (Mc,) float32, m

@@ -527,9 +527,8 @@ class Simulator:
         once per frame."""
         torn = self.torn_sticks()
         for constraint_set in CONSTRAINT_SETS:
-            react = getattr(constraint_set, "on_tear", None)
-            if react is not None and constraint_set.needed(self.solver.req):
-                react(self.model, self.state, torn)
+            if constraint_set.needed(self.solver.req):
+                constraint_set.on_tear(self.model, self.state, torn)
         return torn
 
     def stretch(self, points: np.ndarray | None = None) -> StretchStats:

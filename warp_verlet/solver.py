@@ -21,7 +21,8 @@ from .errors import ArgumentError, WarpVerletError
 from .model import Model
 from .precision import acceleration, smallest_dt
 from .scene import SimulationSettings
-from .stages import STAGES, Requirements, PhaseTask
+from .launches import PhaseTask
+from .stages import STAGES, Requirements
 from .state import State
 
 

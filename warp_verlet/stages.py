@@ -19,17 +19,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Callable
+from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:  # pragma: no cover
-    import numpy as np
-
     from .model import Model
     from .scene import Scene
     from .state import State
 
-VEC3, FLOAT, INT, VEC2I, FLOAT64 = 12, 4, 4, 8, 8
-VEC3D = 24  # a float64 position
+from .constraints import CONSTRAINT_KINDS
+from .launches import FLOAT, FLOAT64, INT, VEC2I, VEC3, VEC3D, BoundStage, recorded
 
 
 @dataclass(frozen=True)
@@ -73,7 +71,7 @@ class Requirements:
         form chosen (``sticks``: "auto", "explicit" or "implicit"; see :func:`implicit_grid_obstacle`)."""
         from dataclasses import replace
 
-        from .multilevel import hierarchy_counts  # counts from the grid's size, without building anything
+        from .constraints.multilevel import hierarchy_counts  # counts from the grid's size, without building anything
         from .topology import stick_count
         from .precision import resolve
 
@@ -148,54 +146,6 @@ def grid_counts(scene: "Scene", sticks: str) -> dict:
     weight_pins = cloth.pin_count if not cloth.particle_masses and 0 < cloth.pin_count <= MAX_UNIFORM_MASS_PINS else 0
     return {"grid_rows": r, "grid_cols": c, "soft_sticks": soft, "grid_pins": pins, "weight_pins": weight_pins}
 
-
-@dataclass(frozen=True)
-class PhaseTask:
-    """One launch of a phase, named by its kernel (or "copy" / "zero" for a memory operation)."""
-
-    kernel: str
-    run: Callable[[], None]
-    launch: object = None  # the recorded wp.Launch, whose parameters (dt) can be updated in place
-
-
-@dataclass
-class BoundStage:
-    """A stage's work against one State: ``run(state, dt)`` does it (the closures hold that state's arrays,
-    never the State itself, so a solver's cache does not keep a dropped state alive); ``phases`` (constraint
-    sets only) are the per-thread tasks of one sweep, phase after phase, which the CPU thread team may run
-    instead."""
-
-    run: Callable[["State", float], None] | None
-    phases: list[list[PhaseTask | None]] | None = None
-
-
-def recorded(kernel, dim: int, inputs: list, outputs: list | None = None, block_dim: int = 256) -> PhaseTask:
-    """A launch recorded once (replaying it skips ``wp.launch``'s argument packing, which dominates small
-    grids on the CPU: measured at 64^2, 2.5 -> 1.4 ms per 8 sweeps), as a PhaseTask."""
-    import warp as wp
-
-    launch = wp.launch(kernel, dim, inputs=inputs, outputs=outputs or [], record_cmd=True, block_dim=block_dim)
-    return PhaseTask(kernel.key, launch.launch, launch)
-
-
-def split_tasks(make: Callable[[int, int], PhaseTask], first: int, count: int, threads: int) -> list[PhaseTask | None]:
-    """``count`` items from ``first`` cut into one piece per thread (None for an empty piece)."""
-    from .cpu_team import split
-
-    return [make(f, n) if n else None for f, n in split(first, count, threads)]
-
-
-# ---------------------------------------------------------------------------------------------- stages
-def start_compliant_substep(launches: list, tension) -> Callable[["State", float], None]:
-    """A BoundStage's prepare for soft (XPBD) sticks: each substep gives ``launches`` its 1 / dt^2 and restarts the
-    tension from zero."""
-    def prepare(state: "State", dt: float) -> None:
-        inv_dt2 = 1.0 / (dt * dt)
-        for launch in launches:
-            launch.set_param_by_name("inv_dt2", inv_dt2)
-        tension.zero_()
-
-    return prepare
 
 
 class Integrate:
@@ -330,212 +280,8 @@ class Tear:
         return BoundStage(lambda state, dt: task.run())
 
 
-# ------------------------------------------------------------------------------------- constraint sets
-class Sticks:
-    """Distance sticks (kernels/relax.py). Coloured: one launch per colour, XPBD where a stick is soft.
-    Jacobi: a gather into a scratch buffer and a copy back, cut by particle."""
-
-    name = "sticks"
-
-    def needed(self, req: Requirements) -> bool:
-        return req.sticks > 0 and not req.implicit_grid
-
-    def device_bytes(self, req: Requirements) -> int:
-        if req.relaxation == "coloured":
-            # ends, rest, weight; soft sticks add a compliance (Model) and a tension (solver scratch)
-            return req.sticks * (VEC2I + 2 * FLOAT + (2 * FLOAT if req.compliant else 0))
-        # neighbour, rest and weight for both ends; a scratch position and a row start per particle
-        return req.sticks * 2 * (INT + 2 * FLOAT) + req.particles * (req.position_bytes + INT)
-
-    def bind(self, model: "Model", state: "State", solver) -> BoundStage:
-        import warp as wp
-
-        from warp_verlet.kernels.relax import relax_colour, relax_colour_compliant, relax_jacobi
-
-        m, x, threads = model, state.particle_q, solver.threads
-        if m.relaxation == "coloured":
-            weight = state.stick_weight if m.tears else m.stick_weight
-            if not m.compliant:
-                def make(f, n):
-                    return recorded(relax_colour, n, [x, m.inv_mass, m.stick_ends, m.stick_rest, weight, f])
-                return BoundStage(None, [split_tasks(make, first, count, threads) for first, count in m.colour_ranges])
-            tension = solver.scratch("stick_tension", m.stick_count, float)
-
-            def make_soft(f, n):
-                return recorded(relax_colour_compliant, n, [x, m.inv_mass, m.stick_ends, m.stick_rest, weight,
-                                                            m.stick_compliance, 0.0, f], [tension])
-            phases = [split_tasks(make_soft, first, count, threads) for first, count in m.colour_ranges]
-            launches = [task.launch for phase in phases for task in phase if task is not None]
-
-            return BoundStage(start_compliant_substep(launches, tension), phases)
-
-        weight = state.stick_weight if m.tears else m.neighbour_weight
-        scratch = solver.scratch("jacobi_positions", m.particle_count, m.position_dtype)
-
-        def gather(f, n):
-            return recorded(relax_jacobi, n, [x, m.inv_mass, m.neighbour_start, m.neighbour, m.neighbour_rest,
-                                              weight, f, scratch])
-
-        def copy_back(f, n):
-            # The task holds the arrays, not the solver: worker threads keep their tasks alive, and must not
-            # keep a solver alive.
-            return PhaseTask("copy", lambda: wp.copy(x, scratch, dest_offset=f, src_offset=f, count=n))
-
-        return BoundStage(None, [split_tasks(gather, 0, m.particle_count, threads),
-                            split_tasks(copy_back, 0, m.particle_count, threads)])
-
-
-class Multilevel:
-    """The multilevel pass (warp_verlet/multilevel.py, kernels/multilevel.py): once per substep, before the
-    sweeps, coarsest level first: ``multilevel_sweeps`` sweeps of a level's unilateral coarse sticks, then its
-    moves interpolated to the next finer level's other particles. It must run first in the relaxation: it
-    measures each particle's move from the Verlet prediction."""
-
-    name = "multilevel"
-
-    def needed(self, req: Requirements) -> bool:
-        return req.coarse_sticks > 0
-
-    def device_bytes(self, req: Requirements) -> int:
-        # ends and limit per coarse stick; child, four parents and four weights per child
-        return req.coarse_sticks * (VEC2I + FLOAT) + req.coarse_children * (INT + 4 * INT + 4 * FLOAT)
-
-    def bind(self, model: "Model", state: "State", solver) -> BoundStage:
-        from warp_verlet.kernels.multilevel import limit_coarse_colour, prolongate
-
-        x, x_inertial, inv_mass = state.particle_q, state.particle_q_inertial, model.inv_mass
-        sweeps = solver.settings.multilevel_sweeps
-        tasks = []
-        for level in model.levels:
-            colours = [recorded(limit_coarse_colour, n, [x, inv_mass, level.ends, level.limit, f])
-                       for f, n in level.colour_ranges]
-            tasks += colours * sweeps
-            tasks.append(recorded(prolongate, level.child.shape[0], [x, x_inertial, inv_mass, level.child,
-                                                                     level.parents, level.weights]))
-        runs = [task.run for task in tasks]
-
-        def run(state: "State", dt: float) -> None:
-            for task in runs:
-                task()
-
-        return BoundStage(run, [])
-
-
-class Tethers:
-    """Long-range attachments (kernels/tether.py): one launch per sweep, before the sticks, so that every sweep
-    starts from particles within reach of their pins. When the torn set changes, tethers cut off from their
-    pin are dropped (warp_verlet/tethers.py)."""
-
-    name = "tethers"
-
-    def needed(self, req: Requirements) -> bool:
-        return req.tethered > 0 and req.grid_pins == 0
-
-    def device_bytes(self, req: Requirements) -> int:
-        per_particle = INT + req.tethers_per_particle * (INT + FLOAT)  # particle; pin and length per tether
-        live = req.tethers_per_particle * FLOAT if req.tears else 0  # the State's lengths, cut by tears
-        return req.tethered * (per_particle + live)
-
-    def bind(self, model: "Model", state: "State", solver) -> BoundStage:
-        from warp_verlet.kernels.tether import pull_tethers
-
-        length = state.tether_length if state.tether_length is not None else model.tether_length
-        x, n = state.particle_q, model.tether_particle.shape[0]
-
-        def make(f, count):
-            return recorded(pull_tethers, count, [x, model.tether_particle[f:f + count], model.tether_pin[f:f + count],
-                                                  length[f:f + count]])
-        return BoundStage(None, [split_tasks(make, 0, n, solver.threads)])
-
-    @staticmethod
-    def on_tear(model: "Model", state: "State", torn: "np.ndarray") -> None:
-        """Drop the tethers whose particle a tear has cut off from its pin."""
-        if state.tether_length is None:
-            return
-        from .tethers import cut_tethers
-
-        state.tether_length.assign(cut_tethers(model.tether_table, model.particle_count, model.host_sticks[~torn]))
-
-
-class GridTethers:
-    """Tethers of a grid cloth with few pins, computed (kernels/grid_relax.py): each free particle finds its
-    nearest pins and their rest-pose distances from its grid coordinates, so a sweep reads no tether table.
-    One launch per sweep over the cloth's particles (pins skip), before the sticks, as Tethers."""
-
-    name = "grid tethers"
-
-    def needed(self, req: Requirements) -> bool:
-        return req.tethered > 0 and req.grid_pins > 0
-
-    def device_bytes(self, req: Requirements) -> int:
-        # the pins, and per pin the squared column and row differences to it (float64)
-        return req.grid_pins * (INT + (req.grid_cols + req.grid_rows) * FLOAT64)
-
-    def bind(self, model: "Model", state: "State", solver) -> BoundStage:
-        import warp as wp
-
-        from warp_verlet.kernels.grid_relax import pull_grid_tethers
-
-        t, x = model.grid_tethers, state.particle_q
-
-        def make(f, rows):
-            return recorded(pull_grid_tethers, rows << t.col_bits,
-                            [x, model.inv_mass, t.first_particle, t.cols, t.pins, t.pin_col_sq, t.pin_row_sq, t.tethers,
-                             wp.float64(t.scale), t.col_bits, f])
-        return BoundStage(None, [split_tasks(make, 0, t.rows, solver.threads)])
-
-
-GRID_BLOCK_DIM = 128
-"""Threads per block of the implicit grid sticks' launches: 128 ran 2% faster per frame than Warp's default 256
-on an H100 at 1024^2, 512 7% slower (bench/results/implicit_grid/README.md)."""
-
-
-class GridSticks:
-    """Implicit grid sticks (kernels/grid_relax.py): one launch per colour of the analytic grid colouring, in
-    its order, each stick's ends and rest length computed from the thread index and the grid; the same
-    positions as Sticks bit for bit. XPBD for the colours of a soft family."""
-
-    name = "grid sticks"
-
-    def needed(self, req: Requirements) -> bool:
-        return req.sticks > 0 and req.implicit_grid
-
-    def device_bytes(self, req: Requirements) -> int:
-        r, c = req.grid_rows, req.grid_cols
-        steps = max(c - 1, 0) + max(c - 2, 0) + max(r - 1, 0) + max(r - 2, 0)  # 1 and 2 columns, 1 and 2 rows apart
-        tables = steps * FLOAT + (max(c - 1, 0) + max(r - 1, 0)) * FLOAT64  # rest lengths; squared steps (shear)
-        # a tension per soft stick (solver scratch); the pins where the free particles weigh alike
-        return tables + req.soft_sticks * FLOAT + req.weight_pins * INT
-
-    def bind(self, model: "Model", state: "State", solver) -> BoundStage:
-        from warp_verlet.kernels.grid_relax import relax_grid_colour, relax_grid_colour_compliant
-
-        g, x, threads = model.grid, state.particle_q, solver.threads
-        tension = solver.scratch("grid_tension", g.soft_sticks, float) if g.soft_sticks else None
-        phases, soft_launches = [], []
-        for colour in g.colours:
-            tables = [colour.pins, colour.col_rest, colour.row_rest, colour.col_sq, colour.row_sq]
-            if colour.compliance > 0.0:
-                def make(f, rows, colour=colour, tables=tables):
-                    return recorded(relax_grid_colour_compliant, rows << colour.layout.col_bits,
-                                    [x, model.inv_mass, colour.layout, *tables, colour.compliance, 0.0, f,
-                                     colour.tension_first], [tension], block_dim=GRID_BLOCK_DIM)
-            else:
-                def make(f, rows, colour=colour, tables=tables):
-                    return recorded(relax_grid_colour, rows << colour.layout.col_bits,
-                                    [x, model.inv_mass, colour.layout, *tables, f], block_dim=GRID_BLOCK_DIM)
-            phase = split_tasks(make, 0, colour.rows, threads)  # the CPU thread team cuts a colour by rows
-            if colour.compliance > 0.0:
-                soft_launches += [task.launch for task in phase if task is not None]
-            phases.append(phase)
-        if tension is None:
-            return BoundStage(None, phases)
-
-        return BoundStage(start_compliant_substep(soft_launches, tension), phases)
-
-
-CONSTRAINT_SETS = (Multilevel(), Tethers(), GridTethers(), Sticks(), GridSticks())
-"""Constraint sets in the order a sweep projects them."""
+CONSTRAINT_SETS = CONSTRAINT_KINDS
+"""Constraint sets in the order a sweep projects them (warp_verlet/constraints/)."""
 
 RELAX = Relax()
 STAGES = (Integrate(), RELAX, Collide(), Tear())

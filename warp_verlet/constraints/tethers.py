@@ -13,6 +13,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import ConstraintSet
+from ..mesh_cloth import connected_labels
+from ..launches import FLOAT, FLOAT64, INT, BoundStage, recorded, split_tasks
+
 # Distances are computed for this many (particle, pin) pairs at a time, to bound the temporary memory.
 PAIRS_PER_CHUNK = 1 << 22
 
@@ -71,23 +75,6 @@ def build_tethers(cloths, specs, k: int) -> TetherTable | None:
                        np.concatenate(lengths).astype(np.float32))
 
 
-def connected_labels(particle_count: int, sticks: np.ndarray) -> np.ndarray:
-    """Label of each particle's connected component through ``sticks`` (the lowest particle index in it):
-    label propagation with pointer jumping, vectorised."""
-    labels = np.arange(particle_count, dtype=np.int64)
-    if len(sticks) == 0:
-        return labels
-    a, b = sticks[:, 0].astype(np.int64), sticks[:, 1].astype(np.int64)
-    while True:
-        low = np.minimum(labels[a], labels[b])
-        before = labels.copy()
-        np.minimum.at(labels, a, low)
-        np.minimum.at(labels, b, low)
-        labels = labels[labels]  # jump to the label's own label: halves the remaining path each round
-        if np.array_equal(labels, before):
-            return labels
-
-
 def cut_tethers(table: TetherTable, particle_count: int, intact_sticks: np.ndarray) -> np.ndarray:
     """The tether lengths with every tether whose particle is cut off from its pin set to +inf (off)."""
     labels = connected_labels(particle_count, intact_sticks)
@@ -97,3 +84,64 @@ def cut_tethers(table: TetherTable, particle_count: int, intact_sticks: np.ndarr
     same[has_pin] = labels[table.particle[:, None].repeat(table.pin.shape[1], 1)[has_pin]] == labels[table.pin[has_pin]]
     length[~same] = np.inf
     return length
+
+
+class Tethers(ConstraintSet):
+    """Long-range attachments (kernels/tether.py): one launch per sweep, before the sticks, so that every sweep
+    starts from particles within reach of their pins. When the torn set changes, tethers cut off from their
+    pin are dropped (cut_tethers above)."""
+
+    name = "tethers"
+
+    def needed(self, req) -> bool:
+        return req.tethered > 0 and req.grid_pins == 0
+
+    def device_bytes(self, req) -> int:
+        per_particle = INT + req.tethers_per_particle * (INT + FLOAT)  # particle; pin and length per tether
+        live = req.tethers_per_particle * FLOAT if req.tears else 0  # the State's lengths, cut by tears
+        return req.tethered * (per_particle + live)
+
+    def bind(self, model, state, solver) -> BoundStage:
+        from warp_verlet.kernels.tether import pull_tethers
+
+        length = state.tether_length if state.tether_length is not None else model.tether_length
+        x, n = state.particle_q, model.tether_particle.shape[0]
+
+        def make(f, count):
+            return recorded(pull_tethers, count, [x, model.tether_particle[f:f + count], model.tether_pin[f:f + count],
+                                                  length[f:f + count]])
+        return BoundStage(None, [split_tasks(make, 0, n, solver.threads)])
+
+    def on_tear(self, model, state, torn: np.ndarray) -> None:
+        """Drop the tethers whose particle a tear has cut off from its pin."""
+        if state.tether_length is None:
+            return
+        state.tether_length.assign(cut_tethers(model.tether_table, model.particle_count, model.host_sticks[~torn]))
+
+
+class GridTethers(ConstraintSet):
+    """Tethers of a grid cloth with few pins, computed (kernels/grid_relax.py): each free particle finds its
+    nearest pins and their rest-pose distances from its grid coordinates, so a sweep reads no tether table.
+    One launch per sweep over the cloth's particles (pins skip), before the sticks, as Tethers."""
+
+    name = "grid tethers"
+
+    def needed(self, req) -> bool:
+        return req.tethered > 0 and req.grid_pins > 0
+
+    def device_bytes(self, req) -> int:
+        # the pins, and per pin the squared column and row differences to it (float64)
+        return req.grid_pins * (INT + (req.grid_cols + req.grid_rows) * FLOAT64)
+
+    def bind(self, model, state, solver) -> BoundStage:
+        import warp as wp
+
+        from warp_verlet.kernels.grid_relax import pull_grid_tethers
+
+        t, x = model.grid_tethers, state.particle_q
+
+        def make(f, rows):
+            return recorded(pull_grid_tethers, rows << t.col_bits,
+                            [x, model.inv_mass, t.first_particle, t.cols, t.pins, t.pin_col_sq, t.pin_row_sq, t.tethers,
+                             wp.float64(t.scale), t.col_bits, f])
+        return BoundStage(None, [split_tasks(make, 0, t.rows, solver.threads)])

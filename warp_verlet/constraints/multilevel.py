@@ -26,8 +26,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .colouring import grid_colouring
-from .topology import SHEAR_ANTI, SHEAR_DIAG, STRUCT_H, STRUCT_V
+from . import ConstraintSet
+from ..colouring import grid_colouring
+from ..launches import FLOAT, INT, VEC2I, BoundStage, recorded
+from ..topology import SHEAR_ANTI, SHEAR_DIAG, STRUCT_H, STRUCT_V
 
 
 def coarser(index: np.ndarray) -> np.ndarray:
@@ -170,3 +172,39 @@ def merge_levels(per_cloth: list[list[Level]]) -> list[Level]:
             child=np.concatenate([p.child for p in parts]), parents=np.concatenate([p.parents for p in parts]),
             weights=np.concatenate([p.weights for p in parts])))
     return merged
+
+
+class Multilevel(ConstraintSet):
+    """The multilevel pass (the hierarchy above, kernels/multilevel.py): once per substep, before the
+    sweeps, coarsest level first: ``multilevel_sweeps`` sweeps of a level's unilateral coarse sticks, then its
+    moves interpolated to the next finer level's other particles. It must run first in the relaxation: it
+    measures each particle's move from the Verlet prediction."""
+
+    name = "multilevel"
+
+    def needed(self, req) -> bool:
+        return req.coarse_sticks > 0
+
+    def device_bytes(self, req) -> int:
+        # ends and limit per coarse stick; child, four parents and four weights per child
+        return req.coarse_sticks * (VEC2I + FLOAT) + req.coarse_children * (INT + 4 * INT + 4 * FLOAT)
+
+    def bind(self, model, state, solver) -> BoundStage:
+        from warp_verlet.kernels.multilevel import limit_coarse_colour, prolongate
+
+        x, x_inertial, inv_mass = state.particle_q, state.particle_q_inertial, model.inv_mass
+        sweeps = solver.settings.multilevel_sweeps
+        tasks = []
+        for level in model.levels:
+            colours = [recorded(limit_coarse_colour, n, [x, inv_mass, level.ends, level.limit, f])
+                       for f, n in level.colour_ranges]
+            tasks += colours * sweeps
+            tasks.append(recorded(prolongate, level.child.shape[0], [x, x_inertial, inv_mass, level.child,
+                                                                     level.parents, level.weights]))
+        runs = [task.run for task in tasks]
+
+        def run(state, dt: float) -> None:
+            for task in runs:
+                task()
+
+        return BoundStage(run, [])
