@@ -9,6 +9,10 @@ sees "sticks sorted by colour, with offsets". Two colourings are offered:
 - :func:`graph_colouring`, for any topology: Warp's ``wp.utils.graph_coloring_assign`` on the
   stick-conflict graph (nodes are sticks, edges join sticks that share a particle), then
   ``graph_coloring_balance`` to even out colour sizes.
+- :func:`colour`, the same for elements on any number of particles (an angle limit on three, a dihedral on
+  four), with an *overflow colour*: past ``max_colours`` the remaining elements go into one last colour whose
+  elements may share particles, which one thread projects one after another (as Box2D v3's constraint graph
+  keeps an overflow set for the constraints its colours cannot take).
 """
 
 from __future__ import annotations
@@ -22,9 +26,10 @@ from .topology import BEND_H, BEND_V, SHEAR_ANTI, SHEAR_DIAG, STRUCT_H, STRUCT_V
 
 @dataclass(frozen=True)
 class Colouring:
-    colour: np.ndarray  # (M,) int32, colour of each stick
+    colour: np.ndarray  # (M,) int32, colour of each stick (or element)
     count: int
     method: str
+    overflow: bool = False  # the last colour is the overflow colour: its elements may share particles
 
     @property
     def sizes(self) -> np.ndarray:
@@ -52,9 +57,10 @@ def grid_colouring(grid_class: np.ndarray, anchor: np.ndarray) -> Colouring:
 
 
 def stick_conflict_edges(sticks: np.ndarray) -> np.ndarray:
-    """Edges of the graph whose nodes are sticks, joining every pair of sticks that share a particle."""
-    m = len(sticks)
-    stick_of_end = np.repeat(np.arange(m, dtype=np.int64), 2)
+    """Edges of the graph whose nodes are sticks (or elements of k particles, (M, k)), joining every pair that
+    shares a particle."""
+    m, k = sticks.shape if sticks.ndim == 2 else (len(sticks), 2)
+    stick_of_end = np.repeat(np.arange(m, dtype=np.int64), k)
     particle = sticks.reshape(-1).astype(np.int64)
     order = np.argsort(particle, kind="stable")
     particle, stick_of_end = particle[order], stick_of_end[order]
@@ -72,8 +78,11 @@ def stick_conflict_edges(sticks: np.ndarray) -> np.ndarray:
     if not pairs:
         return np.zeros((0, 2), np.int32)
     # Two distinct sticks share at most one particle, so no pair comes out twice: a lexicographic sort gives
-    # what np.unique(axis=0) gave (it took 16 s at 512^2, the sort under one).
+    # what np.unique(axis=0) gave (it took 16 s at 512^2, the sort under one). Elements of more particles may
+    # share several, so their pairs are made unique.
     edges = np.sort(np.concatenate(pairs), axis=1)
+    if k > 2:
+        return np.unique(edges, axis=0).astype(np.int32)
     return edges[np.lexsort((edges[:, 1], edges[:, 0]))].astype(np.int32)
 
 
@@ -93,9 +102,42 @@ def graph_colouring(sticks: np.ndarray, balance: bool = True) -> Colouring:
     return _compact(colours.numpy().astype(np.int32), "graph MCS" + (", balanced" if balance else ""))
 
 
-def check_partition(sticks: np.ndarray, colour: np.ndarray) -> None:
-    """Raise AssertionError unless every colour's sticks touch pairwise-distinct particles."""
+MAX_COLOURS = 64
+"""The most colours :func:`colour` makes, the overflow colour included: a colour is one launch per sweep, and
+past a few dozen the launches cost more than projecting the few remaining elements on one thread."""
+
+
+def colour(elements: np.ndarray, max_colours: int = MAX_COLOURS) -> Colouring:
+    """Colour elements of k particles each ((M, k) int array) so that no two elements of a colour share a
+    particle, with Warp's graph colouring of their conflict graph; elements past colour ``max_colours - 1`` go
+    into one overflow colour (the last), whose elements may share particles and are projected in order by one
+    thread (``Colouring.overflow``)."""
+    elements = np.asarray(elements)
+    if elements.ndim != 2 or elements.shape[1] < 1:
+        raise ValueError(f"expected an (M, k) array of particle indices, got shape {elements.shape}")
+    if max_colours < 2:
+        raise ValueError(f"max_colours must be at least 2 (one colour and the overflow), got {max_colours}")
+    coloured = graph_colouring(elements)
+    if coloured.count <= max_colours:
+        return coloured
+    capped = np.minimum(coloured.colour, max_colours - 1).astype(np.int32)
+    return Colouring(capped, max_colours, coloured.method + f", overflow past {max_colours - 1}", overflow=True)
+
+
+def colour_ranges(colouring: Colouring) -> tuple[np.ndarray, list[tuple[int, int]]]:
+    """The order that sorts elements by colour (stable), and each non-empty colour's (first, count) in it."""
+    order = np.argsort(colouring.colour, kind="stable")
+    sizes = colouring.sizes
+    starts = np.r_[0, np.cumsum(sizes)[:-1]]
+    return order, [(int(a), int(n)) for a, n in zip(starts, sizes) if n > 0]
+
+
+def check_partition(sticks: np.ndarray, colour: np.ndarray, overflow: int | None = None) -> None:
+    """Raise AssertionError unless every colour's sticks (or elements, (M, k)) touch pairwise-distinct
+    particles; the ``overflow`` colour, projected by one thread, may share them."""
     for c in np.unique(colour):
+        if c == overflow:
+            continue
         ends = sticks[colour == c].reshape(-1)
         if np.unique(ends).size != ends.size:
             values, counts = np.unique(ends, return_counts=True)

@@ -22,6 +22,7 @@ import warp as wp
 from .colliders import ColliderModel
 from .colouring import Colouring, check_partition, graph_colouring, grid_colouring
 from .errors import ArgumentError
+from .constraints import CONSTRAINT_KINDS
 from .constraints.multilevel import grid_hierarchy, merge_levels
 from .constraints.tethers import TetherTable, build_tethers
 from .scene import Scene
@@ -235,7 +236,8 @@ class Model:
     Tethers (only when a cloth uses them; T tethered particles, K pins each): ``tether_particle`` (T,) int32,
     ``tether_pin`` (T, K) int32 (-1: none) and ``tether_length`` (T, K) float32 m, the rest-pose lengths a
     State's copy starts from when a cloth can tear. Multilevel (only when the scene asks): ``levels``, one
-    DeviceLevel per level, coarsest first.
+    DeviceLevel per level, coarsest first. Other constraint kinds (warp_verlet/constraints/): ``constraints``,
+    kind name -> the device data its ``build`` made, documented in its module.
     """
 
     def __init__(self, scene: Scene, device, colouring: str = "auto", sticks: str = "auto"):
@@ -333,6 +335,12 @@ class Model:
             self.tether_particle = wp.array(table.particle, dtype=int, device=device)
             self.tether_pin = wp.array2d(table.pin, dtype=int, device=device)
             self.tether_length = wp.array2d(table.length, dtype=float, device=device)
+        self.constraints = {}  # constraint kind name -> the device data its build made (kinds with data only)
+        for kind in CONSTRAINT_KINDS:
+            data = kind.build(self, scene, device) if kind.needed(req) else None
+            if data is not None:
+                self.constraints[kind.name] = data
+                self._hold(data, kind.name.replace(" ", "_"))
         self._frozen = True
 
     def _hold(self, part, prefix: str) -> None:

@@ -13,13 +13,16 @@ import os
 import sys
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable
+from types import MappingProxyType
+from typing import TYPE_CHECKING, Any, Callable, Mapping
 
 if sys.version_info >= (3, 11):
     import tomllib
 else:  # pragma: no cover - exercised on Python 3.10 only
     import tomli as tomllib
 
+from .constraints import CONSTRAINT_KINDS
+from .constraints import cloth_keys as constraint_cloth_keys
 from .errors import SceneError
 from .scene_keys import (  # the table reader and value parsers, under the names this module has always used
     ARRAY, STRING, TABLE, Invalid as _Invalid, Table as _Table, accepts, any_real as _any_real,
@@ -109,6 +112,9 @@ class ClothSpec:
     tethers: bool | None = None  # None: on when the cloth has pins and cannot tear
     tether_scale: float = 1.0  # tether length / rest-pose distance to the pin (> 1: slack for a soft cloth)
     mesh: "MeshSpec | None" = None  # a mesh cloth (then pins and particle_masses above are empty)
+    options: Mapping[str, Any] = field(default_factory=lambda: MappingProxyType({}))
+    """The values of the keys the constraint kinds declare (warp_verlet/constraints/), by key name, resolved by
+    each kind's ``check_cloth``; read-only."""
 
     @property
     def uses_tethers(self) -> bool:
@@ -413,10 +419,10 @@ def _read_cloth(file: str, index: int, data: Any, scene_dir: Path) -> ClothSpec:
                                ()),
         tethers=t.take("tethers", _boolean, None),
         tether_scale=t.take("tether_scale", real(1.0), 1.0),
+        options=_take_kind_keys(t),
     )
     t.finish()
-    check_cloth(t, spec)
-    return spec
+    return check_cloth(t, spec)
 
 
 def _read_mesh_cloth(t: _Table, index: int, scene_dir: Path) -> ClothSpec:
@@ -433,24 +439,35 @@ def _read_mesh_cloth(t: _Table, index: int, scene_dir: Path) -> ClothSpec:
         tear_threshold=t.take("tear_threshold", real(1.0, lo_open=True), None),
         tethers=t.take("tethers", _boolean, None),
         tether_scale=t.take("tether_scale", real(1.0), 1.0),
+        options=_take_kind_keys(t),
     )
     t.finish()
     spec = replace(spec, mesh=mesh_scene.load_mesh(t, request))
     if spec.tear_threshold is not None and spec.mesh.mesh.non_manifold_edges:
         raise t.error("tear_threshold", f"tearing needs a manifold mesh (each edge beside at most two faces, to "
                       f"know which faces a torn edge opens), and {spec.mesh.mesh.non_manifold_edges} edges have more")
-    check_cloth(t, spec)
-    return spec
+    return check_cloth(t, spec)
 
 
-def check_cloth(t: _Table, spec: ClothSpec) -> None:
-    """What a grid and a mesh cloth must both satisfy once read."""
+def _take_kind_keys(t: _Table) -> Mapping[str, Any]:
+    """The ``[[cloth]]`` keys that the constraint kinds declare, each taken through its declaration."""
+    return MappingProxyType({key.name: key.take(t) for key in constraint_cloth_keys()})
+
+
+def check_cloth(t: _Table, spec: ClothSpec) -> ClothSpec:
+    """What a grid and a mesh cloth must both satisfy once read; each constraint kind then checks its options
+    against the cloth and resolves them. Returns the cloth with its options resolved."""
     if spec.tethers and not spec.pin_count:
         raise t.error("tethers", "expected pins: a tether ties a particle to a pin, and this cloth has none")
     missing = sorted(set(spec.compliance) - set(spec.sticks))
     if missing:
         raise t.error(f"compliance.{missing[0]}", f"gives a compliance to the {missing[0]} family, which sticks = "
                       f"{_toml_list(spec.sticks)} does not build")
+    for kind in CONSTRAINT_KINDS:
+        resolved = kind.check_cloth(spec, t)
+        if resolved:
+            spec = replace(spec, options=MappingProxyType({**spec.options, **resolved}))
+    return spec
 
 
 def _read_collider(file: str, index: int, data: Any) -> PlaneCollider | SphereCollider:

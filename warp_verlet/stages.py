@@ -54,6 +54,11 @@ class Requirements:
     soft_sticks: int = 0  # implicit grid sticks of families with a compliance (each keeps an XPBD tension)
     grid_pins: int = 0  # implicit grid tethers: the cloth's pins (0: the tethers are arrays)
     weight_pins: int = 0  # implicit grid sticks of a cloth whose free particles weigh alike: its pins
+    elements: tuple[tuple[str, int], ...] = ()  # (kind name, its elements) of the constraint kinds that count them
+
+    def count(self, kind: str) -> int:
+        """The elements of constraint kind ``kind`` (its ``count(scene)``; 0 when the scene has none)."""
+        return dict(self.elements).get(kind, 0)
 
     @property
     def position_bytes(self) -> int:
@@ -86,6 +91,7 @@ class Requirements:
             sphere_keys=sum(len(s.keyframes) for s in scene.spheres) if moving else 0, planes=len(scene.planes),
             tethered=scene.tethered_particles, tethers_per_particle=scene.tethers_per_particle,
             coarse_sticks=coarse[0], coarse_children=coarse[1],
+            elements=tuple((kind.name, n) for kind in CONSTRAINT_KINDS if (n := kind.count(scene))),
         )
         req = replace(req, **grid_counts(scene, sticks))
         return replace(req, precision=resolve(scene, relaxes=RELAX.needed(req)))

@@ -18,12 +18,15 @@ Each stick also records its *grid class* (which of the six directions above it i
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .faces import Faces, grid_faces
 from .mesh_cloth import BEND, SHEAR, STRUCTURAL, particle_masses, stick_families
-from .scene import ClothSpec
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .scene import ClothSpec
 
 # Grid classes, in the order the analytic colouring numbers them.
 STRUCT_H, STRUCT_V, SHEAR_DIAG, SHEAR_ANTI, BEND_H, BEND_V = range(6)
