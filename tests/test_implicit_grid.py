@@ -53,12 +53,13 @@ def run_frames(scene, device: str, sticks: str, frames: int = 5) -> tuple[np.nda
 def test_implicit_and_explicit_sticks_agree_bit_for_bit_on_every_shipped_grid_scene(name, precision, device):
     scene = small_scene(name, precision)
     explicit, reference = run_frames(scene, device, "explicit")
-    assert reference.constraint_sets[-1] == "sticks"
-    if implicit_grid_obstacle(scene) is not None:  # a tearing cloth: the stick arrays serve
-        assert scene.tears and Simulator(scene, device).constraint_sets == reference.constraint_sets
+    assert "sticks" in reference.constraint_sets
+    if implicit_grid_obstacle(scene) is not None:  # a tearing cloth, or several cloths: the stick arrays serve
+        assert scene.tears or len(scene.cloths) > 1
+        assert Simulator(scene, device).constraint_sets == reference.constraint_sets
         return
     auto, sim = run_frames(scene, device, "implicit")
-    assert sim.constraint_sets[-1] == "grid sticks"
+    assert "grid sticks" in sim.constraint_sets
     cloth = scene.cloths[0]
     if cloth.uses_tethers:
         grid_tethers = cloth.pin_count <= MAX_GRID_TETHER_PINS

@@ -21,8 +21,6 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover - exercised on Python 3.10 only
     import tomli as tomllib
 
-from .constraints import CONSTRAINT_KINDS
-from .constraints import cloth_keys as constraint_cloth_keys
 from .errors import SceneError
 from .scene_keys import (  # the table reader and value parsers, under the names this module has always used
     ARRAY, STRING, TABLE, Invalid as _Invalid, Table as _Table, accepts, any_real as _any_real,
@@ -112,9 +110,9 @@ class ClothSpec:
     tethers: bool | None = None  # None: on when the cloth has pins and cannot tear
     tether_scale: float = 1.0  # tether length / rest-pose distance to the pin (> 1: slack for a soft cloth)
     mesh: "MeshSpec | None" = None  # a mesh cloth (then pins and particle_masses above are empty)
-    options: Mapping[str, Any] = field(default_factory=lambda: MappingProxyType({}))
-    """The values of the keys the constraint kinds declare (warp_verlet/constraints/), by key name, resolved by
-    each kind's ``check_cloth``; read-only."""
+    options: Mapping[str, Any] = field(default_factory=lambda: kind_options({}))
+    """The values of the keys the constraint kinds declare (warp_verlet/constraints/), by key name (each key's
+    default where the scene does not give it), resolved by each kind's ``check_cloth``; read-only."""
 
     @property
     def uses_tethers(self) -> bool:
@@ -449,9 +447,19 @@ def _read_mesh_cloth(t: _Table, index: int, scene_dir: Path) -> ClothSpec:
     return check_cloth(t, spec)
 
 
+def kind_options(values: dict[str, Any]) -> Mapping[str, Any]:
+    """A cloth's options: ``values`` over the defaults of every key the constraint kinds declare (imported here,
+    not at the top: numpy, which ``import warp_verlet`` does without)."""
+    from .constraints import cloth_keys
+
+    return MappingProxyType({**{key.name: key.default for key in cloth_keys()}, **values})
+
+
 def _take_kind_keys(t: _Table) -> Mapping[str, Any]:
     """The ``[[cloth]]`` keys that the constraint kinds declare, each taken through its declaration."""
-    return MappingProxyType({key.name: key.take(t) for key in constraint_cloth_keys()})
+    from .constraints import cloth_keys
+
+    return kind_options({key.name: key.take(t) for key in cloth_keys()})
 
 
 def check_cloth(t: _Table, spec: ClothSpec) -> ClothSpec:
@@ -463,10 +471,12 @@ def check_cloth(t: _Table, spec: ClothSpec) -> ClothSpec:
     if missing:
         raise t.error(f"compliance.{missing[0]}", f"gives a compliance to the {missing[0]} family, which sticks = "
                       f"{_toml_list(spec.sticks)} does not build")
+    from .constraints import CONSTRAINT_KINDS
+
     for kind in CONSTRAINT_KINDS:
         resolved = kind.check_cloth(spec, t)
         if resolved:
-            spec = replace(spec, options=MappingProxyType({**spec.options, **resolved}))
+            spec = replace(spec, options=kind_options({**spec.options, **resolved}))
     return spec
 
 
