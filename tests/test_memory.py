@@ -77,12 +77,14 @@ CASES = {
     "float64-jacobi-everything": ({"relaxation": "jacobi", "precision": "float64"}, {"pins": ["top-edge"],
                                   "tear_threshold": 1.5, "tethers": True, "tether_scale": 2.0}, [SWEEP, BALL, GROUND]),
     "auto-float64": ({"substeps": 1000, "relaxation": "jacobi"}, {}),  # "auto" below the float32 floor
+    "angle-limit": ({}, {"max_bend_angle": 30.0}),  # joints along rows and columns, and their limits
+    "angle-limit-float64": ({"precision": "float64"}, {"pins": ["top-edge"], "max_bend_angle": 30.0}),
 }
 
 
 # The cases above that allow implicit grid sticks (one grid cloth that cannot tear, the coloured solver), again
 # with them ("auto" keeps stick arrays on the CPU).
-IMPLICIT = ["coloured", "tethers", "compliance", "multilevel", "float64", "moving-sphere", "planes"]
+IMPLICIT = ["coloured", "tethers", "compliance", "multilevel", "float64", "moving-sphere", "planes", "angle-limit"]
 
 
 @pytest.mark.parametrize("case", list(CASES) + [f"{c}/implicit" for c in IMPLICIT])

@@ -78,13 +78,15 @@ class ConstraintSet:
 
 
 def _kinds() -> tuple:
+    from .angle_limit import AngleHinges, AngleJoints
     from .multilevel import Multilevel
     from .sticks import GridSticks, Sticks
     from .tethers import GridTethers, Tethers
 
     # The multilevel pass first (it measures moves from the Verlet prediction), then the long-range tethers, so
-    # that every sweep starts from particles within reach of their pins, then the sticks.
-    return (Multilevel(), Tethers(), GridTethers(), Sticks(), GridSticks())
+    # that every sweep starts from particles within reach of their pins, then the sticks, then the angle limits
+    # (on lengths the sticks have just set).
+    return (Multilevel(), Tethers(), GridTethers(), Sticks(), GridSticks(), AngleJoints(), AngleHinges())
 
 
 CONSTRAINT_KINDS: tuple = _kinds()
