@@ -54,10 +54,10 @@ class Requirements:
     soft_sticks: int = 0  # implicit grid sticks of families with a compliance (each keeps an XPBD tension)
     grid_pins: int = 0  # implicit grid tethers: the cloth's pins (0: the tethers are arrays)
     weight_pins: int = 0  # implicit grid sticks of a cloth whose free particles weigh alike: its pins
-    elements: tuple[tuple[str, int], ...] = ()  # (kind name, its elements) of the constraint kinds that count them
+    elements: tuple[tuple[str, object], ...] = ()  # (kind name, its count(scene)) of the kinds a scene uses
 
-    def count(self, kind: str) -> int:
-        """The elements of constraint kind ``kind`` (its ``count(scene)``; 0 when the scene has none)."""
+    def count(self, kind: str):
+        """Constraint kind ``kind``'s ``count(scene)`` (0 when the scene does not use it)."""
         return dict(self.elements).get(kind, 0)
 
     @property
