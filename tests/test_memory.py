@@ -79,12 +79,15 @@ CASES = {
     "auto-float64": ({"substeps": 1000, "relaxation": "jacobi"}, {}),  # "auto" below the float32 floor
     "angle-limit": ({}, {"max_bend_angle": 30.0}),  # joints along rows and columns, and their limits
     "angle-limit-float64": ({"precision": "float64"}, {"pins": ["top-edge"], "max_bend_angle": 30.0}),
+    "rigid-patches": ({}, {"pins": ["top-left"], "rigid_patches": [[[0, 0], [0, 1], [1, 0], [1, 1]],
+                                                                   [[5, 5], [5, 6], [6, 5]]]}),
 }
 
 
 # The cases above that allow implicit grid sticks (one grid cloth that cannot tear, the coloured solver), again
 # with them ("auto" keeps stick arrays on the CPU).
-IMPLICIT = ["coloured", "tethers", "compliance", "multilevel", "float64", "moving-sphere", "planes", "angle-limit"]
+IMPLICIT = ["coloured", "tethers", "compliance", "multilevel", "float64", "moving-sphere", "planes", "angle-limit",
+            "rigid-patches"]
 
 
 @pytest.mark.parametrize("case", list(CASES) + [f"{c}/implicit" for c in IMPLICIT])

@@ -37,8 +37,9 @@ class ConstraintKind(Protocol):
         """Once a cloth is read (``spec``, a scene.ClothSpec, its mesh loaded), check this kind's options against it and resolve them (say,
         selections to particle indices): the options to replace, or None. A problem raises ``table.error``."""
 
-    def count(self, scene) -> int:
-        """Its elements in ``scene`` (a scene.Scene), known before anything is built (0: the scene does not use it)."""
+    def count(self, scene) -> int | tuple[int, ...]:
+        """Its elements in ``scene`` (a scene.Scene), known before anything is built: a number, or a tuple of
+        numbers where its arrays come in several sizes; 0 when the scene does not use it."""
 
     def needed(self, req) -> bool:
         """Whether a scene with these requirements (a stages.Requirements) runs it."""
@@ -80,13 +81,15 @@ class ConstraintSet:
 def _kinds() -> tuple:
     from .angle_limit import AngleHinges, AngleJoints
     from .multilevel import Multilevel
+    from .rigid_patches import RigidPatches
     from .sticks import GridSticks, Sticks
     from .tethers import GridTethers, Tethers
 
     # The multilevel pass first (it measures moves from the Verlet prediction), then the long-range tethers, so
     # that every sweep starts from particles within reach of their pins, then the sticks, then the angle limits
-    # (on lengths the sticks have just set).
-    return (Multilevel(), Tethers(), GridTethers(), Sticks(), GridSticks(), AngleJoints(), AngleHinges())
+    # (on lengths the sticks have just set), and the rigid patches last, so that a sweep ends with each rigid.
+    return (Multilevel(), Tethers(), GridTethers(), Sticks(), GridSticks(), AngleJoints(), AngleHinges(),
+            RigidPatches())
 
 
 CONSTRAINT_KINDS: tuple = _kinds()
