@@ -26,6 +26,8 @@ as ``over``s at each cloth's own prim path in that asset, which it sublayers: op
 simulation on the asset with its materials and hierarchy. It has no colliders and takes the asset's upAxis,
 metersPerUnit and defaultPrim.
 
+``USD_POINT_CACHE`` is the format writer_registry.py opens for the suffixes .usd, .usda and .usdc.
+
 This module and ``preview.py`` import ``pxr``; neither imports warp: writing, checking and previewing a cache
 must not pull in the simulator.
 """

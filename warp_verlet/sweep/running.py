@@ -191,7 +191,7 @@ def run_sweep(sweep: Sweep, backend, out: Path | None = None, resume: bool = Tru
         lock.release()
 
 
-SWEEP_LOCK_NAME = "sweep-output-directory"  # no run's output has this name: a run's ends in .usd, .usda, .usdc
+SWEEP_LOCK_NAME = "sweep-output-directory"  # no run's output has this name: a run's ends in a format's suffix
 
 
 def _lock_output_directory(out: Path):
