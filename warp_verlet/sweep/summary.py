@@ -107,7 +107,7 @@ def _cell(value: Any, md: bool = False) -> str:
 
 
 def summary_markers(sweep: Sweep) -> dict[str, bytes]:
-    """How each summary file of this sweep starts (see the package's docstring)."""
+    """How each summary file of this sweep starts (running.py's docstring says why)."""
     empty = Summary(sweep, Path("."), [], "", "")
     md_head = empty.md_text().split("`", 1)[0] + "`"  # "# Sweep NAME", "", "- sweep file: `" (then its path)
     return {"sweep.csv": empty.csv_text().encode(), "sweep.md": md_head.encode()}
