@@ -382,7 +382,7 @@ def test_duplicate_default_cloth_name(tmp_path):
 
 @pytest.mark.parametrize("bad", ["out.abc", "out", "out.USDC", "out.usdz", ".usdc", "dir.usdc/out"])
 def test_bad_output_extension(tmp_path, bad):
-    check(tmp_path, f"[output]\npath = '{bad}'\n" + CLOTH, "output.path", ".usd, .usdc or .usda", repr(bad))
+    check(tmp_path, f"[output]\npath = '{bad}'\n" + CLOTH, "output.path", ".usd, .usda, .usdc", repr(bad))
 
 
 def test_bad_output_path(tmp_path):

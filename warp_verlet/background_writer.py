@@ -1,13 +1,14 @@
 """Write frames on a background thread, so the simulation of frame f + 1 overlaps the writing of frame f.
 
 The step loop hands over each frame's host copy and goes on stepping. On CUDA the next frame's graph runs
-while this thread authors USD; on the CPU, Warp's kernels run in native code that releases the GIL, so the
-writer gets the second core. The queue is bounded (``depth`` frames): a writer slower than the simulation
-makes the step loop wait instead of holding an unbounded number of frames in memory.
+while this thread writes the frame (writer_registry.CacheWriter.write_frame); on the CPU, Warp's kernels run
+in native code that releases the GIL, so the writer gets the second core. The queue is bounded (``depth``
+frames): a writer slower than the simulation makes the step loop wait instead of holding an unbounded number
+of frames in memory.
 
 Errors in the writer thread are raised again in the step loop at its next ``submit`` or at ``close``. Only
-this thread touches the USD stage between the first ``submit`` and ``close``, so no two threads use it at
-once.
+this thread touches the writer (a USD stage, which is not thread-safe) between the first ``submit`` and
+``close``, so no two threads use it at once.
 """
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ class BackgroundWriter:
         self._queue: queue.Queue = queue.Queue(maxsize=depth)
         self._error: BaseException | None = None
         self._reported = False
-        self._thread = threading.Thread(target=self._run, name="usd-writer", daemon=True)
+        self._thread = threading.Thread(target=self._run, name="cache-writer", daemon=True)
         self._thread.start()
 
     def _run(self) -> None:

@@ -37,13 +37,13 @@ from typing import Callable, Iterable, Sequence
 
 from .errors import DiskFullError, OutputBusyError, OutputError
 from .private_dir import make_private_directory, user_directory
+from .writer_registry import is_output_suffix, suffixes_text
 
 
 class OutputNameError(OutputError):
-    """The output path is refused for its name alone (not a USD extension, a partial file's name, or an input
-    file): a bad argument, which nothing on the disk would change (the command line exits 2 for it)."""
+    """The output path is refused for its name alone (no registered format's suffix, a partial file's name, or
+    an input file): a bad argument, which nothing on the disk would change (the command line exits 2 for it)."""
 
-EXTENSIONS = (".usd", ".usda", ".usdc")
 PARTIAL = ".partial"  # NAME.usdc -> NAME.partial.usdc
 # Kept free besides what a save is expected to write: other programs write to the same disk, and the estimate
 # of a save is an estimate.
@@ -311,8 +311,8 @@ class CacheOutput:
                     link = f" ({given} is a symlink to it)" if given.is_symlink() else ""
                     raise self._refuse_name(f"{what} would overwrite the input file {source}{link}; choose "
                                             "another output path")
-        if path.suffix not in EXTENSIONS:
-            raise self._refuse_name(f"the file name must end in {', '.join(EXTENSIONS)}"
+        if not is_output_suffix(path.suffix):  # the suffixes of writer_registry's formats
+            raise self._refuse_name(f"the file name must end in {suffixes_text()}"
                                     + (f" (it is a symlink to {path})" if given.is_symlink() else ""))
         if path.stem.endswith(PARTIAL):
             raise self._refuse_name(f"names ending in {PARTIAL}{path.suffix} are kept for the frames of runs that "
@@ -413,13 +413,14 @@ class CacheOutput:
                       "replaces it")
 
     # ------------------------------------------------------------------ disk space
-    def check_space(self, estimate: CacheEstimate, frames: int, save_every: int) -> None:
+    def check_space(self, estimate: CacheEstimate | None, frames: int, save_every: int) -> None:
         """Refuse the run up front when the disk cannot hold the whole cache of ``frames`` frames (frame 0
-        included)."""
+        included). ``estimate`` None (a format that cannot estimate its size) checks nothing, here or before
+        the saves."""
         self._estimate, self._frames, self._save_every = estimate, int(frames), max(1, int(save_every))
-        need = estimate.peak(self._frames, self._save_every)
+        need = estimate.peak(self._frames, self._save_every) if estimate is not None else 0
         free = free_bytes(self.path.parent)
-        if need + RESERVE_BYTES > free:
+        if estimate is not None and need + RESERVE_BYTES > free:
             raise DiskFullError(f"cannot write {self.given}: the cache needs about {_size(need)} and the disk "
                                 f"holding {self.given.parent} has {_size(free)} free (nothing was written)")
         if self.partial.exists():  # an earlier run's frames (noted on entry): from here on the file is this run's

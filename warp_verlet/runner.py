@@ -1,4 +1,5 @@
-"""Batch runs: scene -> simulator -> USD point cache, one frame at a time, with a divergence guard.
+"""Batch runs: scene -> simulator -> point cache (the writer of the output's suffix: writer_registry.py), one
+frame at a time, with a divergence guard.
 
 The output is checked and locked, and the writer opened, before the first substep, so an unwritable,
 busy or too small output fails before any simulation time is spent. Frames are written on a background
@@ -21,8 +22,9 @@ import numpy as np
 from . import __version__
 from .background_writer import BackgroundWriter
 from .errors import DivergenceError, SceneError
-from .output_file import CacheOutput, estimate_cache, input_files
+from .output_file import CacheOutput, input_files
 from .scene import Scene
+from .writer_registry import CacheRequest, format_for
 
 
 # A structural stick stretched to twice its rest length: far outside anything cloth does, so the solver has
@@ -209,11 +211,11 @@ def load_kernels(sim) -> float:
 
 def open_writer(scene: Scene, sim, target: CacheOutput, samples: int, every_sphere_moves: bool = False,
                 tears: bool = False):
-    """The point cache writer for ``scene``, writing to ``target``'s partial file, once its disk space for
-    ``samples`` frames is checked. ``every_sphere_moves``: sample every sphere's centre per frame (a live
+    """The cache writer for ``scene``, writing to ``target``'s partial file in the format of its suffix
+    (writer_registry.py), once its disk space for ``samples`` frames is checked. ``every_sphere_moves``: sample every sphere's centre per frame (a live
     session, where spheres are dragged); ``tears``: author torn faces even for cloths whose scene cannot tear
     (a live session whose tear threshold was set later)."""
-    from .usd_writer import CachedPlane, CachedSphere, PointCacheWriter  # imports pxr
+    from .usd_writer import CachedPlane, CachedSphere  # imports pxr
 
     override = scene.output.kind == "override"
     shapes = [cached_shape(s.topology, spec, override, tears) for s, spec in zip(sim.model.cloths, scene.cloths)]
@@ -221,15 +223,16 @@ def open_writer(scene: Scene, sim, target: CacheOutput, samples: int, every_sphe
         [CachedSphere(s.name, s.radius, s.keyframes[0][1], s.moving or every_sphere_moves, s.purpose)
          for s in scene.spheres]
         + [CachedPlane(p.name, p.point, p.normal, p.display_size, p.purpose) for p in scene.planes])
-    target.check_space(estimate_cache(shapes, colliders, text=target.partial.suffix == ".usda"), samples,
-                       scene.output.save_every)
-    return PointCacheWriter(
-        target.partial, shapes, fps=scene.simulation.fps, up_axis=scene.output.up_axis,
+    cache_format = format_for(target.partial, override)
+    request = CacheRequest(
+        shapes, fps=scene.simulation.fps, colliders=colliders, up_axis=scene.output.up_axis,
         meters_per_unit=scene.output.meters_per_unit, save_every=scene.output.save_every,
         metadata={"generator": f"warp-verlet {__version__}", "scene": scene.source, "device": str(sim.device)},
-        colliders=colliders, torn_faces=scene.output.torn_faces, before_save=target.before_save,
+        torn_faces=scene.output.torn_faces, before_save=target.before_save,
         override_asset=scene.cloths[0].mesh.mesh.source.file if override else None,
     )
+    target.check_space(cache_format.estimate(request, target.partial), samples, scene.output.save_every)
+    return cache_format.open(target.partial, request)
 
 
 def cached_shape(topology, spec, override: bool, tears: bool = False):

@@ -28,6 +28,7 @@ from .scene_keys import (  # the table reader and value parsers, under the names
     non_negative as _non_negative, per_element as _per_element, prim_name as _prim_name, real, record_key, text,
     toml_list as _toml_list, vector,
 )
+from .writer_registry import is_output_suffix, suffixes_text  # the output formats' suffixes (no pxr, no warp)
 
 if TYPE_CHECKING:  # the mesh modules (numpy) are imported only by a scene that has a mesh cloth
     from .mesh_scene import MeshSpec
@@ -269,8 +270,8 @@ def _read_output(file: str, data: Any, scene_path: Path) -> OutputSettings:
         if "\0" in text(value, key):
             raise _Invalid("expected a path without NUL characters")
         p = Path(value)
-        if p.suffix not in (".usd", ".usdc", ".usda"):
-            raise _Invalid(f"expected a path ending in .usd, .usdc or .usda, got {value!r}")
+        if not is_output_suffix(p.suffix):  # a registered writer's (writer_registry.py)
+            raise _Invalid(f"expected a path ending in {suffixes_text()}, got {value!r}")
         return p
 
     settings = OutputSettings(

@@ -26,6 +26,8 @@ as ``over``s at each cloth's own prim path in that asset, which it sublayers: op
 simulation on the asset with its materials and hierarchy. It has no colliders and takes the asset's upAxis,
 metersPerUnit and defaultPrim.
 
+``USD_POINT_CACHE`` is the format writer_registry.py opens for the suffixes .usd, .usda and .usdc.
+
 This module and ``preview.py`` import ``pxr``; neither imports warp: writing, checking and previewing a cache
 must not pull in the simulator.
 """
@@ -43,11 +45,12 @@ from pxr import Sdf, Tf, Usd, UsdGeom, UsdValidation, Vt
 
 from .errors import ArgumentError, OutputError, StateError, usd_cause, usd_diagnostics
 from .faces import Faces, as_faces
+from .output_file import estimate_cache
+from .writer_registry import USD_SUFFIXES, CacheRequest
 
 WORLD_PATH = Sdf.Path("/World")
 # A rope is drawn as a tube 5 mm across, expressed in stage units so it looks the same at any scale.
 ROPE_WIDTH_METRES = 0.005
-_EXTENSIONS = (".usd", ".usda", ".usdc")
 
 
 @dataclass(frozen=True)
@@ -137,8 +140,8 @@ def _check_shapes(shapes: Sequence[CachedShape]) -> None:
 
 
 def _create_stage(path: Path) -> Usd.Stage:
-    if path.suffix not in _EXTENSIONS:
-        raise OutputError(f"cannot write USD cache {path}: the file name must end in {', '.join(_EXTENSIONS)}")
+    if path.suffix not in USD_SUFFIXES:
+        raise OutputError(f"cannot write USD cache {path}: the file name must end in {', '.join(USD_SUFFIXES)}")
     # USD's resolver silently creates missing parent directories; a typo in --output should fail instead.
     parent = path.parent
     if not parent.is_dir():
@@ -566,3 +569,47 @@ def _check_points(prim: UsdGeom.PointBased, n_points: int, time_range: tuple[flo
         if len(pts) and ((pts < lo - tol).any() or (pts > hi + tol).any()):
             problems.append(f"{name}: extent at time {t} does not contain all points")
     return problems
+
+
+def complete_cache_problems(path: str | os.PathLike[str], frames: int) -> list[str]:
+    """Why the cache at ``path`` is not a complete cache of ``frames`` frames (empty when it is): it must open,
+    pass ``validate_cache``, span time codes 0 .. frames, and hold points at every one of them."""
+    problems = validate_cache(path)
+    if problems:
+        return problems
+    with usd_diagnostics():  # validate_cache said what matters of them
+        stage = Usd.Stage.Open(str(path))
+    if (stage.GetStartTimeCode(), stage.GetEndTimeCode()) != (0, frames):
+        return [f"{path}: frames {stage.GetStartTimeCode():g} .. {stage.GetEndTimeCode():g}, expected 0 .. {frames}"]
+    shapes = [p for p in stage.Traverse() if p.IsA(UsdGeom.PointBased) and UsdGeom.PointBased(p).GetPointsAttr().GetNumTimeSamples()]
+    if not shapes:
+        return [f"{path}: no animated points"]
+    for prim in shapes:
+        n = UsdGeom.PointBased(prim).GetPointsAttr().GetNumTimeSamples()
+        if n != frames + 1:
+            return [f"{path}: {prim.GetPath()} has {n} frames of points, expected {frames + 1}"]
+    return []
+
+
+class UsdPointCache:
+    """The USD point cache format (writer_registry.CacheFormat): a PointCacheWriter, or with the request's
+    ``override_asset`` an override layer over that asset (a mode of the same writer: see writer_registry)."""
+
+    name = "USD point cache"
+    overrides = True
+
+    def open(self, path: Path, request: CacheRequest) -> PointCacheWriter:
+        return PointCacheWriter(
+            path, request.shapes, fps=request.fps, up_axis=request.up_axis, meters_per_unit=request.meters_per_unit,
+            save_every=request.save_every, start_frame=request.start_frame, metadata=request.metadata,
+            colliders=request.colliders, torn_faces=request.torn_faces, before_save=request.before_save,
+            override_asset=request.override_asset)
+
+    def estimate(self, request: CacheRequest, path: Path):
+        return estimate_cache(request.shapes, request.colliders, text=Path(path).suffix == ".usda")
+
+    def problems(self, path: Path, frames: int) -> list[str]:
+        return complete_cache_problems(path, frames)
+
+
+USD_POINT_CACHE = UsdPointCache()
