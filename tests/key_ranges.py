@@ -19,9 +19,9 @@ class Range(NamedTuple):
     integer: bool
 
 
-def _number(text: str) -> float:
-    value = float(text.replace(" ", ""))
-    return int(value) if value.is_integer() else value
+def _number(text: str, integer: bool) -> float:
+    value = float(text.replace(" ", ""))  # "10 000"
+    return int(value) if integer else value
 
 
 def is_scalar_number(key: Key) -> bool:
@@ -38,9 +38,9 @@ def documented_range(key: Key) -> Range:
     if clause == "finite":
         return Range(None, False, None, False, integer)
     if m := re.fullmatch(rf"(>|≥|>=) ({NUMBER})", clause):
-        return Range(_number(m[2]), m[1] == ">", None, False, integer)
+        return Range(_number(m[2], integer), m[1] == ">", None, False, integer)
     if m := re.fullmatch(rf"({NUMBER}) … ({NUMBER})", clause):
-        return Range(_number(m[1]), False, _number(m[2]), False, integer)
+        return Range(_number(m[1], integer), False, _number(m[2], integer), False, integer)
     if m := re.fullmatch(rf"({NUMBER}) (<|≤) x (<|≤) ({NUMBER})", clause):
-        return Range(_number(m[1]), m[2] == "<", _number(m[4]), m[3] == "<", integer)
+        return Range(_number(m[1], integer), m[2] == "<", _number(m[4], integer), m[3] == "<", integer)
     raise ValueError(f"{key.name}: no range in its allowed text {key.allowed!r}")

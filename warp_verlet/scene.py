@@ -256,7 +256,7 @@ SIMULATION_KEYS: tuple[Key, ...] = (
             "\"A budget from `target_stretch`\" below. Not with `substeps`."),
     Key("max_substeps", integer(1, 100_000), 1024, "integer", "substeps", allowed="1 … 100 000",
         doc="The most substeps per frame a `target_stretch` budget may choose."),
-    Key("multilevel", _boolean, False, "bool",
+    Key("multilevel", _boolean, False, "boolean",
         doc="A coarse-to-fine pass over each grid's hierarchy before every substep's sweeps (see \"Multilevel pass\" "
             "below). Not with `tear_threshold` or soft structural sticks."),
     Key("multilevel_sweeps", integer(1, 1000), 1, "integer", "sweeps", allowed="1 … 1000",

@@ -265,6 +265,7 @@ def choice(options: tuple[str, ...]):
             raise Invalid(f"expected one of {', '.join(repr(o) for o in options)}, got {describe(value)}")
         return value
 
+    parse.options = options  # the choices, for the fuzz tests' strings
     return parse
 
 
