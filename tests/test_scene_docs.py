@@ -188,3 +188,69 @@ def test_the_documented_range_is_the_range_the_parser_enforces(key):
         assert accepted(end) != is_open, (key.name, end)
         assert not accepted(step(end, outward)), (key.name, end)
         assert accepted(step(end, -outward)), (key.name, end)
+
+
+# ---------------------------------------------------------------------------------------------- declarations
+
+
+def test_a_key_that_needs_context_is_bound_first():
+    """pins and particle_masses need the grid: their declaration makes the parser from (rows, cols)."""
+    pins = scene._GRID["pins"]
+    with pytest.raises(TypeError, match="needs its context"):
+        pins.take(scene._Table("k.toml", "cloth[0]", {"pins": [0]}))
+    table = scene._Table("k.toml", "cloth[0]", {"pins": ["bottom-right", 1]})
+    assert pins.bound(3, 4).take(table) == ((0, 1), (2, 3))
+    with pytest.raises(TypeError, match="takes no context"):
+        SIMULATION_KEYS[0].bound(3, 4)
+    with pytest.raises(TypeError, match="exactly one of parse and bind"):
+        Key("both", real(), bind=lambda: real())
+    with pytest.raises(TypeError, match="exactly one of parse and bind"):
+        Key("neither")
+
+
+EXTRA = Key("angle_limit", real(0.0, 180.0), None, "number", "degrees", default_text="absent: no limit",
+            allowed="0 … 180", doc="The largest angle between neighbouring faces.")
+
+
+@pytest.mark.parametrize("cloth", [{"resolution": [2, 3], "size": [1.0, 1.0]}, "mesh"], ids=["grid", "mesh"])
+def test_the_keys_of_constraint_kinds_land_in_the_cloths_options(tmp_path, monkeypatch, cloth):
+    """The seam for constraint kinds: a key cloth_keys_of_kinds() declares is taken from a grid and a mesh cloth
+    alike into ClothSpec.options, left out it is its default, a bad value is refused naming it, and without the
+    declaration it is an unknown key."""
+    if cloth == "mesh":
+        from mesh_files import grid_mesh, triangulated, write_obj
+
+        points, faces = grid_mesh(2, 3)
+        cloth = {"mesh": str(write_obj(tmp_path / "panel.obj", points, triangulated(faces)))}
+
+    def load(**extra):
+        return scene.parse_scene({"cloth": [{**cloth, **extra}]}, "k.toml", tmp_path / "k.toml").cloths[0]
+
+    with pytest.raises(scene.SceneError, match="cloth\\[0\\].angle_limit: unknown key"):
+        load(angle_limit=30.0)
+    assert load().options == {}
+    monkeypatch.setattr(scene, "cloth_keys_of_kinds", lambda: (EXTRA,))
+    spec = load(angle_limit=30)
+    assert spec.options == {"angle_limit": 30.0} and isinstance(spec.options["angle_limit"], float)
+    with pytest.raises(TypeError):
+        spec.options["angle_limit"] = 1.0  # read-only
+    assert load().options == {"angle_limit": None}
+    with pytest.raises(scene.SceneError, match="cloth\\[0\\].angle_limit: expected a number in \\[0.0, 180.0\\]"):
+        load(angle_limit=181.0)
+
+
+def test_cloth_options_are_read_only_and_survive_pickling():
+    """A sweep's process pool pickles scenes: ClothSpec.options must pickle (a mappingproxy does not)."""
+    import pickle
+
+    from warp_verlet.scene_keys import FrozenMapping
+
+    options = FrozenMapping({"angle_limit": 30.0})
+    spec = ClothSpec("c", (2, 2), (1.0, 1.0), options=options)
+    assert pickle.loads(pickle.dumps(spec)).options == {"angle_limit": 30.0}
+    assert ClothSpec("c", (2, 2), (1.0, 1.0)).options == {} == FrozenMapping()
+    with pytest.raises(TypeError):
+        options["angle_limit"] = 1.0
+    with pytest.raises(AttributeError):
+        options._items = {}
+    assert dict(options) == {"angle_limit": 30.0} and dict({**options, "x": 1}) == {"angle_limit": 30.0, "x": 1}
