@@ -4,7 +4,8 @@ scene.py reads the keys every cloth has and calls :func:`read_mesh_keys`, then, 
 :func:`load_mesh`. The mesh file is read there, welded and checked (warp_verlet/mesh_io.py, mesh_cloth.py),
 so that a bad mesh is one SceneError naming the scene file, the key and the mesh's problem, from
 ``warp-verlet validate`` as from ``run``. Pins and particle masses are resolved to particle indices here
-too: nothing downstream sees vertex indices, boxes or primvar names. docs/scenes.md documents every key.
+too: nothing downstream sees vertex indices, boxes or primvar names. Each key is declared once in
+:data:`MESH_KEYS` (scene_keys.Key): docs/scenes.md's mesh table is written from it (docs/make_scene_tables.py).
 """
 
 from __future__ import annotations
@@ -16,10 +17,9 @@ from typing import Any
 from .errors import SceneError
 from .mesh_cloth import MASS_DISTRIBUTIONS, ClothMesh, MeshError, prepare
 from .mesh_io import read_mesh, transform_matrix
-from .scene_keys import (ARRAY, NUMBER, Invalid, Table, accepts, any_real, choice, describe, int_text, per_element,
-                         real, text, vector)
+from .scene_keys import (ARRAY, NUMBER, Invalid, Key, Table, accepts, any_real, choice, describe, int_text,
+                         per_element, real, text, vector)
 
-GRID_KEYS = ("resolution", "size", "origin", "orientation")
 _positive = per_element(real(0.0, lo_open=True))
 _point = per_element(vector(3, any_real))  # an error names the element's own key
 
@@ -76,6 +76,31 @@ def _mass_items(value: Any, key: str) -> tuple[tuple[int, float, str], ...]:
     return tuple(out)
 
 
+MESH_KEYS: tuple[Key, ...] = (  # in the order they are read, and of their table in docs/scenes.md
+    Key("mesh", text, type="string",
+        allowed="a file trimesh reads (`.obj`, `.ply`, `.stl`, `.off`, `.glb`, `.gltf`, …) or a USD file (`.usd`, "
+                "`.usda`, `.usdc`, `.usdz`)",
+        doc="The mesh, relative to the scene file's directory."),
+    Key("prim", text, None, "string", default_text="required for USD, refused otherwise",
+        allowed='an absolute prim path, e.g. `"/Set/Cloth"`', doc="The Mesh prim to read."),
+    Key("translate", vector(3, any_real), (0.0, 0.0, 0.0), "[x, y, z] numbers", "m", allowed="finite",
+        doc="Moves the mesh, after `rotate`."),
+    Key("rotate", vector(3, any_real), (0.0, 0.0, 0.0), "[x, y, z] numbers", "degrees", allowed="finite",
+        doc="Rotations about the fixed X, then Y, then Z axes, after `scale`."),
+    Key("scale", _scale, (1.0, 1.0, 1.0), "number or [x, y, z]", default_text="`1.0`", allowed="> 0",
+        doc="Scales the mesh first."),
+    Key("weld_distance", real(0.0), None, "number", "m", default_text="10⁻⁶ × the mesh's bounding-box diagonal",
+        allowed="≥ 0 (0: exact duplicates only)",
+        doc="Vertices at most this far apart (after the transform) become one particle."),
+    Key("pins", _pin_items, (), "array", allowed="see below", doc="Particles held fixed."),
+    Key("particle_masses", _mass_items, (), "array of [vertex, kg]", "–, kg",
+        allowed="vertex in the mesh, each particle once", doc="Overrides of single particles' mass."),
+    Key("mass_distribution", choice(MASS_DISTRIBUTIONS), "area", "string", allowed='`"area"`, `"even"`',
+        doc='`"area"`: each face\'s area is split evenly among its corners, so a particle carries the cloth around '
+            'it. `"even"`: every particle the same, as on a grid.'),
+)
+
+
 @dataclass(frozen=True, eq=False)
 class MeshSpec:
     """A cloth's mesh, read, welded and checked, and what the scene says about its particles, resolved to
@@ -101,21 +126,17 @@ class MeshKeys:
 
 
 def read_mesh_keys(t: Table, scene_dir: Path) -> MeshKeys:
-    """Take the mesh keys from a cloth's table (refusing a grid's), leaving the keys every cloth has."""
-    for key in GRID_KEYS:
-        if key in t.data:
-            raise t.error(key, f"a mesh cloth takes its particles from the mesh: remove {key} (or mesh, for a grid)")
-    relative = t.take("mesh", text)
+    """Take the mesh keys from a cloth's table, leaving the keys every cloth has (scene.py refuses a grid's)."""
+    values = {key.name: key.take(t) for key in MESH_KEYS}
+    relative = values["mesh"]
     return MeshKeys(
         path=Path(relative) if Path(relative).is_absolute() else scene_dir / relative,
-        prim=t.take("prim", text, None),
-        transform=transform_matrix(t.take("translate", vector(3, any_real), (0.0, 0.0, 0.0)),
-                                   t.take("rotate", vector(3, any_real), (0.0, 0.0, 0.0)),
-                                   t.take("scale", _scale, (1.0, 1.0, 1.0))),
-        weld_distance=t.take("weld_distance", real(0.0), None),
-        pins=t.take("pins", _pin_items, ()),
-        particle_masses=t.take("particle_masses", _mass_items, ()),
-        mass_distribution=t.take("mass_distribution", choice(MASS_DISTRIBUTIONS), "area"),
+        prim=values["prim"],
+        transform=transform_matrix(values["translate"], values["rotate"], values["scale"]),
+        weld_distance=values["weld_distance"],
+        pins=values["pins"],
+        particle_masses=values["particle_masses"],
+        mass_distribution=values["mass_distribution"],
     )
 
 

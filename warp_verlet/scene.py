@@ -3,7 +3,14 @@
 This is the first stage of the one-way data flow
 (scene file -> validated scene -> device state -> step loop -> writer). Nothing downstream ever
 sees raw TOML: every key is checked here, once, and every failure is one :class:`SceneError` naming
-the file, the key and what was expected. ``docs/scenes.md`` documents every key with unit and default.
+the file, the key and what was expected.
+
+Every key is declared once, as a :class:`~warp_verlet.scene_keys.Key` in :data:`SIMULATION_KEYS`,
+:data:`OUTPUT_KEYS`, :data:`CLOTH_KEYS` (every cloth), :data:`GRID_KEYS` (a grid cloth) and
+``mesh_scene.MESH_KEYS`` (a mesh cloth): its parser, default, type, unit, range and meaning. The loader takes each
+key through its declaration, and ``docs/scenes.md``'s key tables are written from the same declarations
+(``python docs/make_scene_tables.py``; tests/test_scene_docs.py fails when they are out of date). The keys that
+constraint kinds add to a cloth are taken at one place, :func:`cloth_keys_of_kinds`, into ``ClothSpec.options``.
 """
 
 from __future__ import annotations
@@ -13,7 +20,6 @@ import os
 import sys
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from types import MappingProxyType
 from typing import TYPE_CHECKING, Any, Callable, Mapping
 
 if sys.version_info >= (3, 11):
@@ -23,7 +29,7 @@ else:  # pragma: no cover - exercised on Python 3.10 only
 
 from .errors import SceneError
 from .scene_keys import (  # the table reader and value parsers, under the names this module has always used
-    ARRAY, STRING, TABLE, Invalid as _Invalid, Table as _Table, accepts, any_real as _any_real,
+    ARRAY, STRING, TABLE, FrozenMapping, Invalid as _Invalid, Key, Table as _Table, accepts, any_real as _any_real,
     boolean as _boolean, choice, describe as _describe, int_text as _int_text, integer,
     non_negative as _non_negative, per_element as _per_element, prim_name as _prim_name, real, record_key, text,
     toml_list as _toml_list, vector,
@@ -112,8 +118,8 @@ class ClothSpec:
     tether_scale: float = 1.0  # tether length / rest-pose distance to the pin (> 1: slack for a soft cloth)
     mesh: "MeshSpec | None" = None  # a mesh cloth (then pins and particle_masses above are empty)
     options: Mapping[str, Any] = field(default_factory=lambda: kind_options({}))
-    """The values of the keys the constraint kinds declare (warp_verlet/constraints/), by key name (each key's
-    default where the scene does not give it), resolved by each kind's ``check_cloth``; read-only."""
+    """The values of the keys the constraint kinds declare (cloth_keys_of_kinds), by key name (each key's default
+    where the scene does not give it), as each kind's ``check_cloth`` resolved them; read-only."""
 
     @property
     def uses_tethers(self) -> bool:
@@ -223,32 +229,60 @@ class Scene:
 
 
 
+# ------------------------------------------------------------------------------------------------------------
+# The keys of [simulation] and [output], in the order of their tables in docs/scenes.md. The dataclasses above
+# hold the same defaults for settings built in code (tests/test_scene_docs.py checks that they agree).
+
+SIMULATION_KEYS: tuple[Key, ...] = (
+    Key("fps", real(0.0, lo_open=True), 60.0, "number", "Hz", allowed="> 0",
+        doc="Frames per second of the output. It is also the rate of the USD time codes."),
+    Key("frames", integer(1), 120, "integer", "frames", allowed="≥ 1",
+        doc="Number of frames simulated after the initial pose."),
+    Key("substeps", integer(1, 10_000), 4, "integer", allowed="1 … 10 000",
+        doc="Fixed physics steps per frame. The step is `dt = 1 / (fps × substeps)` s."),
+    Key("iterations", integer(0, 100_000), 8, "integer", allowed="0 … 100 000",
+        doc="Number of constraint relaxation sweeps per substep (K below). With 0, the sticks are not solved."),
+    Key("gravity", vector(3, _any_real), (0.0, -9.81, 0.0), "[x, y, z] numbers", "m/s²", allowed="finite",
+        doc="Uniform acceleration applied to every free particle."),
+    Key("wind", vector(3, _any_real), (0.0, 0.0, 0.0), "[x, y, z] numbers", "m/s²", allowed="finite",
+        doc="Uniform acceleration added to `gravity` (see below)."),
+    Key("damping", real(0.0), 0.0, "number", "1/s", allowed="≥ 0",
+        doc="Rate at which the implicit velocity decays: it falls as `exp(-damping × t)`, whatever `substeps` is. "
+            "0 means no damping (see below)."),
+    Key("relaxation", choice(RELAXATIONS), "coloured", "string", allowed='`"coloured"`, `"jacobi"`',
+        doc="How the sticks are relaxed (see below): graph-coloured Gauss-Seidel, or Jacobi averaging. (`solver`, "
+            "its old name, is an error that names it.)"),
+    Key("target_stretch", real(0.0, 1.0, lo_open=True, hi_open=True), None, "number", "fraction",
+        default_text="none", allowed="0 < x < 1",
+        doc="Choose the substeps frame by frame to keep the RMS structural stretch under this (0.01 = 1 %); see "
+            "\"A budget from `target_stretch`\" below. Not with `substeps`."),
+    Key("max_substeps", integer(1, 100_000), 1024, "integer", "substeps", allowed="1 … 100 000",
+        doc="The most substeps per frame a `target_stretch` budget may choose."),
+    Key("multilevel", _boolean, False, "boolean",
+        doc="A coarse-to-fine pass over each grid's hierarchy before every substep's sweeps (see \"Multilevel pass\" "
+            "below). Not with `tear_threshold` or soft structural sticks."),
+    Key("multilevel_sweeps", integer(1, 1000), 1, "integer", "sweeps", allowed="1 … 1000",
+        doc="Sweeps of each coarse level per substep."),
+    Key("max_dt_ratio", real(1.0), 2.0, "number", allowed="≥ 1",
+        doc="Upper limit on `dt / dt_prev` in the time-step-corrected Verlet update."),
+    Key("max_frame_time", real(0.0, lo_open=True), 0.1, "number", "s", allowed="> 0",
+        doc="Upper limit on the time banked by `Simulator.advance` (see below)."),
+    Key("position_bound", real(0.0, lo_open=True), 1.0e4, "number", "m", default_text="`1.0e4`", allowed="> 0",
+        doc="Divergence guard: a coordinate with \\|x\\| above this value stops the run."),
+    Key("precision", choice(PRECISIONS), "auto", "string", allowed='`"auto"`, `"float32"`, `"float64"`',
+        doc="Float type of the particle positions (see *The smallest step* below). `\"auto\"`: float32, unless the "
+            "scene's `dt` is below the float32 limit, then float64."),
+)
+
+
 def _read_simulation(file: str, data: Any) -> SimulationSettings:
     t = _Table(file, "simulation", data)
-    d = SimulationSettings()
     if "drag" in t.data:
         raise t.error("drag", _drag_moved(t.data))
     if "solver" in t.data:
         raise t.error("solver", 'is renamed relaxation (the scheme that relaxes the sticks): write relaxation = '
                       '"coloured" (graph-coloured Gauss-Seidel) or "jacobi"')
-    settings = SimulationSettings(
-        fps=t.take("fps", real(0.0, lo_open=True), d.fps),
-        frames=t.take("frames", integer(1), d.frames),
-        substeps=t.take("substeps", integer(1, 10_000), d.substeps),
-        iterations=t.take("iterations", integer(0, 100_000), d.iterations),
-        gravity=t.take("gravity", vector(3, _any_real), d.gravity),
-        wind=t.take("wind", vector(3, _any_real), d.wind),
-        damping=t.take("damping", real(0.0), d.damping),
-        relaxation=t.take("relaxation", choice(RELAXATIONS), d.relaxation),
-        multilevel=t.take("multilevel", _boolean, d.multilevel),
-        multilevel_sweeps=t.take("multilevel_sweeps", integer(1, 1000), d.multilevel_sweeps),
-        max_dt_ratio=t.take("max_dt_ratio", real(1.0), d.max_dt_ratio),
-        max_frame_time=t.take("max_frame_time", real(0.0, lo_open=True), d.max_frame_time),
-        position_bound=t.take("position_bound", real(0.0, lo_open=True), d.position_bound),
-        target_stretch=t.take("target_stretch", real(0.0, 1.0, lo_open=True, hi_open=True), None),
-        max_substeps=t.take("max_substeps", integer(1, 100_000), d.max_substeps),
-        precision=t.take("precision", choice(PRECISIONS), d.precision),
-    )
+    settings = SimulationSettings(**{key.name: key.take(t) for key in SIMULATION_KEYS})
     t.finish()
     if settings.target_stretch is not None:
         if "substeps" in t.data:
@@ -262,29 +296,44 @@ def _read_simulation(file: str, data: Any) -> SimulationSettings:
     return settings
 
 
+@accepts(STRING)
+def _usd_path(value: Any, key: str) -> Path:
+    if "\0" in text(value, key):
+        raise _Invalid("expected a path without NUL characters")
+    p = Path(value)
+    if not is_output_suffix(p.suffix):  # a registered writer's (writer_registry.py)
+        raise _Invalid(f"expected a path ending in {suffixes_text()}, got {value!r}")
+    return p
+
+
+OUTPUT_KEYS: tuple[Key, ...] = (
+    # None: named after the scene file (_read_output)
+    Key("path", _usd_path, None, "string", default_text='`"<scene stem>.usdc"`',
+        allowed="ends in a registered output suffix (`.usd`, `.usda` or `.usdc`)", doc="Where the USD point cache is written."),
+    Key("save_every", integer(1), 10, "integer", "frames", allowed="≥ 1",
+        doc="How often the writer saves the layer to disk."),
+    Key("up_axis", choice(UP_AXES), "Y", "string", allowed='`"Y"`, `"Z"`', doc="The stage's `upAxis` metadata."),
+    Key("meters_per_unit", real(0.0, lo_open=True), 1.0, "number", "m", allowed="> 0",
+        doc="The stage's `metersPerUnit` metadata."),
+    Key("kind", choice(OUTPUT_KINDS), "cache", "string", allowed='`"cache"`, `"override"`',
+        doc="A standalone point cache, or an override layer over the USD asset the cloths came from (see below)."),
+    # None: chosen by kind (_read_output)
+    Key("torn_faces", choice(TORN_FACES), None, "string",
+        default_text='`"remove"` for a cache, `"holes"` for an override', allowed='`"remove"`, `"holes"`',
+        doc="How a tearing cloth shows its torn faces (see below)."),
+)
+
+
 def _read_output(file: str, data: Any, scene_path: Path) -> OutputSettings:
     t = _Table(file, "output", data)
-
-    @accepts(STRING)
-    def usd_path(value: Any, key: str) -> Path:
-        if "\0" in text(value, key):
-            raise _Invalid("expected a path without NUL characters")
-        p = Path(value)
-        if not is_output_suffix(p.suffix):  # a registered writer's (writer_registry.py)
-            raise _Invalid(f"expected a path ending in {suffixes_text()}, got {value!r}")
-        return p
-
-    settings = OutputSettings(
-        path=t.take("path", usd_path, Path(scene_path.stem + ".usdc")),
-        save_every=t.take("save_every", integer(1), 10),
-        up_axis=t.take("up_axis", choice(UP_AXES), "Y"),
-        meters_per_unit=t.take("meters_per_unit", real(0.0, lo_open=True), 1.0),
-        kind=t.take("kind", choice(OUTPUT_KINDS), "cache"),
-    )
-    # A cache leaves torn faces out of the topology, which every DCC shows (Blender ignores holeIndices); an
-    # override layer keeps the asset's faces, whose indices its GeomSubsets and material bindings use.
-    settings = replace(settings, torn_faces=t.take("torn_faces", choice(TORN_FACES),
-                                                   "holes" if settings.kind == "override" else "remove"))
+    values = {key.name: key.take(t) for key in OUTPUT_KEYS}
+    if values["path"] is None:
+        values["path"] = Path(scene_path.stem + ".usdc")
+    if values["torn_faces"] is None:
+        # A cache leaves torn faces out of the topology, which every DCC shows (Blender ignores holeIndices); an
+        # override layer keeps the asset's faces, whose indices its GeomSubsets and material bindings use.
+        values["torn_faces"] = "holes" if values["kind"] == "override" else "remove"
+    settings = OutputSettings(**values)
     t.finish()
     if settings.kind == "override":
         for key in ("up_axis", "meters_per_unit"):
@@ -390,35 +439,112 @@ def _read_particle_masses(value: Any, key: str, rows: int, cols: int) -> tuple[t
     return tuple((r, c, kg) for (r, c), kg in out.items())
 
 
+# ------------------------------------------------------------------------------------------------------------
+# The keys of a [[cloth]]: those every cloth has, those of a grid, and (mesh_scene.MESH_KEYS) those of a mesh.
+
+CLOTH_KEYS: tuple[Key, ...] = (  # every cloth, grid or mesh
+    # None: cloth<i>, by the cloth's place in the file (_read_cloth)
+    Key("name", _prim_name, None, "string", default_text='`"cloth<i>"` (`cloth0`, `cloth1`, …)',
+        allowed="letters, digits and `_`, not starting with a digit; unique among the cloths and the colliders; "
+                "not `Colliders`",
+        doc="The USD prim name of this cloth's mesh."),
+    Key("mass", real(0.0, lo_open=True), 1.0, "number", "kg",
+        allowed="> 0; each particle's inverse mass a normal float32 (see the value rules)",
+        doc="Total mass. A grid spreads it evenly: each particle carries `mass / (rows × cols)`; a mesh spreads it "
+            "as `mass_distribution` says."),
+    Key("sticks", _read_sticks, ("structural",), "array of family names",
+        allowed='`"structural"`, `"shear"`, `"bend"`; at least one, each at most once',
+        doc="Which stick families to build (see [stick families](#stick-families))."),
+    Key("compliance", _read_compliance, {}, "table of family = number", "m/N", default_text="`{}`: every stick rigid",
+        allowed="families listed in `sticks`; ≥ 0, finite; coloured solver only",
+        doc="XPBD compliance of a soft family: how far its sticks stretch per newton of tension. 0 means rigid."),
+    Key("tear_threshold", real(1.0, lo_open=True), None, "number", "– (a ratio of rest length)",
+        default_text="absent: the cloth never tears", allowed="> 1, finite",
+        doc="A stick stretched beyond `tear_threshold × L` is removed (see [tearing](#tearing))."),
+    # None: ClothSpec.uses_tethers decides
+    Key("tethers", _boolean, None, "boolean",
+        default_text="on for a grid with pins and no `tear_threshold`, else off (on a mesh: off unless "
+                     "asked, see [mesh cloth](#mesh-cloth))",
+        allowed="`true` needs pins",
+        doc="Long-range attachments (see [tethers](#tethers)): each free particle stays within its rest-pose "
+            "distance of its nearest one or two pins."),
+    Key("tether_scale", real(1.0), 1.0, "number", "– (a ratio of the rest-pose distance)", allowed="≥ 1, finite",
+        doc="Slack: a tether allows `tether_scale ×` the rest distance, for a cloth meant to stretch."),
+)
+
+GRID_KEYS: tuple[Key, ...] = (  # a grid cloth: its particles from resolution and size
+    Key("resolution", vector(2, _per_element(integer(1, 1 << 15))), type="[rows, cols] integers", unit="particles",
+        allowed="each 1 … 32 768; at least 2 particles in all", doc="Grid size in particles."),
+    Key("size", vector(2, _non_negative), type="[along rows, along cols] numbers", unit="m",
+        allowed="≥ 0; > 0 on an axis with more than one particle",
+        doc="Extent of the grid: first the distance from the first row to the last, then from the first column to "
+            "the last."),
+    Key("origin", vector(3, _any_real), (0.0, 0.0, 0.0), "[x, y, z] numbers", "m", allowed="finite",
+        doc="Position of particle 0 (row 0, column 0)."),
+    Key("orientation", choice(ORIENTATIONS), "vertical", "string", allowed='`"vertical"`, `"horizontal"`',
+        doc="Which way the rows run (see the grid conventions)."),
+    Key("pins", default=(), type="array", allowed="names, indices or [row, col] pairs inside the grid",
+        doc="Particles held fixed in place for the whole run (see [pins](#pins)).",
+        bind=lambda rows, cols: accepts(ARRAY)(lambda v, k: _read_pins(v, k, rows, cols))),
+    Key("particle_masses", default=(), type="array of [row, col, kg]", unit="–, –, kg",
+        allowed="row, col inside the grid, each particle at most once; kg > 0",
+        doc="Per-particle overrides of the even share: a heavy weight at the hem, a light chain with a heavy end. A "
+            "pinned particle stays pinned whatever its mass.",
+        bind=lambda rows, cols: accepts(ARRAY)(lambda v, k: _read_particle_masses(v, k, rows, cols))),
+)
+
+_CLOTH = {key.name: key for key in CLOTH_KEYS}
+_GRID = {key.name: key for key in GRID_KEYS}
+
+
+def cloth_keys_of_kinds() -> tuple[Key, ...]:
+    """The [[cloth]] keys that constraint kinds declare (the modules of warp_verlet/constraints/), taken from every
+    cloth, grid or mesh, after its own keys; their values land in ``ClothSpec.options`` by key name. This is the
+    one place the loader asks for them: empty while no kind declares a key. A kind's keys are documented by its
+    own table in docs/scenes.md, written from the same declarations (docs/make_scene_tables.py). Imported here,
+    not at the top: the kinds need numpy, which ``import warp_verlet`` does without."""
+    from .constraints import cloth_keys
+
+    return cloth_keys()
+
+
+def kind_options(values: dict[str, Any]) -> FrozenMapping:
+    """A cloth's options: ``values`` over the defaults of every key the constraint kinds declare."""
+    return FrozenMapping({**{key.name: key.default for key in cloth_keys_of_kinds()}, **values})
+
+
+def _read_options(t: _Table) -> FrozenMapping:
+    return kind_options({key.name: key.take(t) for key in cloth_keys_of_kinds()})
+
+
 def _read_cloth(file: str, index: int, data: Any, scene_dir: Path) -> ClothSpec:
     t = _Table(file, f"cloth[{index}]", data)
     if isinstance(data, dict) and "mesh" in data:
         return _read_mesh_cloth(t, index, scene_dir)
 
-    name = t.take("name", _prim_name, f"cloth{index}")
-    rows, cols = t.take("resolution", vector(2, _per_element(integer(1, 1 << 15))))
+    name = _CLOTH["name"].take(t)
+    rows, cols = _GRID["resolution"].take(t)
     if rows * cols < 2:
         raise t.error("resolution", "expected at least 2 particles, got a 1 x 1 grid")
-    size = t.take("size", vector(2, _non_negative))
+    size = _GRID["size"].take(t)
     for axis, (n, s) in enumerate(zip((rows, cols), size)):
         if n > 1 and s <= 0.0:
             raise t.error(f"size[{axis}]", f"expected a length > 0 m along an axis with {n} particles, got {s}")
     spec = ClothSpec(
-        name=name,
+        name=f"cloth{index}" if name is None else name,
         resolution=(rows, cols),
         size=size,
-        origin=t.take("origin", vector(3, _any_real), (0.0, 0.0, 0.0)),
-        orientation=t.take("orientation", choice(ORIENTATIONS), "vertical"),
-        mass=t.take("mass", real(0.0, lo_open=True), 1.0),
-        sticks=t.take("sticks", _read_sticks, ("structural",)),
-        compliance=t.take("compliance", _read_compliance, {}),
-        pins=t.take("pins", accepts(ARRAY)(lambda v, k: _read_pins(v, k, rows, cols)), ()),
-        tear_threshold=t.take("tear_threshold", real(1.0, lo_open=True), None),
-        particle_masses=t.take("particle_masses", accepts(ARRAY)(lambda v, k: _read_particle_masses(v, k, rows, cols)),
-                               ()),
-        tethers=t.take("tethers", _boolean, None),
-        tether_scale=t.take("tether_scale", real(1.0), 1.0),
-        options=_take_kind_keys(t),
+        origin=_GRID["origin"].take(t),
+        orientation=_GRID["orientation"].take(t),
+        mass=_CLOTH["mass"].take(t),
+        sticks=_CLOTH["sticks"].take(t),
+        compliance=_CLOTH["compliance"].take(t),
+        pins=_GRID["pins"].bound(rows, cols).take(t),
+        tear_threshold=_CLOTH["tear_threshold"].take(t),
+        particle_masses=_GRID["particle_masses"].bound(rows, cols).take(t),
+        tethers=_CLOTH["tethers"].take(t),
+        tether_scale=_CLOTH["tether_scale"].take(t),
+        options=_read_options(t),
     )
     t.finish()
     return check_cloth(t, spec)
@@ -429,38 +555,22 @@ def _read_mesh_cloth(t: _Table, index: int, scene_dir: Path) -> ClothSpec:
     and trimesh or pxr), the keys every cloth has here; the file is read once every key has been checked."""
     from . import mesh_scene
 
+    mesh_keys = {key.name for key in mesh_scene.MESH_KEYS}
+    for key in GRID_KEYS:
+        if key.name not in mesh_keys and key.name in t.data:
+            raise t.error(key.name, f"a mesh cloth takes its particles from the mesh: remove {key.name} (or mesh, for "
+                          "a grid)")
     request = mesh_scene.read_mesh_keys(t, scene_dir)
-    spec = ClothSpec(
-        name=t.take("name", _prim_name, f"cloth{index}"), resolution=None, size=None,
-        mass=t.take("mass", real(0.0, lo_open=True), 1.0),
-        sticks=t.take("sticks", _read_sticks, ("structural",)),
-        compliance=t.take("compliance", _read_compliance, {}),
-        tear_threshold=t.take("tear_threshold", real(1.0, lo_open=True), None),
-        tethers=t.take("tethers", _boolean, None),
-        tether_scale=t.take("tether_scale", real(1.0), 1.0),
-        options=_take_kind_keys(t),
-    )
+    values = {key.name: key.take(t) for key in CLOTH_KEYS}
+    if values["name"] is None:
+        values["name"] = f"cloth{index}"
+    spec = ClothSpec(resolution=None, size=None, **values, options=_read_options(t))
     t.finish()
     spec = replace(spec, mesh=mesh_scene.load_mesh(t, request))
     if spec.tear_threshold is not None and spec.mesh.mesh.non_manifold_edges:
         raise t.error("tear_threshold", f"tearing needs a manifold mesh (each edge beside at most two faces, to "
                       f"know which faces a torn edge opens), and {spec.mesh.mesh.non_manifold_edges} edges have more")
     return check_cloth(t, spec)
-
-
-def kind_options(values: dict[str, Any]) -> Mapping[str, Any]:
-    """A cloth's options: ``values`` over the defaults of every key the constraint kinds declare (imported here,
-    not at the top: numpy, which ``import warp_verlet`` does without)."""
-    from .constraints import cloth_keys
-
-    return MappingProxyType({**{key.name: key.default for key in cloth_keys()}, **values})
-
-
-def _take_kind_keys(t: _Table) -> Mapping[str, Any]:
-    """The ``[[cloth]]`` keys that the constraint kinds declare, each taken through its declaration."""
-    from .constraints import cloth_keys
-
-    return kind_options({key.name: key.take(t) for key in cloth_keys()})
 
 
 def check_cloth(t: _Table, spec: ClothSpec) -> ClothSpec:
@@ -529,7 +639,7 @@ def parse_scene(data: dict, file: str = "<scene>", scene_path: Path | None = Non
     scene_path = scene_path or Path(file)
     top = _Table(file, "", data)
     simulation = (top.take("simulation", accepts(TABLE)(lambda v, k: _read_simulation(file, v)), None)
-                  or SimulationSettings())
+                  or _read_simulation(file, {}))
     output = (top.take("output", accepts(TABLE)(lambda v, k: _read_output(file, v, scene_path)), None)
               or _read_output(file, {}, scene_path))
 

@@ -7,6 +7,10 @@ raises :class:`Invalid` with the problem (and, inside an array, the element's ow
 Each parser declares the TOML kinds it accepts (:func:`accepts`), and :func:`recorded_keys` lists every key a
 load asks for with those kinds, as the loader takes it: tests/test_scene_fuzz.py fuzzes each key so recorded, so
 that a key added to the loader is fuzzed without a hand-kept list.
+
+A scene key is declared once, as a :class:`Key` (its parser, default and documentation), in the module of what it
+configures; the loader takes it through the declaration, docs/make_scene_tables.py writes docs/scenes.md's tables
+from it, and :func:`recorded_keys` notes which declaration each key was taken through (``.declared``).
 """
 
 from __future__ import annotations
@@ -15,8 +19,8 @@ import contextvars
 import math
 import re
 from contextlib import contextmanager
-from dataclasses import dataclass
-from typing import Any, Callable, Iterator
+from dataclasses import dataclass, replace
+from typing import Any, Callable, Iterator, Mapping
 
 from .errors import SceneError
 
@@ -44,12 +48,21 @@ def accepts(*kinds: str | tuple[str, ...]):
 _RECORDING: contextvars.ContextVar[dict | None] = contextvars.ContextVar("recorded_keys", default=None)
 
 
+class RecordedKeys(dict):
+    """Dotted key as errors name it -> the kinds its parser accepts (None where the parser declares none); and in
+    ``declared``, dotted key -> the :class:`Key` it was taken through, for the keys taken by :meth:`Key.take`."""
+
+    def __init__(self):
+        super().__init__()
+        self.declared: dict[str, Key] = {}
+
+
 @contextmanager
-def recorded_keys() -> Iterator[dict[str, frozenset[str] | None]]:
+def recorded_keys() -> Iterator[RecordedKeys]:
     """Inside the block, every key a table is asked for (by :meth:`Table.take`, present or not, or by a parser
     through :func:`record_key`) is recorded: dotted key as errors name it -> the kinds its parser accepts
-    (None where the parser declares none)."""
-    keys: dict[str, frozenset[str] | None] = {}
+    (None where the parser declares none), and the declaration it was taken through (:class:`RecordedKeys`)."""
+    keys = RecordedKeys()
     token = _RECORDING.set(keys)
     try:
         yield keys
@@ -104,20 +117,68 @@ class Table:
 @dataclass(frozen=True)
 class Key:
     """One scene key, declared once where its kind lives: the loader takes it (:meth:`take`), docs/scenes.md's
-    tables are written from it, and the fuzz tests find it (:func:`recorded_keys`)."""
+    tables are written from it (docs/make_scene_tables.py), and the fuzz tests find it (:func:`recorded_keys`).
+
+    A key whose parser needs what the scene says elsewhere (a grid's pins need its rows and columns) declares
+    ``bind`` instead of ``parse``: a function of that context returning the parser, called by :meth:`bound`
+    (``PINS.bound(rows, cols).take(t)``). Every other key is taken as it is (``FPS.take(t)``)."""
 
     name: str
-    parse: Callable[[Any, str], Any]
+    parse: Callable[[Any, str], Any] | None = None  # None only with bind
     default: Any = REQUIRED  # the value when the key is absent; REQUIRED: it must be given
     type: str = ""  # as the docs name it: "number", "[x, y, z] numbers", "array of [row, col] pairs"
     unit: str = "–"  # SI: "m", "kg", "s", "m/s²", "degrees", or "–" for none
     default_text: str | None = None  # the docs' default where the value alone does not say it ("absent: ...")
     allowed: str = ""  # the docs' range or choices: "> 0", "0 … 180"
     doc: str = ""  # what it does, in a sentence or a few
+    bind: Callable[..., Callable[[Any, str], Any]] | None = None  # context -> the parser, for a key that needs it
+
+    def __post_init__(self):
+        if (self.parse is None) == (self.bind is None):
+            raise TypeError(f"scene key {self.name!r}: declare exactly one of parse and bind")
+
+    def bound(self, *context: Any) -> "Key":
+        """This key with the parser its ``bind`` makes of ``context``."""
+        if self.bind is None:
+            raise TypeError(f"scene key {self.name!r} takes no context: take it as it is")
+        return replace(self, parse=self.bind(*context), bind=None)
 
     def take(self, table: "Table") -> Any:
         """The key's value from ``table``, parsed, or its default."""
+        if self.parse is None:
+            raise TypeError(f"scene key {self.name!r} needs its context first: take it as key.bound(...).take(t)")
+        keys = _RECORDING.get()
+        if keys is not None:
+            keys.declared[table.key(self.name)] = self
         return table.take(self.name, self.parse, self.default)
+
+
+class FrozenMapping(Mapping):
+    """A read-only mapping that pickles (a sweep's process pool sends scenes to its workers) and compares by
+    content: the values of a cloth's declared extra keys (ClothSpec.options)."""
+
+    __slots__ = ("_items",)
+
+    def __init__(self, items: Mapping[str, Any] | None = None):
+        object.__setattr__(self, "_items", dict(items or {}))
+
+    def __getitem__(self, key: str) -> Any:
+        return self._items[key]
+
+    def __iter__(self):
+        return iter(self._items)
+
+    def __len__(self) -> int:
+        return len(self._items)
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        raise AttributeError("a FrozenMapping is read-only")
+
+    def __reduce__(self):
+        return (FrozenMapping, (self._items,))
+
+    def __repr__(self) -> str:
+        return f"FrozenMapping({self._items!r})"
 
 
 class Invalid(Exception):
@@ -204,6 +265,7 @@ def choice(options: tuple[str, ...]):
             raise Invalid(f"expected one of {', '.join(repr(o) for o in options)}, got {describe(value)}")
         return value
 
+    parse.options = options  # the choices, for the fuzz tests' strings
     return parse
 
 
