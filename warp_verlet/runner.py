@@ -213,14 +213,13 @@ def open_writer(scene: Scene, sim, target: CacheOutput, samples: int, every_sphe
     ``samples`` frames is checked. ``every_sphere_moves``: sample every sphere's centre per frame (a live
     session, where spheres are dragged); ``tears``: author torn faces even for cloths whose scene cannot tear
     (a live session whose tear threshold was set later)."""
-    from .usd_writer import CachedPlane, CachedSphere, PointCacheWriter  # imports pxr
+    from .colliders import by_kind
+    from .usd_writer import PointCacheWriter  # imports pxr
 
     override = scene.output.kind == "override"
     shapes = [cached_shape(s.topology, spec, override, tears) for s, spec in zip(sim.model.cloths, scene.cloths)]
-    colliders = [] if override else (
-        [CachedSphere(s.name, s.radius, s.keyframes[0][1], s.moving or every_sphere_moves, s.purpose)
-         for s in scene.spheres]
-        + [CachedPlane(p.name, p.point, p.normal, p.display_size, p.purpose) for p in scene.planes])
+    colliders = [] if override else [kind.cached(c, every_sphere_moves) for kind, specs in by_kind(scene.colliders)
+                                     for c in specs]  # in clamp order, as ColliderModel.moving_centres samples
     target.check_space(estimate_cache(shapes, colliders, text=target.partial.suffix == ".usda"), samples,
                        scene.output.save_every)
     return PointCacheWriter(

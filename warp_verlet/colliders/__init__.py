@@ -12,10 +12,10 @@ bind device work.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Callable, Protocol, runtime_checkable
 
-from ..scene_keys import STRING, Invalid, Key, accepts, choice, describe, prim_name, real
+from ..scene_keys import STRING, Key, accepts, choice, prim_name, real
 
 if TYPE_CHECKING:  # pragma: no cover
     import numpy as np
@@ -46,6 +46,30 @@ class InsideReport:
     inside: "np.ndarray"
     where: str
     fix: str
+
+
+@dataclass
+class LiveDrawing:
+    """What a kind drew on the live page (live_app.py): its items (viser handles), the points the camera
+    frames, and the per-frame update (None for colliders that never move)."""
+
+    items: list
+    points: list = field(default_factory=list)
+    update: Callable[[], None] | None = None
+
+
+class FrameReader(Protocol):
+    """What cache_reader.py lends a kind reading its prim at one time code: ``time``; ``attribute(prim, name,
+    get)``, the value of ``get()`` (a damaged one is one clear error naming the file, the frame and
+    ``prim.name``); ``finite(prim, values)`` (float64, refusing NaN and inf); ``to_world(prim, points)``."""
+
+    time: Any
+
+    def attribute(self, prim: Any, name: str, get: Callable[[], Any]) -> Any: ...
+
+    def finite(self, prim: Any, values: Any) -> "np.ndarray": ...
+
+    def to_world(self, prim: Any, points: "np.ndarray") -> "np.ndarray": ...
 
 
 @runtime_checkable
@@ -80,19 +104,22 @@ class ColliderKind(Protocol):
       this scene needs none; every name the kind ever creates, always (the State keeps them as attributes).
     - ``bind(model, state)``: its :class:`ColliderLaunches` against one State.
 
-    Output (cache, preview, viewer, live page; pxr only where the cache is written or read):
+    Output (cache, preview, viewer, live page; pxr and viser imported inside, where they are used):
 
-    - ``cached(spec, always_moving)``: what the cache writer needs of one collider (a small record with
-      ``name``, ``purpose`` and ``moving``); ``always_moving``: a live session, where colliders are dragged.
-    - ``samples(colliders, state)``: the per-frame samples of this kind's moving colliders, (M, 3) float32,
-      in scene order (what the writer time-samples).
-    - ``write_prim(stage, path, cached)``: define its prim in a USD stage; returns the attribute to
-      time-sample per frame (a translate op), or None for a still prim.
-    - ``find_prim(prim)``: whether a prim under /World/Colliders is one this kind wrote.
-    - ``read_prim(prim, time, read)``: its geometry at ``time`` from the cache, as plain numpy (``read(name,
-      getter)`` reads and checks one attribute).
-    - ``drawn(geometry, lo, hi)`` / ``render(mi, name, geometry)`` / ``add_to_view(server, name, geometry)``:
-      the preview's clipped geometry, its Mitsuba shape, and its viser handle.
+    - ``cached(spec, always_moving)``: what the cache writer needs of one collider: a frozen record with
+      ``name``, ``purpose``, ``moving`` and ``define(stage, path)``, which defines its prim under
+      /World/Colliders and returns the attribute op to time-sample per frame, or None for a still prim
+      (usd_writer.py; ``always_moving``: a live session, where colliders are dragged).
+    - ``samples(colliders, state)``: the per-frame samples of this kind's moving colliders, (M, 3), in scene
+      order: what ``define``'s ops are set to each frame (runner.py, through ``ColliderModel.moving_centres``).
+    - ``owns_prim(prim, under_colliders)``: whether a cache prim is one of this kind (cache_reader.py asks each
+      kind in registry order; ``under_colliders``: the prim lies under /World/Colliders).
+    - ``read_prim(prim, reader)``: its geometry at ``reader.time`` (a :class:`FrameReader`) as drawing
+      primitives, name -> item: ``"spheres"`` (centre, radius) or ``"planes"`` ((4, 3) corners, which the
+      drawing clips to the content); the preview (preview_render.py) and the viewer (cache_player.py) draw
+      those primitives.
+    - ``add_to_live(app, specs)``: draw this kind's colliders on the live page (live_app.py): a
+      :class:`LiveDrawing`.
     """
 
     type: str
@@ -114,6 +141,16 @@ class ColliderKind(Protocol):
     def state_arrays(self, colliders: "ColliderModel") -> dict[str, Any]: ...
 
     def bind(self, model: "Model", state: "State") -> ColliderLaunches: ...
+
+    def cached(self, spec: Any, always_moving: bool = False) -> Any: ...
+
+    def samples(self, colliders: "ColliderModel", state: "State") -> "np.ndarray": ...
+
+    def owns_prim(self, prim: Any, under_colliders: bool) -> bool: ...
+
+    def read_prim(self, prim: Any, reader: FrameReader) -> dict[str, Any]: ...
+
+    def add_to_live(self, app: Any, specs: tuple) -> LiveDrawing: ...
 
 
 @accepts(STRING)

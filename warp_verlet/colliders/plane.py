@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..scene_keys import Key, any_real, real, vector
-from . import ColliderLaunches, InsideReport
+from . import ColliderLaunches, InsideReport, LiveDrawing
 
 VEC3, FLOAT = 12, 4
 
@@ -125,6 +125,78 @@ class PlaneKind:
         import numpy as np
 
         return np.zeros((0, 3), np.float32)
+
+    def cached(self, spec: PlaneCollider, always_moving: bool = False) -> "CachedPlane":
+        return CachedPlane(spec.name, spec.point, spec.normal, spec.display_size, spec.purpose)
+
+    def owns_prim(self, prim, under_colliders: bool) -> bool:
+        from pxr import UsdGeom
+
+        return under_colliders and prim.IsA(UsdGeom.Mesh)  # the writer draws a plane as a one-quad mesh
+
+    def read_prim(self, prim, reader) -> dict[str, Any]:
+        """The quad's corners as authored, as the drawing primitive ``planes`` (drawing clips them to the
+        content); nothing for a quad that cannot be drawn."""
+        import numpy as np
+        from pxr import UsdGeom
+
+        plane, time = UsdGeom.Mesh(prim), reader.time
+        points = reader.attribute(plane, "points", lambda: plane.GetPointsAttr().Get(time))
+        if points is not None and len(points) >= 3:
+            corners = np.asarray(points, dtype=np.float64)
+            if np.isfinite(corners).all():  # older caches of an overflowing normal hold NaN corners
+                return {"planes": reader.to_world(plane, corners)}
+        return {}
+
+    def add_to_live(self, app, specs: tuple[PlaneCollider, ...]) -> LiveDrawing:
+        """The quads the cache draws; they never move, and the camera frames the cloth, not the ground."""
+        from ..web_view import add_plane
+
+        return LiveDrawing([add_plane(app.server, plane.name, plane_corners(self.cached(plane))) for plane in specs])
+
+
+@dataclass(frozen=True)
+class CachedPlane:
+    """A plane collider in the cache, drawn as a square of side ``size`` centred on ``point``."""
+
+    name: str
+    point: tuple[float, float, float]
+    normal: tuple[float, float, float]
+    size: float
+    purpose: str = "guide"
+
+    @property
+    def moving(self) -> bool:
+        return False
+
+    def define(self, stage, path):
+        """A one-quad Mesh, seen from both sides; nothing to sample per frame."""
+        from pxr import UsdGeom, Vt
+
+        plane = UsdGeom.Mesh.Define(stage, path)
+        corners = plane_corners(self)
+        plane.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(corners))
+        plane.CreateExtentAttr(UsdGeom.PointBased.ComputeExtent(Vt.Vec3fArray.FromNumpy(corners)))
+        plane.CreateFaceVertexCountsAttr(Vt.IntArray([4]))
+        plane.CreateFaceVertexIndicesAttr(Vt.IntArray([0, 1, 2, 3]))
+        plane.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+        plane.CreateDoubleSidedAttr(True)
+        plane.CreatePurposeAttr(self.purpose)
+        return None
+
+
+def plane_corners(plane: CachedPlane):
+    """The square's corners, counter-clockwise seen from the normal's side."""
+    import numpy as np
+
+    n = np.asarray(plane.normal, dtype=np.float64)
+    helper = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 0.0, 1.0])
+    u = np.cross(n, helper)
+    u /= np.linalg.norm(u)
+    v = np.cross(n, u)
+    h = plane.size / 2
+    p = np.asarray(plane.point, dtype=np.float64)
+    return np.array([p - h * u - h * v, p + h * u - h * v, p + h * u + h * v, p - h * u + h * v], np.float32)
 
 
 PLANE = PlaneKind()

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..scene_keys import ARRAY, Invalid, Key, accepts, any_real, describe, per_element, real, vector
-from . import ColliderLaunches, InsideReport
+from . import ColliderLaunches, InsideReport, LiveDrawing
 
 VEC3, FLOAT, INT, FLOAT64 = 12, 4, 4, 8
 
@@ -182,6 +182,94 @@ class SphereKind:
         if not colliders.spheres_move:
             return np.zeros((0, 3), np.float32)
         return state.sphere_centres.numpy()[[s.moving for s in colliders.spheres]]
+
+    def cached(self, spec: SphereCollider, always_moving: bool = False) -> "CachedSphere":
+        return CachedSphere(spec.name, spec.radius, spec.keyframes[0][1], spec.moving or always_moving, spec.purpose)
+
+    def owns_prim(self, prim, under_colliders: bool) -> bool:
+        from pxr import UsdGeom
+
+        return prim.IsA(UsdGeom.Sphere)
+
+    def read_prim(self, prim, reader) -> dict[str, Any]:
+        """The sphere at the reader's time, as the drawing primitive ``spheres``: (centre, radius)."""
+        import numpy as np
+        from pxr import UsdGeom
+
+        sphere, time = UsdGeom.Sphere(prim), reader.time
+        centre = reader.attribute(sphere, "xformOp:translate",
+                                  lambda: np.array(sphere.ComputeLocalToWorldTransform(time).ExtractTranslation()))
+        radius = reader.attribute(sphere, "radius", lambda: sphere.GetRadiusAttr().Get(time))
+        return {"spheres": (reader.finite(sphere, centre), float(reader.finite(sphere, radius)))}
+
+    def add_to_live(self, app, specs: tuple[SphereCollider, ...]) -> LiveDrawing:
+        """Icospheres at the live session's centres; a still sphere gets a gizmo that drags it. The per-frame
+        update follows the centres (a path, a drag, or Reset)."""
+        import numpy as np
+
+        from ..web_view import add_sphere
+
+        drawn = []
+        centres = app.session.sphere_centres()
+        for i, sphere in enumerate(specs):
+            handle = add_sphere(app.server, sphere.name, centres[i], sphere.radius)
+            gizmo = None
+            if not sphere.moving:  # a keyframed sphere follows its path; the others can be dragged
+                gizmo = app.server.scene.add_transform_controls(
+                    f"/drag/{sphere.name}", scale=max(sphere.radius * 1.6, 0.1), disable_rotations=True,
+                    position=tuple(float(v) for v in centres[i]))
+
+                def dragged(event, index=i) -> None:
+                    app.guarded(lambda: app.session.move_sphere(index, np.asarray(event.target.position)))
+
+                gizmo.on_update(dragged)
+            drawn.append(LiveSphere(handle, gizmo, centres[i]))
+
+        def update() -> None:
+            for sphere, centre in zip(drawn, app.session.sphere_centres()):
+                if not np.array_equal(centre, sphere.centre):
+                    sphere.handle.position = tuple(float(v) for v in centre)
+                    sphere.centre = centre
+                    if sphere.gizmo is not None and not np.allclose(sphere.gizmo.position, centre):
+                        sphere.gizmo.position = tuple(float(v) for v in centre)  # moved by Reset, not the drag
+
+        return LiveDrawing(drawn, [d.centre for d in drawn], update)
+
+
+@dataclass
+class LiveSphere:
+    """A sphere on the live page: its icosphere, its drag gizmo (None for a keyframed one), and the centre
+    drawn last."""
+
+    handle: Any
+    gizmo: Any
+    centre: Any
+
+
+@dataclass(frozen=True)
+class CachedSphere:
+    """A sphere collider in the cache: its render-visible radius (thickness excluded) and where it starts."""
+
+    name: str
+    radius: float
+    centre: tuple[float, float, float]
+    moving: bool = False
+    purpose: str = "guide"
+
+    def define(self, stage, path):
+        """A Sphere prim with a translate: sampled per frame when it moves (the op returned), else set once."""
+        from pxr import UsdGeom, Vt
+
+        sphere = UsdGeom.Sphere.Define(stage, path)
+        sphere.CreateRadiusAttr(float(self.radius))
+        r = float(self.radius)
+        sphere.CreateExtentAttr(Vt.Vec3fArray([(-r, -r, -r), (r, r, r)]))
+        sphere.CreatePurposeAttr(self.purpose)
+        op = sphere.AddTranslateOp()
+        if self.moving:
+            return op  # sampled per frame in write_frame
+        op.Set(tuple(float(c) for c in self.centre))
+        return None
 
 
 SPHERE = SphereKind()
