@@ -133,23 +133,26 @@ class LevelKind:
         return (len(specs),)
 
     def device_bytes(self, counts) -> int:
-        return counts[0] * (4 + 4)  # axis, floor
+        return counts[0] * (4 + 4 + 4)  # axis, starting floor; the State's floor
 
     def build(self, specs, device) -> dict[str, Any]:
         return {"level_axes": wp.array([s.axis for s in specs], dtype=int),
-                "level_floors": wp.array([s.level + s.thickness for s in specs], dtype=float)}
+                "level_start": wp.array([s.level + s.thickness for s in specs], dtype=float)}
 
     def state_arrays(self, colliders) -> dict[str, Any]:
-        return {}
+        """The floors live in the State (as if a session could raise them), to exercise a kind's moving part."""
+        start = getattr(colliders, "level_start", None)
+        return {"level_floors": None if start is None else wp.clone(start)}
 
     def bind(self, model, state) -> ColliderLaunches:
         from warp_verlet.stages import recorded
 
         c = model.colliders
         return ColliderLaunches((), (recorded(keep_above_levels, model.particle_count,
-                                              [state.particle_q, model.inv_mass, c.level_axes, c.level_floors]),))
+                                              [state.particle_q, model.inv_mass, c.level_axes,
+                                               state.level_floors]),))
 
-    def samples(self, colliders, state):
+    def samples(self, colliders, state, always_moving: bool = False):
         return np.zeros((0, 3), np.float32)
 
 
@@ -201,7 +204,18 @@ def test_a_kind_registered_in_a_test_clamps_is_estimated_and_launched(with_level
     held = sum(a.capacity for a in device_arrays(sim).values())
     assert held == estimate(sim.scene, form).device_bytes
     without = estimate(falling_scene(ground), form).device_bytes
-    assert estimate(sim.scene, form).device_bytes - without == LEVEL_KIND.device_bytes((1,)) == 8
+    assert estimate(sim.scene, form).device_bytes - without == LEVEL_KIND.device_bytes((1,)) == 12
+    # Its moving part is the State's: listed, cloned and assigned with the rest.
+    state = sim.state
+    assert {a.ptr for a in vars(state).values() if isinstance(a, wp.array)} == {a.ptr for a in state.arrays().values()}
+    twin = state.clone()
+    assert twin.level_floors.ptr != state.level_floors.ptr
+    np.testing.assert_array_equal(twin.level_floors.numpy(), np.float32([-0.24]))
+    state.level_floors.assign(np.array([0.5], np.float32))
+    state.assign(twin)
+    np.testing.assert_array_equal(state.level_floors.numpy(), np.float32([-0.24]))
+    # A scene without the kind still has the name, as None (the State's attributes do not depend on the scene).
+    assert Simulator(falling_scene(ground), "cpu", use_graph=False).state.level_floors is None
 
 
 def test_without_the_kind_registered_its_type_is_refused():

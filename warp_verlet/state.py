@@ -55,11 +55,11 @@ class State:
             self.torn_entries = wp.zeros(1, dtype=int) if model.tears else None
             cuttable = model.tears and model.tether_table is not None
             self.tether_length = wp.clone(model.tether_length) if cuttable else None
-            self._collider_arrays: tuple[str, ...] = ()
+            self.collider_array_names: tuple[str, ...] = ()  # what the collider kinds move, present or None
             for kind in collider_kinds():  # every kind's names, None where this scene has none of it
                 for name, array in kind.state_arrays(model.colliders).items():
                     setattr(self, name, array)
-                    self._collider_arrays += (name,)
+                    self.collider_array_names += (name,)
         self.time = 0.0
         self.steps = 0
         self.dt_prev: float | None = None
@@ -69,14 +69,14 @@ class State:
         return {name: getattr(self, name) for name in self._names() if getattr(self, name) is not None}
 
     def _names(self) -> tuple[str, ...]:
-        return self._ARRAYS + self._collider_arrays
+        return self._ARRAYS + self.collider_array_names
 
     def clone(self) -> "State":
         """An independent copy: stepping one does not touch the other."""
         other = State.__new__(State)
         other.model = self.model
         with wp.ScopedDevice(self.model.device):
-            other._collider_arrays = self._collider_arrays
+            other.collider_array_names = self.collider_array_names
             for name in self._names():
                 value = getattr(self, name)
                 setattr(other, name, None if value is None else wp.clone(value))

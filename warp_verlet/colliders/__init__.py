@@ -110,8 +110,9 @@ class ColliderKind(Protocol):
       ``name``, ``purpose``, ``moving`` and ``define(stage, path)``, which defines its prim under
       /World/Colliders and returns the attribute op to time-sample per frame, or None for a still prim
       (usd_writer.py; ``always_moving``: a live session, where colliders are dragged).
-    - ``samples(colliders, state)``: the per-frame samples of this kind's moving colliders, (M, 3), in scene
-      order: what ``define``'s ops are set to each frame (runner.py, through ``ColliderModel.moving_centres``).
+    - ``samples(colliders, state, always_moving)``: the per-frame samples of this kind's moving colliders
+      (of all of them when ``always_moving``, as ``cached``), (M, 3), in scene order: what ``define``'s ops are
+      set to each frame (runner.py and a live session's recording, through ``ColliderModel.moving_centres``).
     - ``owns_prim(prim, under_colliders)``: whether a cache prim is one of this kind (cache_reader.py asks each
       kind in registry order; ``under_colliders``: the prim lies under /World/Colliders).
     - ``read_prim(prim, reader)``: its geometry at ``reader.time`` (a :class:`FrameReader`) as drawing
@@ -144,7 +145,7 @@ class ColliderKind(Protocol):
 
     def cached(self, spec: Any, always_moving: bool = False) -> Any: ...
 
-    def samples(self, colliders: "ColliderModel", state: "State") -> "np.ndarray": ...
+    def samples(self, colliders: "ColliderModel", state: "State", always_moving: bool = False) -> "np.ndarray": ...
 
     def owns_prim(self, prim: Any, under_colliders: bool) -> bool: ...
 
@@ -257,12 +258,13 @@ class ColliderModel:
     def has(self, kind: ColliderKind) -> bool:
         return any(k is kind for k, _ in self.kinds)
 
-    def moving_centres(self, state) -> "np.ndarray":
-        """Per-frame samples of every moving collider, in clamp order then scene order (what the cache
-        time-samples). Costs no device copy when nothing moves."""
+    def moving_centres(self, state, always_moving: bool = False) -> "np.ndarray":
+        """Per-frame samples of every moving collider (every collider that can move, when ``always_moving``: a
+        live session's, where spheres are dragged), in clamp order then scene order: what the cache
+        time-samples. Costs no device copy when nothing moves."""
         import numpy as np
 
-        parts = [kind.samples(self, state) for kind, _ in self.kinds]
+        parts = [kind.samples(self, state, always_moving) for kind, _ in self.kinds]
         parts = [p for p in parts if len(p)]
         return np.concatenate(parts) if parts else np.zeros((0, 3), np.float32)
 

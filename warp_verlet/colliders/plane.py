@@ -121,7 +121,7 @@ class PlaneKind:
         return ColliderLaunches((), (clamp,))
 
     # ------------------------------------------------------------------ output
-    def samples(self, colliders, state):
+    def samples(self, colliders, state, always_moving: bool = False):
         import numpy as np
 
         return np.zeros((0, 3), np.float32)

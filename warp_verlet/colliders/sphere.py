@@ -175,10 +175,12 @@ class SphereKind:
         return ColliderLaunches(before, (clamp,))
 
     # ------------------------------------------------------------------ output
-    def samples(self, colliders, state):
-        """Centres of the moving spheres only, in scene order."""
+    def samples(self, colliders, state, always_moving: bool = False):
+        """Centres of the moving spheres only (of every sphere when ``always_moving``), in scene order."""
         import numpy as np
 
+        if always_moving:
+            return state.sphere_centres.numpy().copy()
         if not colliders.spheres_move:
             return np.zeros((0, 3), np.float32)
         return state.sphere_centres.numpy()[[s.moving for s in colliders.spheres]]
