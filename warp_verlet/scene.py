@@ -28,7 +28,7 @@ from .scene_keys import (  # the table reader and value parsers, under the names
     toml_list as _toml_list, vector,
 )
 
-from .colliders import COLLIDER_PURPOSES, kind_of, read_collider, specs_of  # noqa: F401 (the purposes: as before)
+from .colliders import kind_of, read_collider, specs_of
 from .colliders.plane import PLANE, PlaneCollider
 from .colliders.sphere import SPHERE, SphereCollider
 

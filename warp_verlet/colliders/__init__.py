@@ -161,12 +161,8 @@ def _collider_type(value: Any, key: str) -> str:
     return choice(tuple(sorted(k.type for k in kinds())))(value, key)
 
 
-# The keys every kind shares, declared once; the kinds' own keys follow them in each table.
-TYPE = Key("type", _collider_type, type="string", allowed="a registered kind: \"plane\", \"sphere\"",
-           doc="The kind of collider.")
-NAME = Key("name", prim_name, default=None, type="string", default_text='"plane<i>" / "sphere<i>"',
-           allowed="letters, digits, `_`; not starting with a digit; unique among colliders",
-           doc="Its prim name in the cache: `/World/Colliders/<name>`.")
+# The keys every kind shares, declared once (SHARED_KEYS, below the registry); the kinds' own keys follow them
+# in each table.
 THICKNESS = Key("thickness", real(0.0), 0.0, type="number", unit="m", allowed="≥ 0",
                 doc="The cloth is kept this far outside the surface, so that it never touches the render-visible "
                     "collider. At `0` the cloth rests on the visible surface and z-fights with it in renders: "
@@ -175,12 +171,11 @@ THICKNESS = Key("thickness", real(0.0), 0.0, type="number", unit="m", allowed="�
 FRICTION = Key("friction", real(0.0, 1.0), 0.0, type="number", allowed="0 … 1",
                doc="Fraction of the tangential implicit velocity (x − x_prev) removed each substep a particle is "
                    "in contact. 0 = frictionless, 1 = sticks.")
-PURPOSE = Key("purpose", choice(COLLIDER_PURPOSES), "guide", type="string", allowed='"guide", "default"',
+PURPOSE = Key("purpose", choice(COLLIDER_PURPOSES), "guide", type="string", allowed='`"guide"`, `"default"`',
               doc="The USD `purpose` of its prim in a cache. `\"guide\"`: a helper, left out of renders (Blender, "
                   "Karma) and hidden in usdview until guides are shown (Display > Display Purposes > Guide); the "
                   "default, since a collider stands in for the user's own geometry. `\"default\"`: rendered with "
                   "the cloth.")
-SHARED_KEYS = (TYPE, NAME, THICKNESS, FRICTION, PURPOSE)
 
 
 def kinds() -> tuple[ColliderKind, ...]:
@@ -255,9 +250,6 @@ class ColliderModel:
                         raise AssertionError(f"collider kind {kind.type!r} builds {name!r}, which is taken")
                     setattr(self, name, value)
 
-    def has(self, kind: ColliderKind) -> bool:
-        return any(k is kind for k, _ in self.kinds)
-
     def moving_centres(self, state, always_moving: bool = False) -> "np.ndarray":
         """Per-frame samples of every moving collider (every collider that can move, when ``always_moving``: a
         live session's, where spheres are dragged), in clamp order then scene order: what the cache
@@ -269,9 +261,18 @@ class ColliderModel:
         return np.concatenate(parts) if parts else np.zeros((0, 3), np.float32)
 
 
-from .plane import PLANE  # noqa: E402 (the kinds import the shared keys above)
+from .plane import PLANE  # noqa: E402 (the kinds import the records above)
 from .sphere import SPHERE  # noqa: E402
 
 COLLIDER_KINDS: tuple[ColliderKind, ...] = (SPHERE, PLANE)
 """The registered kinds, in clamp order: spheres before planes, so that a sphere resting on the ground cannot
 push cloth through the ground (the plane's clamp comes last and wins)."""
+
+# The type's choices and the name's default are the registry's, in the docs' (alphabetical) order.
+TYPE = Key("type", _collider_type, type="string", allowed=", ".join(sorted(f'`"{k.type}"`' for k in COLLIDER_KINDS)),
+           doc="The kind of collider.")
+NAME = Key("name", prim_name, default=None, type="string",
+           default_text=" / ".join(sorted(f'`"{k.type}<i>"`' for k in COLLIDER_KINDS)),
+           allowed="letters, digits, `_`; not starting with a digit; unique among colliders",
+           doc="Its prim name in the cache: `/World/Colliders/<name>`.")
+SHARED_KEYS = (TYPE, NAME, THICKNESS, FRICTION, PURPOSE)
