@@ -100,8 +100,8 @@ def particle_spacing(spec: ClothSpec) -> float:
 def start_inside_warnings(scene: Scene) -> list[str]:
     """Particles that start where the collider clamp would move them on the first substep, as each collider's
     kind finds them (``start_inside``): closer than radius + thickness to a sphere's centre (at time 0), or less
-    than thickness above a plane on its free side. The clamp moves them out at once, a jump that Verlet turns into velocity; pinned ones it never
-    moves, so they stay inside."""
+    than thickness above a plane on its free side. The clamp moves them out at once, a jump that Verlet turns
+    into velocity; pinned ones it never moves, so they stay inside."""
     if not scene.colliders:
         return []
     out = []

@@ -26,6 +26,7 @@ if TYPE_CHECKING:  # pragma: no cover
     from ..state import State
 
 COLLIDER_PURPOSES = ("guide", "default")  # USD purpose: a helper hidden in renders, or rendered geometry
+VEC3, FLOAT, INT, FLOAT64 = 12, 4, 4, 8  # device bytes, for the kinds' device_bytes (as stages.py counts them)
 
 
 @dataclass(frozen=True)

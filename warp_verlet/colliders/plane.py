@@ -7,9 +7,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..scene_keys import Key, any_real, real, vector
-from . import ColliderLaunches, InsideReport, LiveDrawing
-
-VEC3, FLOAT = 12, 4
+from . import FLOAT, VEC3, ColliderLaunches, InsideReport, LiveDrawing
 
 
 @dataclass(frozen=True)

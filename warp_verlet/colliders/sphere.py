@@ -6,9 +6,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..scene_keys import ARRAY, Invalid, Key, accepts, any_real, describe, per_element, real, vector
-from . import ColliderLaunches, InsideReport, LiveDrawing
-
-VEC3, FLOAT, INT, FLOAT64 = 12, 4, 4, 8
+from . import FLOAT, FLOAT64, INT, VEC3, ColliderLaunches, InsideReport, LiveDrawing
 
 
 @dataclass(frozen=True)
