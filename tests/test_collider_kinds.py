@@ -5,7 +5,9 @@ library file knowing it."""
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -53,6 +55,20 @@ def test_every_key_is_documented(key):
     assert isinstance(key, Key)
     assert key.type.strip() and key.unit.strip() and key.doc.strip() and key.allowed.strip()
     assert key.doc.rstrip().endswith("."), "the docs tables print the doc text as a sentence"
+
+
+def test_the_docs_collider_tables_say_what_the_keys_declare():
+    # docs/scenes.md's [[collider]] rows: | `key` | type | unit | default | allowed | meaning |
+    text = (Path(__file__).resolve().parent.parent / "docs" / "scenes.md").read_text(encoding="utf-8")
+    section = text[text.index("## `[[collider]]`"):]
+    section = section[:section.index("\n## ", 1)]
+    rows = {m[0]: m[1:] for m in re.findall(r"^\| `(\w+)` \| (.*?) \| (.*?) \| (.*?) \| (.*?) \| (.*) \|$", section,
+                                            re.MULTILINE)}
+    keys = [*SHARED_KEYS, *(k for kind in colliders.COLLIDER_KINDS for k in kind.keys)]
+    assert sorted(rows) == sorted(k.name for k in keys)
+    for key in keys:
+        type_, unit, _, allowed, doc = rows[key.name]
+        assert (type_, unit, allowed, doc) == (key.type, key.unit, key.allowed, key.doc), key.name
 
 
 def test_kind_keys_are_distinct_from_the_shared_ones():
