@@ -171,6 +171,48 @@ class LevelKind:
     def samples(self, colliders, state, always_moving: bool = False):
         return np.zeros((0, 3), np.float32)
 
+    def cached(self, spec, always_moving: bool = False) -> "CachedLevel":
+        return CachedLevel(spec.name, spec.axis, spec.level, spec.purpose)
+
+    def owns_prim(self, prim, under_colliders: bool) -> bool:
+        return under_colliders and prim.HasAttribute("level:level")
+
+    def read_prim(self, prim, reader) -> dict[str, Any]:
+        from pxr import UsdGeom
+
+        mesh = UsdGeom.Mesh(prim)
+        points = reader.attribute(mesh, "points", lambda: mesh.GetPointsAttr().Get(reader.time))
+        return {"planes": reader.to_world(mesh, reader.finite(mesh, points))}
+
+    def add_to_live(self, app, specs):
+        raise NotImplementedError("not drawn on the live page in these tests")
+
+
+@dataclass(frozen=True)
+class CachedLevel:
+    name: str
+    axis: int
+    level: float
+    purpose: str
+    moving: bool = False
+
+    def define(self, stage, path):
+        """A 2 m square across the axis at the level, tagged with its level."""
+        from pxr import Sdf, UsdGeom, Vt
+
+        corners = np.zeros((4, 3), np.float32)
+        u, v = [a for a in range(3) if a != self.axis]
+        corners[:, self.axis] = self.level
+        corners[:, u] = [-1, 1, 1, -1]
+        corners[:, v] = [-1, -1, 1, 1]
+        mesh = UsdGeom.Mesh.Define(stage, path)
+        mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(corners))
+        mesh.CreateFaceVertexCountsAttr(Vt.IntArray([4]))
+        mesh.CreateFaceVertexIndicesAttr(Vt.IntArray([0, 1, 2, 3]))
+        mesh.CreatePurposeAttr(self.purpose)
+        mesh.GetPrim().CreateAttribute("level:level", Sdf.ValueTypeNames.Float).Set(self.level)
+        return None
+
 
 LEVEL_KIND = LevelKind()
 FALLING = {"simulation": {"fps": 60.0, "substeps": 4, "iterations": 2},
@@ -232,6 +274,30 @@ def test_a_kind_registered_in_a_test_clamps_is_estimated_and_launched(with_level
     np.testing.assert_array_equal(state.level_floors.numpy(), np.float32([-0.24]))
     # A scene without the kind still has the name, as None (the State's attributes do not depend on the scene).
     assert Simulator(falling_scene(ground), "cpu", use_graph=False).state.level_floors is None
+
+
+def test_a_kind_registered_in_a_test_is_written_to_the_cache_and_read_back(monkeypatch, tmp_path):
+    from pxr import Usd
+
+    from warp_verlet.cache_reader import open_cache, read_frame
+    from warp_verlet.runner import run_scene
+
+    # Before the plane: the cache reader asks the kinds in registry order, and the plane claims any mesh under
+    # /World/Colliders.
+    monkeypatch.setattr(colliders, "COLLIDER_KINDS", (SPHERE, LEVEL_KIND, PLANE))
+    out = tmp_path / "level.usda"
+    scene = falling_scene({"type": "level", "level": -0.25, "purpose": "default"},
+                          {"type": "plane", "name": "ground", "point": [0.0, -1.0, 0.0], "display_size": 4.0})
+    run_scene(scene, output=out, device="cpu", frames=2)
+    stage = Usd.Stage.Open(str(out))
+    prim = stage.GetPrimAtPath("/World/Colliders/level0")
+    assert prim.GetAttribute("level:level").Get() == -0.25 and prim.GetAttribute("purpose").Get() == "default"
+    cache = open_cache(out)
+    assert [(kind.type, prim.GetName()) for kind, prim in cache.colliders] == [("level", "level0"), ("plane", "ground")]
+    assert len(cache.cloths) == 1  # neither collider is taken for a cloth
+    level_quad, ground_quad = read_frame(cache, 2).planes
+    np.testing.assert_array_equal(level_quad[:, 1], -0.25)
+    np.testing.assert_allclose(ground_quad[:, 1], -1.0, atol=1e-7)
 
 
 def test_without_the_kind_registered_its_type_is_refused():

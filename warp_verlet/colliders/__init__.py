@@ -115,7 +115,9 @@ class ColliderKind(Protocol):
       (of all of them when ``always_moving``, as ``cached``), (M, 3), in scene order: what ``define``'s ops are
       set to each frame (runner.py and a live session's recording, through ``ColliderModel.moving_centres``).
     - ``owns_prim(prim, under_colliders)``: whether a cache prim is one of this kind (cache_reader.py asks each
-      kind in registry order; ``under_colliders``: the prim lies under /World/Colliders).
+      kind in registry order and the first that owns the prim reads it; ``under_colliders``: the prim lies
+      under /World/Colliders). The plane owns every mesh there, so a kind that writes a mesh comes before it
+      (its clamp then runs before the plane's too, as the ground's should run last).
     - ``read_prim(prim, reader)``: its geometry at ``reader.time`` (a :class:`FrameReader`) as drawing
       primitives, name -> item: ``"spheres"`` (centre, radius) or ``"planes"`` ((4, 3) corners, which the
       drawing clips to the content); the preview (preview_render.py) and the viewer (cache_player.py) draw
