@@ -234,7 +234,8 @@ def device_bytes(collider_counts: tuple[tuple[str, tuple[int, ...]], ...]) -> in
 
 
 class ColliderModel:
-    """The scene's colliders on one device: each kind's fixed data (``build``), as attributes of this object.
+    """The scene's colliders on one device: each kind's fixed data (``build``), as attributes of this object
+    (flat, so that the memory check, bench.common.device_arrays, finds every array as it did).
 
     Only the kinds a scene has get arrays and launches: no planes, no ``collide_planes``; no moving sphere, no
     clock and no ``place_spheres``. What moves lives in the :class:`~warp_verlet.state.State` (each kind's
