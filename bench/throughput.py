@@ -32,7 +32,8 @@ from pathlib import Path
 
 import warp as wp
 
-from warp_verlet.scene import PlaneCollider, SphereCollider
+from warp_verlet.colliders.plane import PlaneCollider
+from warp_verlet.colliders.sphere import SphereCollider
 from warp_verlet.simulator import Simulator
 
 from .common import (arg_parser, copy_bandwidth, device_arrays, hanging_cloth, machine, median_spread, quiet_warp,

@@ -172,7 +172,7 @@ def launch_both(kernel, dim: int, make, device: str) -> list[list[np.ndarray]]:
 def kernel_cases():
     """(name, kernel, dim, make) for every kernel that reads or writes positions, on random float32 data:
     positions within 2 m, masses with pins among them, stretched and compressed sticks, friction."""
-    from warp_verlet.kernels import collide, guard, integrate, relax, tear, tether
+    from warp_verlet.kernels import collide_plane, collide_sphere, guard, integrate, relax, tear, tether
 
     rng = np.random.default_rng(11)
     n = 4000
@@ -213,11 +213,11 @@ def kernel_cases():
         ("pull_tethers", tether.pull_tethers, len(free),
          lambda vec, real: [q(vec), f(free, int), wp.array2d(np.tile(pinned, (len(free), 1)), dtype=int),
                             wp.array2d(reach.astype(np.float32), dtype=float)]),
-        ("collide_planes", collide.collide_planes, n,
+        ("collide_planes", collide_plane.collide_planes, n,
          lambda vec, real: [q(vec), q(vec, x_in), q(vec, dq), f(w), f(np.array([[0.0, -0.5, 0.0], [1.0, 0.0, 0.0]],
                             np.float32), wp.vec3), f(np.array([[0.0, 1.0, 0.0], [-0.6, 0.0, 0.8]], np.float32), wp.vec3),
                             f(np.array([0.01, 0.0], np.float32)), f(np.array([0.3, 0.0], np.float32))]),
-        ("collide_spheres", collide.collide_spheres, n,
+        ("collide_spheres", collide_sphere.collide_spheres, n,
          lambda vec, real: [q(vec), q(vec, x_in), q(vec, dq), f(w), f(np.array([[0.5, 0.5, 0.0], [-1.0, 0.0, 1.0]],
                             np.float32), wp.vec3), f(np.array([1.0, 0.7], np.float32)),
                             f(np.array([0.4, 0.0], np.float32))]),
@@ -255,7 +255,7 @@ X = 1.25  # exact in float32, as the collider data and rest lengths below
 def f64_case(name: str):
     """(kernel, dim, arguments, check) for one kernel on float64 positions, set up so that the right answer
     differs from the input by D or by D / 3."""
-    from warp_verlet.kernels import collide, guard, integrate, relax, tear, tether
+    from warp_verlet.kernels import collide_plane, collide_sphere, guard, integrate, relax, tear, tether
 
     def q(*rows):
         return wp.array(np.array(rows, np.float64), dtype=wp.vec3d)
@@ -281,9 +281,9 @@ def f64_case(name: str):
         "pull_tethers": (tether.pull_tethers, 1, [q([X, X, X], [X + 0.5 + D, X, X]), f(1, dtype=int),
                          wp.array2d(np.array([[0]]), dtype=int), wp.array2d(np.array([[0.5]]), dtype=float)],
                          {0: [[X, X, X], [X + 0.5, X, X]]}),
-        "collide_planes": (collide.collide_planes, 1, [q([0.7, X - D, 0.2]), q([0.7, X - D, 0.2]), q([0, 0, 0]),
+        "collide_planes": (collide_plane.collide_planes, 1, [q([0.7, X - D, 0.2]), q([0.7, X - D, 0.2]), q([0, 0, 0]),
                            f(1.0), *planes], {0: [[0.7, X, 0.2]]}),
-        "collide_spheres": (collide.collide_spheres, 1, [q([X + 0.5 - D, 0, 0]), q([X + 0.5 - D, 0, 0]), q([0, 0, 0]),
+        "collide_spheres": (collide_sphere.collide_spheres, 1, [q([X + 0.5 - D, 0, 0]), q([X + 0.5 - D, 0, 0]), q([0, 0, 0]),
                             f(1.0), f([X, 0.0, 0.0], dtype=wp.vec3), f(0.5), f(0.0)],
                             {0: [[X + 0.5, 0, 0]]}),
         # Sticks D longer and D shorter than their 0.25 m tear length: only the first tears.

@@ -16,6 +16,7 @@ from typing import Callable
 import numpy as np
 from pxr import Tf, Usd, UsdGeom
 
+from .colliders import ColliderKind, kinds as collider_kinds
 from .errors import WarpVerletError, usd_cause, usd_diagnostics
 from .faces import Faces, as_faces, grid_faces
 from .usd_writer import COLLIDERS_PATH
@@ -50,8 +51,7 @@ class PointCache:
     frames: tuple[int, ...]  # every frame the cache holds, in order
     cloths: tuple[ClothPrim, ...]
     ropes: tuple[UsdGeom.BasisCurves, ...]
-    spheres: tuple[UsdGeom.Sphere, ...]
-    planes: tuple[UsdGeom.Mesh, ...]
+    colliders: tuple[tuple[ColliderKind, Usd.Prim], ...]  # each collider prim and the kind that wrote it
 
 
 @dataclass(frozen=True)
@@ -114,13 +114,12 @@ def open_cache(path: str | os.PathLike[str]) -> PointCache:
     if stage is None:
         raise PreviewError(f"{path}: not a USD file, or a damaged one: USD cannot open it")
 
-    cloths, ropes, spheres, planes = [], [], [], []
+    cloths, ropes, colliders = [], [], []
     for prim in stage.Traverse():
-        collider = prim.GetPath().HasPrefix(COLLIDERS_PATH)
-        if prim.IsA(UsdGeom.Sphere):
-            spheres.append(UsdGeom.Sphere(prim))
-        elif prim.IsA(UsdGeom.Mesh) and collider:
-            planes.append(UsdGeom.Mesh(prim))  # the writer draws a plane collider as a one-quad mesh
+        under_colliders = prim.GetPath().HasPrefix(COLLIDERS_PATH)
+        kind = next((k for k in collider_kinds() if k.owns_prim(prim, under_colliders)), None)
+        if kind is not None:
+            colliders.append((kind, prim))
         elif prim.IsA(UsdGeom.Mesh):
             cloths.append(_cloth_prim(path, UsdGeom.Mesh(prim)))
         elif prim.IsA(UsdGeom.BasisCurves):
@@ -137,8 +136,7 @@ def open_cache(path: str | os.PathLike[str]) -> PointCache:
         frames = tuple(sorted({int(t) for t in times if float(t).is_integer()}))
     up_axis = "Z" if UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.z else "Y"
     return PointCache(path=path, stage=stage, up_axis=up_axis, fps=stage.GetTimeCodesPerSecond(),
-                      frames=frames or (0,), cloths=tuple(cloths), ropes=tuple(ropes), spheres=tuple(spheres),
-                      planes=tuple(planes))
+                      frames=frames or (0,), cloths=tuple(cloths), ropes=tuple(ropes), colliders=tuple(colliders))
 
 
 def _cloth_prim(path: Path, mesh: UsdGeom.Mesh) -> ClothPrim:
@@ -262,18 +260,31 @@ def read_frame(cache: PointCache, frame: int) -> FrameGeometry:
         points = _to_world(curves, time, _finite(cache.path, curves, points, frame))
         counts = curves.GetCurveVertexCountsAttr().Get(time) or [len(points)]
         ropes += np.split(points, np.cumsum(counts)[:-1])
-    spheres = []
-    for sphere in cache.spheres:
-        centre = _read(cache.path, sphere, "xformOp:translate",
-                       lambda: np.array(sphere.ComputeLocalToWorldTransform(time).ExtractTranslation()), where)
-        radius = _read(cache.path, sphere, "radius", lambda: sphere.GetRadiusAttr().Get(time), where)
-        spheres.append((_finite(cache.path, sphere, centre, frame), float(_finite(cache.path, sphere, radius, frame))))
-    planes = []
-    for plane in cache.planes:
-        points = _read(cache.path, plane, "points", lambda: plane.GetPointsAttr().Get(time), where)
-        if points is not None and len(points) >= 3:
-            corners = np.asarray(points, dtype=np.float64)
-            if np.isfinite(corners).all():  # older caches of an overflowing normal hold NaN corners
-                planes.append(_to_world(plane, time, corners))
+    drawn: dict[str, list] = {"spheres": [], "planes": []}  # the drawing primitives the kinds' prims become
+    reader = _FrameReader(cache.path, frame, time, where)
+    for kind, prim in cache.colliders:
+        for primitive, item in kind.read_prim(prim, reader).items():
+            drawn[primitive].append(item)
     return FrameGeometry(frame=frame, seconds=frame / cache.fps, ropes=tuple(ropes),
-                         spheres=tuple(spheres), planes=tuple(planes), cloth_frames=tuple(cloth_frames))
+                         spheres=tuple(drawn["spheres"]), planes=tuple(drawn["planes"]),
+                         cloth_frames=tuple(cloth_frames))
+
+
+@dataclass(frozen=True)
+class _FrameReader:
+    """The reading helpers above, for one frame, as a collider kind's ``read_prim`` gets them
+    (colliders.FrameReader)."""
+
+    path: Path
+    frame: int
+    time: Usd.TimeCode
+    where: str
+
+    def attribute(self, prim, name: str, get):
+        return _read(self.path, prim, name, get, self.where)
+
+    def finite(self, prim, values) -> np.ndarray:
+        return _finite(self.path, prim, values, self.frame)
+
+    def to_world(self, prim, points: np.ndarray) -> np.ndarray:
+        return _to_world(prim, self.time, points)

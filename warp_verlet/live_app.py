@@ -16,12 +16,12 @@ from typing import Callable
 
 import numpy as np
 
+from .colliders import by_kind
 from .display_mesh import DisplayMesh
 from .errors import WarpVerletError
 from .live_session import LiveSession, Pin
 from .scene import Scene
-from .web_view import (CLOTH_COLOURS, LOCALHOST, DEFAULT_PORT, ClothDrawing, add_plane, add_sphere, frame_camera,
-                       start_server)
+from .web_view import CLOTH_COLOURS, LOCALHOST, DEFAULT_PORT, ClothDrawing, frame_camera, start_server
 
 DRAW_HZ = 60.0
 READOUT_HZ = 4.0
@@ -56,7 +56,8 @@ class LiveApp:
         self.cloths = [ClothDrawing(self.server, spec.name, display, p, CLOTH_COLOURS[i % len(CLOTH_COLOURS)])
                        for i, (spec, display, p) in enumerate(zip(scene.cloths, self.displays, points))]
         self._add_colliders(scene)
-        everything = np.concatenate(points + [s.centre[None] for s in self._sphere_list])
+        everything = np.concatenate(points + [np.asarray(p)[None] for d in self._collider_drawings.values()
+                                              for p in d.points])
         frame_camera(self.server, everything.min(0), everything.max(0))
         self._build_gui(scene, record_path or default_record_path(scene))
         self.server.on_client_connect(self._page_connected)
@@ -70,27 +71,19 @@ class LiveApp:
 
     # ------------------------------------------------------------------ scene
     def _add_colliders(self, scene: Scene) -> None:
-        self._sphere_list = []
-        centres = self.session.sphere_centres()
-        for i, sphere in enumerate(scene.spheres):
-            handle = add_sphere(self.server, sphere.name, centres[i], sphere.radius)
-            gizmo = None
-            if not sphere.moving:  # a keyframed sphere follows its path; the others can be dragged
-                gizmo = self.server.scene.add_transform_controls(
-                    f"/drag/{sphere.name}", scale=max(sphere.radius * 1.6, 0.1), disable_rotations=True,
-                    position=tuple(float(v) for v in centres[i]))
-                gizmo.on_update(self._dragged(i))
-            self._sphere_list.append(_Sphere(handle, gizmo, centres[i]))
-        if scene.planes:
-            from .usd_writer import CachedPlane, plane_corners  # imports pxr: only for a scene with planes
-        for plane in scene.planes:
-            add_plane(self.server, plane.name,
-                      plane_corners(CachedPlane(plane.name, plane.point, plane.normal, plane.display_size)))
+        """Each kind draws its colliders (warp_verlet/colliders: add_to_live)."""
+        self._collider_drawings = {kind.type: kind.add_to_live(self, specs)
+                                   for kind, specs in by_kind(scene.colliders)}
 
-    def _dragged(self, index: int) -> Callable:
-        def moved(event) -> None:
-            self._guard(lambda: self.session.move_sphere(index, np.asarray(event.target.position)))
-        return moved
+    @property
+    def _sphere_list(self) -> list:
+        """The spheres drawn (their handles and gizmos), as the live page's tests reach them."""
+        drawing = self._collider_drawings.get("sphere")
+        return drawing.items if drawing is not None else []
+
+    def guarded(self, action: Callable[[], None]) -> None:
+        """Run an action of a control that a collider kind added (a drag), as the page's own (:meth:`_guard`)."""
+        self._guard(action)
 
     # ------------------------------------------------------------------ GUI
     def _build_gui(self, scene: Scene, record_path: Path) -> None:
@@ -211,13 +204,9 @@ class LiveApp:
         start = time.perf_counter()
         for drawing, p, h in zip(self.cloths, points, hidden):
             drawing.update(p, h)
-        centres = self.session.sphere_centres()
-        for sphere, centre in zip(self._sphere_list, centres):
-            if not np.array_equal(centre, sphere.centre):
-                sphere.handle.position = tuple(float(v) for v in centre)
-                sphere.centre = centre
-                if sphere.gizmo is not None and not np.allclose(sphere.gizmo.position, centre):
-                    sphere.gizmo.position = tuple(float(v) for v in centre)  # moved by Reset, not by the drag
+        for drawing in self._collider_drawings.values():
+            if drawing.update is not None:
+                drawing.update()
         self.send_seconds = time.perf_counter() - start
         self.draws += 1
 
@@ -278,11 +267,6 @@ class LiveApp:
 
     def stop(self) -> None:
         self._stop.set()
-
-
-class _Sphere:
-    def __init__(self, handle, gizmo, centre):
-        self.handle, self.gizmo, self.centre = handle, gizmo, centre
 
 
 def default_record_path(scene: Scene) -> Path:

@@ -87,7 +87,7 @@ class RecordedFrame:
     frame: int
     positions: "warp.array"  # every particle's position at the frame, a copy on the simulation's device
     to_cache: CacheVertices  # positions -> each cloth's cache vertices, for the simulator that made them
-    centres: np.ndarray  # every sphere's centre
+    centres: np.ndarray  # every collider's sample (each sphere's centre), as a cache of dragged colliders takes them
     hidden: list[np.ndarray] | None  # per cloth, faces beside torn sticks, when they changed this frame
 
     def points(self) -> list[np.ndarray]:
@@ -487,7 +487,9 @@ class LiveSession:
                      f"writes frames 0-{self.frame - 1}")
             return
         copy = wp.clone(positions)  # on the device, in the stream's order: no wait for the GPU
-        self._recording.append(RecordedFrame(self.frame, copy, self._to_cache, self.sphere_centres(), hidden))
+        with self._lock:
+            samples = self.sim.colliders.moving_centres(self.sim.state, always_moving=True)
+        self._recording.append(RecordedFrame(self.frame, copy, self._to_cache, samples, hidden))
         self._recorded_bytes += size
 
     def save(self, path: str | Path, note: Callable[[str], None] | None = None) -> int:

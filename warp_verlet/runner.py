@@ -215,14 +215,12 @@ def open_writer(scene: Scene, sim, target: CacheOutput, samples: int, every_sphe
     (writer_registry.py), once its disk space for ``samples`` frames is checked. ``every_sphere_moves``: sample every sphere's centre per frame (a live
     session, where spheres are dragged); ``tears``: author torn faces even for cloths whose scene cannot tear
     (a live session whose tear threshold was set later)."""
-    from .usd_writer import CachedPlane, CachedSphere  # imports pxr
+    from .colliders import by_kind
 
     override = scene.output.kind == "override"
     shapes = [cached_shape(s.topology, spec, override, tears) for s, spec in zip(sim.model.cloths, scene.cloths)]
-    colliders = [] if override else (
-        [CachedSphere(s.name, s.radius, s.keyframes[0][1], s.moving or every_sphere_moves, s.purpose)
-         for s in scene.spheres]
-        + [CachedPlane(p.name, p.point, p.normal, p.display_size, p.purpose) for p in scene.planes])
+    colliders = [] if override else [kind.cached(c, every_sphere_moves) for kind, specs in by_kind(scene.colliders)
+                                     for c in specs]  # in clamp order, as ColliderModel.moving_centres samples
     cache_format = format_for(target.partial, override)
     request = CacheRequest(
         shapes, fps=scene.simulation.fps, colliders=colliders, up_axis=scene.output.up_axis,

@@ -36,6 +36,10 @@ from .scene_keys import (  # the table reader and value parsers, under the names
 )
 from .writer_registry import is_output_suffix, suffixes_text  # the output formats' suffixes (no pxr, no warp)
 
+from .colliders import kind_of, read_collider, specs_of
+from .colliders.plane import PLANE, PlaneCollider
+from .colliders.sphere import SPHERE, SphereCollider
+
 if TYPE_CHECKING:  # the mesh modules (numpy) are imported only by a scene that has a mesh cloth
     from .mesh_scene import MeshSpec
 
@@ -46,7 +50,6 @@ STICK_FAMILIES = ("structural", "shear", "bend")
 UP_AXES = ("Y", "Z")
 OUTPUT_KINDS = ("cache", "override")  # a standalone point cache, or a layer over the USD asset the cloths came from
 TORN_FACES = ("remove", "holes")  # how a cache shows torn faces: left out of the topology, or holeIndices
-COLLIDER_PURPOSES = ("guide", "default")  # USD purpose: a helper hidden in renders, or rendered geometry
 # Named pin groups; each maps (rows, cols) to a list of (row, col). Row 0 is the top edge (the origin's
 # edge), column 0 the left edge.
 NAMED_PINS: dict[str, Callable[[int, int], list[tuple[int, int]]]] = {
@@ -149,46 +152,6 @@ class ClothSpec:
 
 
 @dataclass(frozen=True)
-class PlaneCollider:
-    """An infinite plane through ``point`` whose ``normal`` (unit length) points to the free side."""
-
-    name: str
-    point: tuple[float, float, float]
-    normal: tuple[float, float, float]
-    thickness: float = 0.0
-    friction: float = 0.0
-    display_size: float = 10.0
-    purpose: str = "guide"  # USD purpose of its prim in a cache
-
-
-@dataclass(frozen=True)
-class SphereCollider:
-    """A sphere whose centre follows ``keyframes`` ((time s, (x, y, z)), ...) linearly, held at the ends."""
-
-    name: str
-    radius: float
-    keyframes: tuple[tuple[float, tuple[float, float, float]], ...]
-    thickness: float = 0.0
-    friction: float = 0.0
-    purpose: str = "guide"  # USD purpose of its prim in a cache
-
-    @property
-    def moving(self) -> bool:
-        return len({c for _, c in self.keyframes}) > 1
-
-    def centre_at(self, time: float) -> tuple[float, float, float]:
-        times = [t for t, _ in self.keyframes]
-        return tuple(float(v) for v in _lerp_keys(times, [c for _, c in self.keyframes], time))
-
-
-def _lerp_keys(times: list[float], values: list[tuple], time: float):
-    import numpy as np  # host-side only: USD authoring and tests
-
-    values = np.asarray(values, dtype=np.float64)
-    return np.array([np.interp(time, times, values[:, k]) for k in range(values.shape[1])])
-
-
-@dataclass(frozen=True)
 class Scene:
     source: str
     simulation: SimulationSettings
@@ -198,11 +161,11 @@ class Scene:
 
     @property
     def planes(self) -> tuple[PlaneCollider, ...]:
-        return tuple(c for c in self.colliders if isinstance(c, PlaneCollider))
+        return specs_of(self.colliders, PLANE)
 
     @property
     def spheres(self) -> tuple[SphereCollider, ...]:
-        return tuple(c for c in self.colliders if isinstance(c, SphereCollider))
+        return specs_of(self.colliders, SPHERE)
 
     @property
     def particle_count(self) -> int:
@@ -591,49 +554,6 @@ def check_cloth(t: _Table, spec: ClothSpec) -> ClothSpec:
     return spec
 
 
-def _read_collider(file: str, index: int, data: Any) -> PlaneCollider | SphereCollider:
-    t = _Table(file, f"collider[{index}]", data)
-    kind = t.take("type", choice(("plane", "sphere")))
-    name = t.take("name", _prim_name, f"{kind}{index}")
-    thickness = t.take("thickness", real(0.0), 0.0)
-    friction = t.take("friction", real(0.0, 1.0), 0.0)
-    purpose = t.take("purpose", choice(COLLIDER_PURPOSES), "guide")
-    if kind == "plane":
-        normal = _unit_vector(t.take("normal", vector(3, _any_real), (0.0, 1.0, 0.0)))
-        if normal is None:
-            raise t.error("normal", "expected a non-zero vector")
-        collider: PlaneCollider | SphereCollider = PlaneCollider(
-            name=name, point=t.take("point", vector(3, _any_real), (0.0, 0.0, 0.0)),
-            normal=normal, thickness=thickness, friction=friction,
-            display_size=t.take("display_size", real(0.0, lo_open=True), 10.0), purpose=purpose,
-        )
-    else:
-        radius = t.take("radius", real(0.0, lo_open=True))
-        if "centre" in t.data and "path" in t.data:
-            raise t.error("path", "give either centre (a still sphere) or path (a moving one), not both")
-        if "path" in t.data:
-            keys = t.take("path", _read_path)
-        else:
-            keys = ((0.0, t.take("centre", vector(3, _any_real), (0.0, 0.0, 0.0))),)
-        collider = SphereCollider(name=name, radius=radius, keyframes=keys, thickness=thickness, friction=friction,
-                                  purpose=purpose)
-    t.finish()
-    return collider
-
-
-@accepts(ARRAY)
-def _read_path(value: Any, key: str) -> tuple[tuple[float, tuple[float, float, float]], ...]:
-    if not isinstance(value, list) or not value:
-        raise _Invalid(f"expected an array of [time, x, y, z] keyframes, got {_describe(value)}")
-    keys = []
-    for i, item in enumerate(value):
-        t, x, y, z = _per_element(vector(4, _per_element(real())))(item, f"{key}[{i}]")
-        if keys and t <= keys[-1][0]:
-            raise _Invalid(f"keyframe times must increase, got {t} s after {keys[-1][0]} s", f"{key}[{i}][0]")
-        keys.append((t, (x, y, z)))
-    return tuple(keys)
-
-
 def parse_scene(data: dict, file: str = "<scene>", scene_path: Path | None = None) -> Scene:
     """Validate an already-parsed TOML document. ``file`` is used in error messages."""
     scene_path = scene_path or Path(file)
@@ -653,7 +573,7 @@ def parse_scene(data: dict, file: str = "<scene>", scene_path: Path | None = Non
     def colliders(value: Any, key: str) -> tuple:
         if not isinstance(value, list):
             raise _Invalid(f"expected [[collider]] tables, got {_describe(value)}")
-        return tuple(_read_collider(file, i, c) for i, c in enumerate(value))
+        return tuple(read_collider(_Table(file, f"collider[{i}]", c), i) for i, c in enumerate(value))
 
     cloth_specs = top.take("cloth", cloths)
     collider_specs = top.take("collider", colliders, ())
@@ -778,18 +698,6 @@ def _check_prim_names(file: str, cloths: tuple, colliders: tuple) -> None:
                              f"collider[{collider_names[cloth.name]}] is also named {cloth.name!r}")
 
 
-def _unit_vector(v: tuple[float, ...]) -> tuple[float, ...] | None:
-    """``v`` / |v|, or None for the zero vector. Scaled by its largest component first, so that neither a
-    huge vector ([1e300, 1e300, 0]: the sum of squares is inf) nor a tiny one (squares underflow to 0) loses
-    its direction."""
-    scale = max(abs(x) for x in v)
-    if scale == 0.0:
-        return None
-    scaled = [x / scale for x in v]
-    length = math.hypot(*scaled)  # in [1, sqrt(3)]
-    return tuple(x / length for x in scaled)
-
-
 def _float32_fits(x: float) -> bool:
     return math.isfinite(x) and abs(x) <= FLOAT32_MAX
 
@@ -849,23 +757,4 @@ def _check_float32(file: str, simulation: SimulationSettings, cloths: tuple, col
     for j, c in enumerate(colliders):
         key = f"collider[{j}]"
         fits(f"{key}.thickness", [c.thickness])
-        if isinstance(c, PlaneCollider):
-            fits(f"{key}.point", c.point)
-            fits(f"{key}.display_size", [c.display_size])
-            far = max(abs(v) for v in c.point)
-            if not _float32_fits(far + c.display_size):
-                where = (f"{key}.point[{[abs(v) for v in c.point].index(far)}]" if far >= c.display_size
-                         else f"{key}.display_size")
-                raise SceneError(file, where, f"the drawn square reaches beyond what float32 can hold ({limit})")
-        else:
-            fits(f"{key}.radius", [c.radius])
-            if not _float32_fits(c.radius + c.thickness):
-                where = f"{key}.radius" if c.radius >= c.thickness else f"{key}.thickness"
-                raise SceneError(file, where, f"radius + thickness = {c.radius + c.thickness:g} m, which float32 "
-                                 f"cannot hold ({limit})")
-            for k, (_, centre) in enumerate(c.keyframes):
-                for axis, v in enumerate(centre):
-                    if not _float32_fits(v):
-                        where = f"{key}.path[{k}][{axis + 1}]" if len(c.keyframes) > 1 else f"{key}.centre[{axis}]"
-                        raise SceneError(file, where, f"expected a number that float32 can hold ({limit}), "
-                                         f"got {v:g}")
+        kind_of(c).check_numbers(c, file, key)

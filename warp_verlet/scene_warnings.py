@@ -16,7 +16,8 @@ import math
 
 import numpy as np
 
-from .scene import ClothSpec, PlaneCollider, Scene, SphereCollider
+from .colliders import kind_of
+from .scene import ClothSpec, Scene
 
 # runner.UNCONVERGED_STRETCH, the run's own check (a structural stick at twice its rest length), repeated here
 # so that validate does not import the runner; tests/test_scene_warnings.py checks that the two agree.
@@ -97,10 +98,10 @@ def particle_spacing(spec: ClothSpec) -> float:
 
 
 def start_inside_warnings(scene: Scene) -> list[str]:
-    """Particles that start where the collider clamp (kernels/collide.py) would move them on the first substep:
-    closer than radius + thickness to a sphere's centre (at time 0), or less than thickness above a plane on its
-    free side. The clamp moves them out at once, a jump that Verlet turns into velocity; pinned ones it never
-    moves, so they stay inside."""
+    """Particles that start where the collider clamp would move them on the first substep, as each collider's
+    kind finds them (``start_inside``): closer than radius + thickness to a sphere's centre (at time 0), or less
+    than thickness above a plane on its free side. The clamp moves them out at once, a jump that Verlet turns
+    into velocity; pinned ones it never moves, so they stay inside."""
     if not scene.colliders:
         return []
     out = []
@@ -108,21 +109,8 @@ def start_inside_warnings(scene: Scene) -> list[str]:
         points = rest_positions(spec)
         pinned = pinned_mask(spec, len(points))
         for collider in scene.colliders:
-            if isinstance(collider, SphereCollider):
-                centre = np.asarray(collider.centre_at(0.0), np.float64)
-                reach = collider.radius + collider.thickness
-                inside = np.linalg.norm(points - centre, axis=1) < reach
-                where = (f"inside sphere '{collider.name}' (closer than radius + thickness = {_g(reach)} m to its "
-                         f"centre {tuple(round(v, 6) for v in centre)} at time 0)")
-                fix = "move the cloth's origin, or the sphere's centre (or its path's first keyframe), so that " \
-                      "they start apart"
-            else:
-                height = (points - np.asarray(collider.point)) @ np.asarray(collider.normal)
-                inside = height < collider.thickness
-                side = "behind" if collider.thickness == 0 else "behind or within thickness = " \
-                    f"{_g(collider.thickness)} m of"
-                where = f"{side} plane '{collider.name}'"
-                fix = "move the cloth's origin to the plane's free side (the way its normal points), or move the plane"
+            report = kind_of(collider).start_inside(collider, points)
+            inside, where, fix = report.inside, report.where, report.fix
             count = int(inside.sum())
             if not count:
                 continue

@@ -8,8 +8,8 @@ substep is
    a stick is soft) per colour (Gauss-Seidel across colours), or one ``relax_jacobi`` gather plus a copy
    (Jacobi); on a GPU, one grid cloth that cannot tear computes its sticks instead of reading them
    (``relax_grid_colour``, kernels/grid_relax.py, bit-identical; ``constraint_sets`` names the choice),
-3. collider clamping, once, after the sweeps: ``collide_spheres`` and ``collide_planes`` for the kinds the
-   scene has (moving spheres are first placed on the device clock),
+3. collider clamping, once, after the sweeps: each collider kind's clamp (``collide_spheres``, ``collide_planes``)
+   for the kinds the scene has, in registry order (moving spheres are first placed on the device clock),
 4. ``tear_sticks``, only when a cloth of the scene can tear,
 
 and nothing else unless the scene asks for it. A frame's fixed-dt substeps are captured once (a CUDA graph, or
@@ -421,10 +421,9 @@ class Simulator:
         mine, theirs = self.state, other.state
         for name in ("particle_q", "particle_q_inertial", "particle_dq"):
             getattr(mine, name).assign(getattr(theirs, name).numpy().astype(self.model.host_position_dtype))
-        if theirs.sphere_centres is not None and mine.sphere_centres is not None:
-            wp.copy(mine.sphere_centres, theirs.sphere_centres)
-        if theirs.collider_clock is not None and mine.collider_clock is not None:
-            wp.copy(mine.collider_clock, theirs.collider_clock)
+        for name in mine.collider_array_names:  # each collider kind's moving part (sphere centres, the clock)
+            if getattr(theirs, name, None) is not None and getattr(mine, name) is not None:
+                wp.copy(getattr(mine, name), getattr(theirs, name))
         if self.model.tears and other.model.tears and other.torn_count():
             self.model.restore_tears(mine, other.model.host_sticks[other.torn_sticks()])
             self.sync_tears()

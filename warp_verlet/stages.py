@@ -27,7 +27,7 @@ if TYPE_CHECKING:  # pragma: no cover
     from .state import State
 
 from .constraints import CONSTRAINT_KINDS
-from .launches import FLOAT, FLOAT64, INT, VEC2I, VEC3, VEC3D, BoundStage, recorded
+from .launches import FLOAT, VEC2I, VEC3, VEC3D, BoundStage, recorded
 
 
 @dataclass(frozen=True)
@@ -41,9 +41,7 @@ class Requirements:
     free_particles: bool
     compliant: bool
     tears: bool
-    spheres: int
-    sphere_keys: int  # keyframes over all spheres, when one moves (else 0)
-    planes: int
+    colliders: tuple[tuple[str, tuple[int, ...]], ...]  # (kind's type, its counts) per kind present, clamp order
     tethered: int = 0  # free particles of tethered cloths
     tethers_per_particle: int = 0
     coarse_sticks: int = 0  # multilevel: coarse sticks over all levels
@@ -80,15 +78,15 @@ class Requirements:
         from .topology import stick_count
         from .precision import resolve
 
-        moving = any(s.moving for s in scene.spheres)
+        from .colliders import counts as collider_counts
+
         free = any(c.pin_count < c.particle_count for c in scene.cloths)
         counts = [hierarchy_counts(*c.resolution) for c in scene.cloths] if scene.simulation.multilevel else []
         coarse = (sum(n for n, _ in counts), sum(n for _, n in counts))
         req = cls(
             particles=scene.particle_count, sticks=sum(stick_count(c) for c in scene.cloths),
             relaxation=scene.simulation.relaxation, iterations=scene.simulation.iterations, free_particles=free,
-            compliant=scene.compliant, tears=scene.tears, spheres=len(scene.spheres),
-            sphere_keys=sum(len(s.keyframes) for s in scene.spheres) if moving else 0, planes=len(scene.planes),
+            compliant=scene.compliant, tears=scene.tears, colliders=collider_counts(scene.colliders),
             tethered=scene.tethered_particles, tethers_per_particle=scene.tethers_per_particle,
             coarse_sticks=coarse[0], coarse_children=coarse[1],
             elements=tuple((kind.name, n) for kind in CONSTRAINT_KINDS if (n := kind.count(scene))),
@@ -221,44 +219,30 @@ class Relax:
 
 
 class Collide:
-    """Collider clamping after the sweeps (kernels/collide.py): spheres first, planes last, so that a sphere
-    resting on the ground cannot push cloth through the ground; moving spheres are first placed on the
-    device clock."""
+    """Collider clamping after the sweeps: every collider kind of the registry (warp_verlet/colliders) the scene
+    has, in registry order (spheres first, planes last, so that a sphere resting on the ground cannot push
+    cloth through the ground). Each kind's ``before`` (a moving sphere placed on the device clock) runs before
+    any clamp."""
 
     name = "collide"
 
     def needed(self, req: Requirements) -> bool:
-        return bool(req.spheres or req.planes)
+        return bool(req.colliders)
 
     def device_bytes(self, req: Requirements) -> int:
-        planes = req.planes * (2 * VEC3 + 2 * FLOAT)  # points, normals, thickness, friction
-        spheres = req.spheres * (VEC3 + 2 * FLOAT + VEC3)  # start centre, reach, friction; the State's centre
-        moving = ((req.spheres + 1) * INT + req.sphere_keys * (FLOAT + VEC3) + FLOAT64) if req.sphere_keys else 0
-        return planes + spheres + moving
+        from .colliders import device_bytes
+
+        return device_bytes(req.colliders)
 
     def bind(self, model: "Model", state: "State", solver) -> BoundStage:
-        import warp as wp
-
-        from warp_verlet.kernels.collide import advance_clock, collide_planes, collide_spheres, place_spheres
-
-        c, n, clock = model.colliders, model.particle_count, state.collider_clock
-        tasks = []
-        if c.moving:
-            tasks.append(recorded(place_spheres, len(c.spheres), [state.collider_clock, c.key_start, c.key_times,
-                                                                  c.key_centres], [state.sphere_centres]))
-        if c.spheres:
-            tasks.append(recorded(collide_spheres, n, [state.particle_q, state.particle_q_inertial, state.particle_dq,
-                                                       model.inv_mass, state.sphere_centres, c.sphere_reach,
-                                                       c.sphere_friction]))
-        if c.planes:
-            tasks.append(recorded(collide_planes, n, [state.particle_q, state.particle_q_inertial, state.particle_dq,
-                                                      model.inv_mass, c.plane_points, c.plane_normals,
-                                                      c.plane_thickness, c.plane_friction]))
+        bound = [kind.bind(model, state) for kind, _ in model.colliders.kinds]
+        before = [prepare for launches in bound for prepare in launches.before]
+        clamps = [task for launches in bound for task in launches.clamps]
 
         def run(state: "State", dt: float) -> None:
-            if clock is not None:
-                wp.launch(advance_clock, 1, inputs=[clock, wp.float64(dt)])
-            for task in tasks:
+            for prepare in before:
+                prepare(dt)
+            for task in clamps:
                 task.run()
 
         return BoundStage(run)

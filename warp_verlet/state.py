@@ -13,6 +13,7 @@ import numpy as np
 import warp as wp
 
 from .errors import ArgumentError
+from .colliders import kinds as collider_kinds
 from .model import Model
 
 
@@ -32,16 +33,17 @@ class State:
     - ``torn_entries``: (1,) int32, or None. Tear entries zeroed so far; only when a cloth can tear.
     - ``tether_length``: (T, K) float32, m, or None. Live tether lengths (+inf once a tear cuts a particle off
       from its pin); only when a tethered cloth can tear, otherwise the Model's lengths serve.
-    - ``collider_clock``: (1,) float64, s, or None. Simulated time on the device, which places the moving
-      spheres inside a captured frame; only when a sphere moves.
-    - ``sphere_centres``: (S,) ``wp.vec3``, m, or None. Where each sphere is now; only when there are spheres.
+    - what each collider kind moves (its ``state_arrays``, warp_verlet/colliders), for spheres:
+      ``collider_clock``: (1,) float64, s, or None. Simulated time on the device, which places the moving
+      spheres inside a captured frame; only when a sphere moves. ``sphere_centres``: (S,) ``wp.vec3``, m, or
+      None. Where each sphere is now; only when there are spheres.
 
     Host scalars: ``time`` (s simulated), ``steps`` (substeps taken) and ``dt_prev`` (s, the last step's dt,
     None before the first step: the next step then runs the exact start).
     """
 
     _ARRAYS = ("particle_q", "particle_q_inertial", "particle_dq", "stick_weight", "torn_entries",
-               "tether_length", "collider_clock", "sphere_centres")
+               "tether_length")  # then each collider kind's (state_arrays), in registry order
 
     def __init__(self, model: Model):
         self.model = model
@@ -53,23 +55,29 @@ class State:
             self.torn_entries = wp.zeros(1, dtype=int) if model.tears else None
             cuttable = model.tears and model.tether_table is not None
             self.tether_length = wp.clone(model.tether_length) if cuttable else None
-            colliders = model.colliders
-            self.collider_clock = wp.zeros(1, dtype=wp.float64) if colliders.moving else None
-            self.sphere_centres = wp.clone(colliders.sphere_start) if colliders.spheres else None
+            self.collider_array_names: tuple[str, ...] = ()  # what the collider kinds move, present or None
+            for kind in collider_kinds():  # every kind's names, None where this scene has none of it
+                for name, array in kind.state_arrays(model.colliders).items():
+                    setattr(self, name, array)
+                    self.collider_array_names += (name,)
         self.time = 0.0
         self.steps = 0
         self.dt_prev: float | None = None
 
     def arrays(self) -> dict[str, wp.array]:
         """The device arrays this state holds, by name (absent ones left out)."""
-        return {name: getattr(self, name) for name in self._ARRAYS if getattr(self, name) is not None}
+        return {name: getattr(self, name) for name in self._names() if getattr(self, name) is not None}
+
+    def _names(self) -> tuple[str, ...]:
+        return self._ARRAYS + self.collider_array_names
 
     def clone(self) -> "State":
         """An independent copy: stepping one does not touch the other."""
         other = State.__new__(State)
         other.model = self.model
         with wp.ScopedDevice(self.model.device):
-            for name in self._ARRAYS:
+            other.collider_array_names = self.collider_array_names
+            for name in self._names():
                 value = getattr(self, name)
                 setattr(other, name, None if value is None else wp.clone(value))
         other.time, other.steps, other.dt_prev = self.time, self.steps, self.dt_prev
@@ -80,7 +88,7 @@ class State:
         against this state, and a captured frame, stay valid)."""
         if other.model is not self.model:
             raise ArgumentError("a state can only be assigned from a state of the same model")
-        for name in self._ARRAYS:
+        for name in self._names():
             mine = getattr(self, name)
             if mine is not None:
                 wp.copy(mine, getattr(other, name))

@@ -4,7 +4,8 @@ Layout of a cache::
 
     /World                 Xform, the stage's defaultPrim
     /World/<cloth>         Mesh (faces of any size, UVs in primvars:st) or, for a rope, linear BasisCurves
-    /World/Colliders/<n>   Sphere (time-sampled translate when it moves) or a large quad Mesh for a plane
+    /World/Colliders/<n>   each collider as its kind defines it (warp_verlet/colliders): a Sphere (time-sampled
+                           translate when it moves), or a large quad Mesh for a plane
 
 ``points`` and ``extent`` are time-sampled every frame; a time code is a frame number
 (timeCodesPerSecond == framesPerSecond == fps). A mesh keeps the faces and UVs it was given (triangles,
@@ -43,6 +44,8 @@ from typing import Callable, Sequence
 import numpy as np
 from pxr import Sdf, Tf, Usd, UsdGeom, UsdValidation, Vt
 
+from .colliders.plane import CachedPlane, plane_corners  # noqa: F401 (each kind's cache record, here as before)
+from .colliders.sphere import CachedSphere  # noqa: F401
 from .errors import ArgumentError, OutputError, StateError, usd_cause, usd_diagnostics
 from .faces import Faces, as_faces
 from .output_file import estimate_cache
@@ -78,41 +81,7 @@ class CachedShape:
         return len(self.faces) == 0
 
 
-@dataclass(frozen=True)
-class CachedSphere:
-    """A sphere collider: its render-visible radius (thickness excluded) and where it starts."""
-
-    name: str
-    radius: float
-    centre: tuple[float, float, float]
-    moving: bool = False
-    purpose: str = "guide"
-
-
-@dataclass(frozen=True)
-class CachedPlane:
-    """A plane collider, drawn as a square of side ``size`` centred on ``point``."""
-
-    name: str
-    point: tuple[float, float, float]
-    normal: tuple[float, float, float]
-    size: float
-    purpose: str = "guide"
-
-
 COLLIDERS_PATH = WORLD_PATH.AppendChild("Colliders")
-
-
-def plane_corners(plane: CachedPlane) -> np.ndarray:
-    """The square's corners, counter-clockwise seen from the normal's side."""
-    n = np.asarray(plane.normal, dtype=np.float64)
-    helper = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 0.0, 1.0])
-    u = np.cross(n, helper)
-    u /= np.linalg.norm(u)
-    v = np.cross(n, u)
-    h = plane.size / 2
-    p = np.asarray(plane.point, dtype=np.float64)
-    return np.array([p - h * u - h * v, p + h * u - h * v, p + h * u + h * v, p - h * u + h * v], np.float32)
 
 
 def _check_shapes(shapes: Sequence[CachedShape]) -> None:
@@ -174,7 +143,7 @@ class PointCacheWriter:
 
     def __init__(self, path: str | os.PathLike[str], shapes: Sequence[CachedShape], fps: float, *,
                  up_axis: str = "Y", meters_per_unit: float = 1.0, save_every: int = 10, start_frame: int = 0,
-                 metadata: dict[str, str] | None = None, colliders: Sequence[CachedSphere | CachedPlane] = (),
+                 metadata: dict[str, str] | None = None, colliders: Sequence = (),
                  torn_faces: str = "holes", override_asset: str | os.PathLike[str] | None = None,
                  before_save: Callable[[PointCacheWriter], None] | None = None):
         _check_shapes(shapes)
@@ -228,32 +197,13 @@ class PointCacheWriter:
                            if shape.is_rope else self._define_mesh(stage, WORLD_PATH.AppendChild(shape.name), shape)
                            for shape in self.shapes]
         self.colliders = tuple(colliders)
-        self._moving: list[UsdGeom.XformOp] = []  # translate ops of moving spheres, in collider order
+        self._moving: list[UsdGeom.XformOp] = []  # ops of moving colliders (a sphere's translate), in collider order
         if self.colliders:
             UsdGeom.Scope.Define(stage, COLLIDERS_PATH)
-        for collider in self.colliders:
-            prim_path = COLLIDERS_PATH.AppendChild(collider.name)
-            if isinstance(collider, CachedSphere):
-                sphere = UsdGeom.Sphere.Define(stage, prim_path)
-                sphere.CreateRadiusAttr(float(collider.radius))
-                r = float(collider.radius)
-                sphere.CreateExtentAttr(Vt.Vec3fArray([(-r, -r, -r), (r, r, r)]))
-                sphere.CreatePurposeAttr(collider.purpose)
-                op = sphere.AddTranslateOp()
-                if collider.moving:
-                    self._moving.append(op)  # sampled per frame in write_frame
-                else:
-                    op.Set(tuple(float(c) for c in collider.centre))
-            else:
-                plane = UsdGeom.Mesh.Define(stage, prim_path)
-                corners = plane_corners(collider)
-                plane.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(corners))
-                plane.CreateExtentAttr(UsdGeom.PointBased.ComputeExtent(Vt.Vec3fArray.FromNumpy(corners)))
-                plane.CreateFaceVertexCountsAttr(Vt.IntArray([4]))
-                plane.CreateFaceVertexIndicesAttr(Vt.IntArray([0, 1, 2, 3]))
-                plane.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
-                plane.CreateDoubleSidedAttr(True)
-                plane.CreatePurposeAttr(collider.purpose)
+        for collider in self.colliders:  # each kind's record defines its own prim
+            sampled = collider.define(stage, COLLIDERS_PATH.AppendChild(collider.name))
+            if sampled is not None:
+                self._moving.append(sampled)  # sampled per frame in write_frame
         # Curves pad their extent by half the width; keep the width array to compute it per frame.
         self._rope_widths = Vt.FloatArray([rope_width])
         try:

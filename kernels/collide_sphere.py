@@ -1,65 +1,12 @@
-"""Collider clamping: particles are projected out of planes and spheres after the relaxation sweeps.
-
-Clamping last, once per substep, means no stick correction can push a particle back through a surface in
-the same substep (the seed article's pitfall about shifting particles through boundaries). Verlet turns
-the projection into a velocity change by itself: the move is part of x - x_prev.
-
-Friction scales the tangential part of the implicit velocity v = x - x_prev of a particle in contact by
-(1 - friction). In the summed-form state (integrate.py), x_prev = x_inertial - delta, so removing
-friction * v_t from v means subtracting it from delta.
-
-A collider's thickness is added to its surface: the cloth rests that far outside the render-visible
-sphere or plane, so the two never z-fight.
-"""
+"""Sphere colliders: particles are projected out of spheres (the response: collide_response.py); a moving
+sphere's centre is placed on the device clock first."""
 
 from typing import Any
 
 import warp as wp
 
-from .positions import for_positions, scaled
-
-
-@wp.func
-def project_out(
-    i: int,
-    xi: Any,
-    normal: Any,
-    depth: Any,
-    friction: float,
-    x_inertial: wp.array(dtype=Any),
-    delta: wp.array(dtype=Any),
-):
-    """Move xi out by depth along normal, apply friction to its implicit velocity, return the new position."""
-    xi = xi + normal * depth
-    if friction > 0.0:
-        v = xi - (x_inertial[i] - delta[i])
-        tangential = v - normal * wp.dot(v, normal)
-        delta[i] = delta[i] - scaled(tangential, friction)
-    return xi
-
-
-@wp.kernel
-def collide_planes(
-    x: wp.array(dtype=Any),
-    x_inertial: wp.array(dtype=Any),
-    delta: wp.array(dtype=Any),
-    inv_mass: wp.array(dtype=float),
-    points: wp.array(dtype=wp.vec3),
-    normals: wp.array(dtype=wp.vec3),
-    thickness: wp.array(dtype=float),
-    friction: wp.array(dtype=float),
-):
-    """Collider data is float32; it is converted to the positions' precision (x.dtype) before any use."""
-    i = wp.tid()
-    if inv_mass[i] == 0.0:
-        return  # pins are where the user put them
-    xi = x[i]
-    for p in range(points.shape[0]):
-        n = x.dtype(normals[p])
-        depth = type(xi[0])(thickness[p]) - wp.dot(xi - x.dtype(points[p]), n)
-        if depth > type(depth)(0.0):
-            xi = project_out(i, xi, n, depth, friction[p], x_inertial, delta)
-    x[i] = xi
+from .collide_response import project_out
+from .positions import for_positions
 
 
 @wp.kernel
@@ -91,7 +38,6 @@ def collide_spheres(
     x[i] = xi
 
 
-for_positions(collide_planes, arrays=("x", "x_inertial", "delta"))
 for_positions(collide_spheres, arrays=("x", "x_inertial", "delta"))
 
 
