@@ -14,7 +14,7 @@ Everything between the two markers is rewritten; every other line of the file is
 those of :func:`key_tables`: the scene's own (``simulation``, ``output``, ``cloth``, ``grid``, ``mesh``), and those
 of the collider and constraint kinds, found in their registries when those packages provide them
 (``warp_verlet.colliders.COLLIDER_KINDS`` gives ``collider.<kind>`` for each kind, named by its ``name`` or
-``type``, with its ``keys``, and ``COLLIDER_KEYS`` the table ``collider``; ``warp_verlet.constraints.CONSTRAINT_KINDS``
+``type``, with its ``keys``, and ``SHARED_KEYS`` the table ``collider``; ``warp_verlet.constraints.CONSTRAINT_KINDS``
 gives ``constraint.<kind>`` with each kind's ``cloth_keys``, and ``CONSTRAINT_KEYS`` the table ``constraint``). So a new kind's table
 is one marker in docs/scenes.md. A marker naming a table that does not exist is an error, as is a marker left
 open. tests/test_scene_docs.py runs the check.
@@ -41,7 +41,7 @@ BEGIN = re.compile(r"^<!-- keys: (\S.*?) -->$")
 END = "<!-- /keys -->"
 HEADER = "| key | type | unit | default | allowed | meaning |\n|---|---|---|---|---|---|"
 # (module, registry of kinds, table of the keys all its kinds share, prefix of the tables' names)
-REGISTRIES = (("warp_verlet.colliders", "COLLIDER_KINDS", "COLLIDER_KEYS", "collider"),
+REGISTRIES = (("warp_verlet.colliders", "COLLIDER_KINDS", "SHARED_KEYS", "collider"),
               ("warp_verlet.constraints", "CONSTRAINT_KINDS", "CONSTRAINT_KEYS", "constraint"))
 KIND_KEYS = ("keys", "cloth_keys")  # the attribute of a kind that holds its keys (a constraint's are [[cloth]] keys)
 

@@ -112,7 +112,7 @@ def test_kind_registries_add_their_tables(monkeypatch):
     """A collider kind's table is collider.<its name or type>, with its keys; a constraint kind's is
     constraint.<name>, with its cloth_keys; the keys every collider shares are the table collider."""
     box = types.SimpleNamespace(type="box", keys=KEYS[:2])
-    _fake_module(monkeypatch, "warp_verlet.colliders", COLLIDER_KINDS={"box": box}, COLLIDER_KEYS=KEYS[2:])
+    _fake_module(monkeypatch, "warp_verlet.colliders", COLLIDER_KINDS={"box": box}, SHARED_KEYS=KEYS[2:])
     angle = types.SimpleNamespace(name="angle_limit", cloth_keys=KEYS[4:])
     plain = types.SimpleNamespace(name="plain", cloth_keys=())
     _fake_module(monkeypatch, "warp_verlet.constraints", CONSTRAINT_KINDS=(angle, plain))
