@@ -122,7 +122,7 @@ def stacked_triangles(count: int) -> SourceMesh:
 def test_a_million_coincident_vertices_weld_into_three_particles_in_little_memory(monkeypatch):
     # Coincident vertices collapse before the close-pair search, so even a 64 MiB allowance takes them (the
     # search over all pairs would have asked for 103 GiB).
-    monkeypatch.setattr("warp_verlet.memory.available_host_bytes", lambda: 64 * 2**20)
+    monkeypatch.setattr("warp_verlet.machine.available_host_bytes", lambda: 64 * 2**20)
     with pytest.warns(UserWarning, match="shared by more than two faces"):  # 333,334 faces on each edge
         mesh = prepare(stacked_triangles(333_334))
     assert mesh.vertex_count == 1_000_002 and mesh.particle_count == 3
@@ -132,12 +132,12 @@ def test_a_million_coincident_vertices_weld_into_three_particles_in_little_memor
 def test_a_dense_cluster_of_distinct_vertices_is_refused_before_the_search_allocates(monkeypatch):
     # 1000 distinct vertices within 1e-6 m, welded at 1e-3 m: 8 grids x 499,500 candidate pairs x 128 bytes is
     # about 0.48 GiB, over the 32 MiB that a 64 MiB machine allows.
-    monkeypatch.setattr("warp_verlet.memory.available_host_bytes", lambda: 64 * 2**20)
+    monkeypatch.setattr("warp_verlet.machine.available_host_bytes", lambda: 64 * 2**20)
     rng = np.random.default_rng(1)
     points = rng.uniform(0.0, 1e-6, (1000, 3))
     with pytest.raises(MeshError, match=r"cluster\.obj: 1000 distinct vertices lie in one cell .* 3996000 pairs"):
         weld(points, 1e-3, "cluster.obj")
-    monkeypatch.setattr("warp_verlet.memory.available_host_bytes", lambda: 64 * 2**30)  # 32 GiB allowed: welded
+    monkeypatch.setattr("warp_verlet.machine.available_host_bytes", lambda: 64 * 2**30)  # 32 GiB allowed: welded
     np.testing.assert_array_equal(weld(points, 1e-3), np.zeros(1000))
 
 

@@ -9,10 +9,7 @@ them.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Callable
-
-if TYPE_CHECKING:  # pragma: no cover
-    from .state import State
+from typing import Any, Callable
 
 VEC3, FLOAT, INT, VEC2I, FLOAT64 = 12, 4, 4, 8, 8
 VEC3D = 24  # a float64 position
@@ -34,7 +31,7 @@ class BoundStage:
     sets only) are the per-thread tasks of one sweep, phase after phase, which the CPU thread team may run
     instead."""
 
-    run: Callable[["State", float], None] | None
+    run: Callable[[Any, float], None] | None  # (a State, dt)
     phases: list[list[PhaseTask | None]] | None = None
 
 
@@ -55,10 +52,10 @@ def split_tasks(make: Callable[[int, int], PhaseTask], first: int, count: int, t
 
 
 # ---------------------------------------------------------------------------------------------- stages
-def start_compliant_substep(launches: list, tension) -> Callable[["State", float], None]:
+def start_compliant_substep(launches: list, tension) -> Callable[[Any, float], None]:
     """A BoundStage's prepare for soft (XPBD) sticks: each substep gives ``launches`` its 1 / dt^2 and restarts the
     tension from zero."""
-    def prepare(state: "State", dt: float) -> None:
+    def prepare(state, dt: float) -> None:
         inv_dt2 = 1.0 / (dt * dt)
         for launch in launches:
             launch.set_param_by_name("inv_dt2", inv_dt2)

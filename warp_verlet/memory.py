@@ -12,10 +12,10 @@ cloth (128 B per stick coloured, 150 B Jacobi) and rounded up.
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 
 from .errors import WarpVerletError
+from .machine import gib
 from .scene import Scene
 from .topology import stick_count  # noqa: F401 (the count before building; memory's callers ask here)
 
@@ -34,10 +34,6 @@ class MemoryNeed:
         return f"about {gib(self.device_bytes)} of device arrays and {gib(self.host_bytes)} of host memory to build them"
 
 
-def gib(n: float) -> str:
-    return f"{n / (1 << 30):.2f} GiB"
-
-
 def estimate(scene: Scene, sticks: str = "auto") -> MemoryNeed:
     """``sticks``: the sticks' form the simulator is asked for ("auto", "explicit", "implicit")."""
     from .stages import Requirements, device_bytes
@@ -50,21 +46,6 @@ def estimate(scene: Scene, sticks: str = "auto") -> MemoryNeed:
         host_bytes=req.sticks * HOST_BUILD_BYTES_PER_STICK + req.particles * 64,
         precision=req.precision,
     )
-
-
-def available_host_bytes() -> int | None:
-    """MemAvailable from /proc/meminfo (what can be allocated without swapping), else None."""
-    try:
-        with open("/proc/meminfo") as f:
-            for line in f:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except OSError:
-        pass
-    try:
-        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
-    except (ValueError, OSError, AttributeError):
-        return None
 
 
 def check_fits(scene: Scene, device_name: str, device_free: int | None, host_free: int | None,

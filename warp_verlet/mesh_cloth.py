@@ -202,7 +202,7 @@ def _close_pairs(points: np.ndarray, distance: float, what: str) -> np.ndarray:
 def _check_weld_fits(candidates: int, largest_group: int, distance: float, what: str) -> None:
     """Refuse a close-pair search whose candidate pairs would take more than half the available host memory
     (as memory.check_fits does for a run's arrays), or 8 GiB where that is unknown."""
-    from .memory import available_host_bytes, gib  # imported here: memory imports the scene, which imports this
+    from .machine import available_host_bytes, gib
 
     available = available_host_bytes()
     budget = available // 2 if available is not None else 8 * 2**30

@@ -21,7 +21,7 @@ import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
 from .errors import OutputError
-from .memory import available_host_bytes
+from .machine import available_host_bytes
 # Reading is shared with the browser player; grid_shape is re-exported for callers of this module.
 from .cache_reader import (FrameGeometry, PointCache, PreviewError, grid_shape,  # noqa: F401
                            open_cache, read_frame)

@@ -20,7 +20,7 @@ import os
 import sys
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable, Mapping
+from typing import TYPE_CHECKING, Any, Mapping
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -32,7 +32,7 @@ from .scene_keys import (  # the table reader and value parsers, under the names
     ARRAY, STRING, TABLE, FrozenMapping, Invalid as _Invalid, Key, Table as _Table, accepts, any_real as _any_real,
     boolean as _boolean, choice, describe as _describe, int_text as _int_text, integer,
     non_negative as _non_negative, per_element as _per_element, prim_name as _prim_name, real, record_key, text,
-    toml_list as _toml_list, vector,
+    toml_list as _toml_list, vector, NAMED_PINS, FLOAT32_MAX, FLOAT32_TINY, float32_fits,
 )
 from .writer_registry import is_output_suffix, suffixes_text  # the output formats' suffixes (no pxr, no warp)
 
@@ -52,16 +52,6 @@ OUTPUT_KINDS = ("cache", "override")  # a standalone point cache, or a layer ove
 TORN_FACES = ("remove", "holes")  # how a cache shows torn faces: left out of the topology, or holeIndices
 # Named pin groups; each maps (rows, cols) to a list of (row, col). Row 0 is the top edge (the origin's
 # edge), column 0 the left edge.
-NAMED_PINS: dict[str, Callable[[int, int], list[tuple[int, int]]]] = {
-    "top-left": lambda r, c: [(0, 0)],
-    "top-right": lambda r, c: [(0, c - 1)],
-    "bottom-left": lambda r, c: [(r - 1, 0)],
-    "bottom-right": lambda r, c: [(r - 1, c - 1)],
-    "top-edge": lambda r, c: [(0, j) for j in range(c)],
-    "bottom-edge": lambda r, c: [(r - 1, j) for j in range(c)],
-    "left-edge": lambda r, c: [(i, 0) for i in range(r)],
-    "right-edge": lambda r, c: [(i, c - 1) for i in range(r)],
-}
 
 
 TARGET_ITERATIONS = 2  # sweeps per substep when target_stretch chooses the substeps (warp_verlet/budget.py)
@@ -682,8 +672,6 @@ def load_scene(path: str | Path) -> Scene:
 # Checks across keys: prim names in the cache, and numbers as the device will hold them (float32).
 
 RESERVED_PRIM_NAMES = ("Colliders",)  # /World/Colliders holds the colliders (usd_writer.COLLIDERS_PATH)
-FLOAT32_MAX = 3.4028234663852886e38
-FLOAT32_TINY = 1.1754943508222875e-38  # the smallest normal float32: below it precision is lost, then 0
 
 
 def _check_prim_names(file: str, cloths: tuple, colliders: tuple) -> None:
@@ -698,10 +686,6 @@ def _check_prim_names(file: str, cloths: tuple, colliders: tuple) -> None:
                              f"collider[{collider_names[cloth.name]}] is also named {cloth.name!r}")
 
 
-def _float32_fits(x: float) -> bool:
-    return math.isfinite(x) and abs(x) <= FLOAT32_MAX
-
-
 def _check_float32(file: str, simulation: SimulationSettings, cloths: tuple, colliders: tuple) -> None:
     """Refuse numbers that are valid as TOML floats (float64) but not as the float32 the device computes with:
     past about 3.4e38 they become inf, and an inverse mass below about 1.2e-38 becomes 0 (the particle would
@@ -710,14 +694,14 @@ def _check_float32(file: str, simulation: SimulationSettings, cloths: tuple, col
 
     def fits(key: str, values) -> None:
         for k, v in enumerate(values):
-            if not _float32_fits(v):
+            if not float32_fits(v):
                 where = key if len(values) == 1 else f"{key}[{k}]"
                 raise SceneError(file, where, f"expected a number that float32 can hold ({limit}), got {v:g}")
 
     fits("simulation.gravity", simulation.gravity)
     fits("simulation.wind", simulation.wind)
     for k, (g, w) in enumerate(zip(simulation.gravity, simulation.wind)):
-        if not _float32_fits(g + w):  # one acceleration on the device
+        if not float32_fits(g + w):  # one acceleration on the device
             larger = "gravity" if abs(g) >= abs(w) else "wind"
             raise SceneError(file, f"simulation.{larger}[{k}]", f"gravity + wind = {g + w:g} m/s^2, which float32 "
                              f"cannot hold ({limit})")
@@ -732,7 +716,7 @@ def _check_float32(file: str, simulation: SimulationSettings, cloths: tuple, col
             fits(f"{key}.size", c.size)
             far = max(abs(v) for v in c.origin)
             reach = far + max(c.size)  # the far corner, whichever way the cloth lies
-            if not _float32_fits(reach):
+            if not float32_fits(reach):
                 where = (f"{key}.origin[{[abs(v) for v in c.origin].index(far)}]" if far >= max(c.size)
                          else f"{key}.size[{list(c.size).index(max(c.size))}]")
                 raise SceneError(file, where, f"the cloth reaches {reach:g} m from the world's origin, beyond what "

@@ -312,3 +312,25 @@ def prim_name(value: Any, key: str) -> str:
     if not PRIM_NAME.fullmatch(name):  # not .match: "$" would accept a trailing newline
         raise Invalid(f"expected a name of letters, digits and '_' not starting with a digit, got {name!r}")
     return name
+
+
+# Grid pins by name: (rows, cols) -> the [row, col] of each pinned particle. Read by every selection of a grid's
+# particles (pins, rigid patches).
+NAMED_PINS: dict[str, Callable[[int, int], list[tuple[int, int]]]] = {
+    "top-left": lambda r, c: [(0, 0)],
+    "top-right": lambda r, c: [(0, c - 1)],
+    "bottom-left": lambda r, c: [(r - 1, 0)],
+    "bottom-right": lambda r, c: [(r - 1, c - 1)],
+    "top-edge": lambda r, c: [(0, j) for j in range(c)],
+    "bottom-edge": lambda r, c: [(r - 1, j) for j in range(c)],
+    "left-edge": lambda r, c: [(i, 0) for i in range(r)],
+    "right-edge": lambda r, c: [(i, c - 1) for i in range(r)],
+}
+
+FLOAT32_MAX = 3.4028234663852886e38
+FLOAT32_TINY = 1.1754943508222875e-38  # the smallest normal float32: below it precision is lost, then 0
+
+
+def float32_fits(x: float) -> bool:
+    """Whether the device can hold ``x`` as a float32: finite and within its range."""
+    return math.isfinite(x) and abs(x) <= FLOAT32_MAX

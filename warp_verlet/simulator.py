@@ -29,7 +29,8 @@ import warp as wp
 from warp_verlet.kernels.guard import find_diverged
 
 from .errors import ArgumentError, StateError, WarpVerletError
-from .memory import available_host_bytes, check_fits
+from .machine import available_host_bytes
+from .memory import check_fits
 from .model import Model
 from .scene import Scene
 from .solver import VerletSolver

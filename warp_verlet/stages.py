@@ -22,9 +22,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:  # pragma: no cover
-    from .model import Model
     from .scene import Scene
-    from .state import State
 
 from .constraints import CONSTRAINT_KINDS
 from .launches import FLOAT, VEC2I, VEC3, VEC3D, BoundStage, recorded
@@ -163,7 +161,7 @@ class Integrate:
     def device_bytes(self, req: Requirements) -> int:
         return 0  # it updates the State's positions, prediction and increment, which every scene has
 
-    def bind(self, model: "Model", state: "State", solver) -> BoundStage:
+    def bind(self, model, state, solver) -> BoundStage:
         import warp as wp
 
         from warp_verlet.kernels.integrate import verlet_step
@@ -174,7 +172,7 @@ class Integrate:
         x, x_inertial, dq, inv_mass, n = (state.particle_q, state.particle_q_inertial, state.particle_dq,
                                           model.inv_mass, model.particle_count)
 
-        def run(state: "State", dt: float) -> None:
+        def run(state, dt: float) -> None:
             ratio = min(dt / state.dt_prev, settings.max_dt_ratio)
             # In the positions' type (accel is one too): a float32 factor would cost float64 its precision.
             velocity_scale = real(math.exp(-settings.damping * dt) * ratio)
@@ -197,7 +195,7 @@ class Relax:
     def device_bytes(self, req: Requirements) -> int:
         return sum(c.device_bytes(req) for c in CONSTRAINT_SETS if c.needed(req))
 
-    def bind(self, model: "Model", state: "State", solver) -> BoundStage:
+    def bind(self, model, state, solver) -> BoundStage:
         sets = [c.bind(model, state, solver) for c in CONSTRAINT_SETS if c.needed(solver.req)]
         phases = [phase for bound in sets for phase in bound.phases]
         before = [bound.run for bound in sets if bound.run is not None]  # per-substep set-up (dt, zeroing)
@@ -205,7 +203,7 @@ class Relax:
         sweep = [task.run for phase in phases for task in phase if task is not None]
         iterations = solver.settings.iterations
 
-        def run(state: "State", dt: float) -> None:
+        def run(state, dt: float) -> None:
             for prepare in before:
                 prepare(state, dt)
             if team is not None:
@@ -234,12 +232,12 @@ class Collide:
 
         return device_bytes(req.colliders)
 
-    def bind(self, model: "Model", state: "State", solver) -> BoundStage:
+    def bind(self, model, state, solver) -> BoundStage:
         bound = [kind.bind(model, state) for kind, _ in model.colliders.kinds]
         before = [prepare for launches in bound for prepare in launches.before]
         clamps = [task for launches in bound for task in launches.clamps]
 
-        def run(state: "State", dt: float) -> None:
+        def run(state, dt: float) -> None:
             for prepare in before:
                 prepare(dt)
             for task in clamps:
@@ -262,7 +260,7 @@ class Tear:
         # their ends.
         return req.sticks * (2 * FLOAT if req.relaxation == "coloured" else 2 * (2 * FLOAT + VEC2I))
 
-    def bind(self, model: "Model", state: "State", solver) -> BoundStage:
+    def bind(self, model, state, solver) -> BoundStage:
         from warp_verlet.kernels.tear import tear_sticks
 
         task = recorded(tear_sticks, model.tear_ends.shape[0], [state.particle_q, model.tear_ends, model.tear_length],

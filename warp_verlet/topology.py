@@ -18,15 +18,11 @@ Each stick also records its *grid class* (which of the six directions above it i
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .faces import Faces, grid_faces
 from .mesh_cloth import BEND, SHEAR, STRUCTURAL, particle_masses, stick_families
-
-if TYPE_CHECKING:  # pragma: no cover
-    from .scene import ClothSpec
 
 # Grid classes, in the order the analytic colouring numbers them.
 STRUCT_H, STRUCT_V, SHEAR_DIAG, SHEAR_ANTI, BEND_H, BEND_V = range(6)
@@ -88,7 +84,7 @@ class ClothTopology:
         return tuple(FAMILY_NAMES[c] for c in np.unique(self.family))
 
 
-def grid_positions(spec: ClothSpec) -> np.ndarray:
+def grid_positions(spec) -> np.ndarray:
     rows, cols = spec.resolution
     height, width = spec.size
     # A 1-particle axis has no spacing; linspace(0, s, 1) gives [0] as wanted.
@@ -116,7 +112,7 @@ def _stick_block(rows: int, cols: int, dr: int, dc: int, grid_class: int):
     return ends, np.full(r.shape, grid_class, np.int8), np.stack([r, c], axis=1)
 
 
-def stick_count(spec: ClothSpec) -> int:
+def stick_count(spec) -> int:
     """The number of sticks :func:`build_cloth` makes for a cloth, without building it (a mesh's are
     counted from its faces)."""
     if spec.mesh is not None:
@@ -130,7 +126,7 @@ def stick_count(spec: ClothSpec) -> int:
     return sum(per_family[family] for family in spec.sticks)
 
 
-def build_cloth(spec: ClothSpec) -> ClothTopology:
+def build_cloth(spec) -> ClothTopology:
     if spec.mesh is not None:
         return build_mesh_cloth(spec)
     rows, cols = spec.resolution
@@ -185,7 +181,7 @@ def build_cloth(spec: ClothSpec) -> ClothTopology:
     )
 
 
-def build_mesh_cloth(spec: ClothSpec) -> ClothTopology:
+def build_mesh_cloth(spec) -> ClothTopology:
     """A mesh cloth's topology: particles from the welded vertices, sticks from the faces."""
     mesh_spec = spec.mesh
     mesh, source = mesh_spec.mesh, mesh_spec.mesh.source

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..scene_keys import Key, any_real, real, vector
-from . import FLOAT, VEC3, ColliderLaunches, InsideReport, LiveDrawing
+from .kind import FLOAT, VEC3, ColliderLaunches, InsideReport, LiveDrawing
 
 
 @dataclass(frozen=True)
@@ -62,16 +62,16 @@ class PlaneKind:
 
     def check_numbers(self, spec: PlaneCollider, file: str, key: str) -> None:
         from ..errors import SceneError
-        from ..scene import FLOAT32_MAX, _float32_fits
+        from ..scene_keys import FLOAT32_MAX, float32_fits
 
         limit = f"float32 holds magnitudes up to {FLOAT32_MAX:.3g}"
         for name, values in (("point", spec.point), ("display_size", (spec.display_size,))):
             for k, v in enumerate(values):
-                if not _float32_fits(v):
+                if not float32_fits(v):
                     where = f"{key}.{name}" if len(values) == 1 else f"{key}.{name}[{k}]"
                     raise SceneError(file, where, f"expected a number that float32 can hold ({limit}), got {v:g}")
         far = max(abs(v) for v in spec.point)
-        if not _float32_fits(far + spec.display_size):
+        if not float32_fits(far + spec.display_size):
             where = (f"{key}.point[{[abs(v) for v in spec.point].index(far)}]" if far >= spec.display_size
                      else f"{key}.display_size")
             raise SceneError(file, where, f"the drawn square reaches beyond what float32 can hold ({limit})")
@@ -110,7 +110,7 @@ class PlaneKind:
 
     def bind(self, model, state) -> ColliderLaunches:
         from ..kernels.collide_plane import collide_planes
-        from ..stages import recorded
+        from ..launches import recorded
 
         c = model.colliders
         clamp = recorded(collide_planes, model.particle_count,

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..scene_keys import ARRAY, Invalid, Key, accepts, any_real, describe, per_element, real, vector
-from . import FLOAT, FLOAT64, INT, VEC3, ColliderLaunches, InsideReport, LiveDrawing
+from .kind import FLOAT, FLOAT64, INT, VEC3, ColliderLaunches, InsideReport, LiveDrawing
 
 
 @dataclass(frozen=True)
@@ -80,19 +80,19 @@ class SphereKind:
 
     def check_numbers(self, spec: SphereCollider, file: str, key: str) -> None:
         from ..errors import SceneError
-        from ..scene import FLOAT32_MAX, _float32_fits
+        from ..scene_keys import FLOAT32_MAX, float32_fits
 
         limit = f"float32 holds magnitudes up to {FLOAT32_MAX:.3g}"
-        if not _float32_fits(spec.radius):
+        if not float32_fits(spec.radius):
             raise SceneError(file, f"{key}.radius", f"expected a number that float32 can hold ({limit}), "
                              f"got {spec.radius:g}")
-        if not _float32_fits(spec.radius + spec.thickness):
+        if not float32_fits(spec.radius + spec.thickness):
             where = f"{key}.radius" if spec.radius >= spec.thickness else f"{key}.thickness"
             raise SceneError(file, where, f"radius + thickness = {spec.radius + spec.thickness:g} m, which float32 "
                              f"cannot hold ({limit})")
         for k, (_, centre) in enumerate(spec.keyframes):
             for axis, v in enumerate(centre):
-                if not _float32_fits(v):
+                if not float32_fits(v):
                     where = f"{key}.path[{k}][{axis + 1}]" if len(spec.keyframes) > 1 else f"{key}.centre[{axis}]"
                     raise SceneError(file, where, f"expected a number that float32 can hold ({limit}), got {v:g}")
 
@@ -153,7 +153,7 @@ class SphereKind:
         import warp as wp
 
         from ..kernels.collide_sphere import advance_clock, collide_spheres, place_spheres
-        from ..stages import recorded
+        from ..launches import recorded
 
         c = model.colliders
         before = ()

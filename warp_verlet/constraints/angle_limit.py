@@ -18,7 +18,7 @@ import math
 
 import numpy as np
 
-from . import ConstraintSet
+from .kind import ConstraintSet
 from ..launches import FLOAT, BoundStage, recorded, split_tasks
 from ..scene_keys import Key, real
 

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import ConstraintSet
+from .kind import ConstraintSet
 from ..colouring import grid_colouring
 from ..launches import FLOAT, INT, VEC2I, BoundStage, recorded
 from ..topology import SHEAR_ANTI, SHEAR_DIAG, STRUCT_H, STRUCT_V

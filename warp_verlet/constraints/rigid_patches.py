@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import ConstraintSet
+from .kind import ConstraintSet
 from ..launches import FLOAT, INT, VEC3, BoundStage, recorded, split_tasks
 from ..scene_keys import Invalid, Key, accepts, ARRAY, describe, int_text
 
@@ -84,7 +84,7 @@ RIGID_PATCHES = Key(
 
 def _resolve(spec, table, written) -> tuple[tuple[int, ...], ...]:
     """Each patch as sorted particle indices of the cloth, checked."""
-    from ..scene import NAMED_PINS
+    from ..scene_keys import NAMED_PINS
     from ..topology import grid_positions
 
     mesh = spec.mesh.mesh if spec.mesh is not None else None

@@ -7,7 +7,7 @@ tearing and the stretch metrics share); this module binds their sweeps.
 
 from __future__ import annotations
 
-from . import ConstraintSet
+from .kind import ConstraintSet
 from ..launches import FLOAT, FLOAT64, INT, VEC2I, BoundStage, PhaseTask, recorded, split_tasks, start_compliant_substep
 
 

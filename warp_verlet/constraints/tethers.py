@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import ConstraintSet
+from .kind import ConstraintSet
 from ..mesh_cloth import connected_labels
 from ..launches import FLOAT, FLOAT64, INT, BoundStage, recorded, split_tasks
 
