@@ -205,3 +205,24 @@ def test_a_velocity_or_positions_of_the_wrong_shape_is_an_argument_error_naming_
         sim.state.set_positions(np.zeros((5, 3)))
     sim.state.set_velocity([1.0, 0.0, 0.0])  # the two shapes it documents are still taken
     sim.state.set_velocity(np.ones((16, 3)))
+
+
+def test_the_increment_always_holds_metres_and_the_start_velocity_has_its_own_field():
+    # particle_dq is x - x_prev's part in metres at every moment; a velocity given before the first step waits
+    # in start_velocity (m/s, host), is carried by clone and assign, and becomes the first increment.
+    sim = Simulator(make_scene({"gravity": [0.0, 0.0, 0.0], "damping": 0.0, "iterations": 0}, resolution=[3, 3],
+                               pins=["top-left"]), "cpu", use_graph=False)
+    state = sim.state
+    state.set_velocity([2.0, 0.0, 0.0])
+    assert not state.particle_dq.numpy().any()
+    assert np.array_equal(state.start_velocity[1:], np.tile([2.0, 0.0, 0.0], (8, 1)))
+    assert not state.start_velocity[0].any()  # the pin stays at rest
+    twin = state.clone()
+    assert np.array_equal(twin.start_velocity, state.start_velocity) and twin.start_velocity is not state.start_velocity
+    dt = sim.dt
+    sim.step(dt)
+    assert state.start_velocity is None
+    move = state.particle_dq.numpy()[1:, 0].astype(np.float64) + (state.particle_q.numpy() - state.particle_q_inertial.numpy())[1:, 0]
+    np.testing.assert_allclose(move, 2.0 * dt, rtol=1e-5)  # the first step moved v dt, in metres
+    state.assign(twin)  # back before the start: the velocity comes back with it
+    assert state.start_velocity is not None and state.dt_prev is None

@@ -429,6 +429,8 @@ class Simulator:
             self.model.restore_tears(mine, other.model.host_sticks[other.torn_sticks()])
             self.sync_tears()
         mine.time, mine.steps, mine.dt_prev = theirs.time, theirs.steps, theirs.dt_prev
+        mine.start_velocity = None if theirs.start_velocity is None else theirs.start_velocity.astype(
+            self.model.host_position_dtype)
         self._accumulator = other._accumulator
 
     # ------------------------------------------------------------------ reading state

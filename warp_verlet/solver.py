@@ -147,7 +147,11 @@ class VerletSolver:
         stages = self.bind(state)
         with wp.ScopedDevice(self.model.device):
             if state.dt_prev is None:
-                # Exact start for constant acceleration: x_prev = x0 - v0 dt + a dt^2 / 2.
+                # Exact start for constant acceleration: x_prev = x0 - v0 dt + a dt^2 / 2. The start reads v0 from the
+                # increment's array, which it overwrites with the increment (never captured: it runs once).
+                if state.start_velocity is not None:
+                    state.particle_dq.assign(state.start_velocity)
+                    state.start_velocity = None
                 wp.launch(verlet_start, self.model.particle_count,
                           inputs=[state.particle_q, self.model.inv_mass, self.accel, self.model.position_scalar(dt)],
                           outputs=[state.particle_q_inertial, state.particle_dq])

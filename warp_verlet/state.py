@@ -26,8 +26,7 @@ class State:
       (``model.position_dtype``), m. Positions.
     - ``particle_q_inertial``: (N,) of the same type, m. The position the last Verlet step predicted (summed form,
       kernels/integrate.py): x - x_prev = ``particle_dq`` + (x - x_inertial).
-    - ``particle_dq``: (N,) of the same type, m. The last step's increment. Before the first step it holds the
-      initial velocity in m/s instead (see :meth:`set_velocity`); the exact start turns it into an increment.
+    - ``particle_dq``: (N,) of the same type, m. The last step's increment (zero before the first step).
     - ``stick_weight``: (E,) float32, dimensionless, or None. Per tear entry, 1 while the stick holds and 0
       once torn; only when a cloth can tear. The relaxation multiplies a stick's correction by it.
     - ``torn_entries``: (1,) int32, or None. Tear entries zeroed so far; only when a cloth can tear.
@@ -39,7 +38,9 @@ class State:
       None. Where each sphere is now; only when there are spheres.
 
     Host scalars: ``time`` (s simulated), ``steps`` (substeps taken) and ``dt_prev`` (s, the last step's dt,
-    None before the first step: the next step then runs the exact start).
+    None before the first step: the next step then runs the exact start). On the host too, ``start_velocity``:
+    (N, 3) m/s of the positions' numpy type, or None (at rest): the velocity :meth:`set_velocity` gave, which
+    the exact start turns into the first increment; None again once it has.
     """
 
     _ARRAYS = ("particle_q", "particle_q_inertial", "particle_dq", "stick_weight", "torn_entries",
@@ -63,6 +64,7 @@ class State:
         self.time = 0.0
         self.steps = 0
         self.dt_prev: float | None = None
+        self.start_velocity: np.ndarray | None = None
 
     def arrays(self) -> dict[str, wp.array]:
         """The device arrays this state holds, by name (absent ones left out)."""
@@ -81,6 +83,7 @@ class State:
                 value = getattr(self, name)
                 setattr(other, name, None if value is None else wp.clone(value))
         other.time, other.steps, other.dt_prev = self.time, self.steps, self.dt_prev
+        other.start_velocity = None if self.start_velocity is None else self.start_velocity.copy()
         return other
 
     def assign(self, other: "State") -> None:
@@ -93,6 +96,7 @@ class State:
             if mine is not None:
                 wp.copy(mine, getattr(other, name))
         self.time, self.steps, self.dt_prev = other.time, other.steps, other.dt_prev
+        self.start_velocity = None if other.start_velocity is None else other.start_velocity.copy()
 
     def set_velocity(self, velocity) -> None:
         """Start again from the current positions, moving at ``velocity`` (m/s): one (3,) vector for every particle, or
@@ -107,8 +111,9 @@ class State:
                                 f"particles, got {shape}") from None
         if not np.isfinite(v).all():
             raise ArgumentError("velocity must be finite")
-        v = np.where(self.model.host_inv_mass[:, None] > 0, v, 0.0).astype(dtype)
-        self.particle_dq.assign(v)
+        self.start_velocity = np.where(self.model.host_inv_mass[:, None] > 0, v, 0.0).astype(dtype)
+        self.particle_dq.zero_()
+        self.particle_q_inertial.assign(self.particle_q)
         self.dt_prev = None
 
     def positions(self) -> np.ndarray:

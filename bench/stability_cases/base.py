@@ -114,10 +114,12 @@ def particle_masses(sc: Scene) -> np.ndarray:
 
 def implicit_velocity(sim: Simulator, dt: float) -> np.ndarray:
     """(x - x_prev) / dt in float64, from the summed-form State: x - x_prev = particle_dq + (particle_q -
-    particle_q_inertial). Before the first step particle_dq holds the initial velocity (m/s) itself."""
+    particle_q_inertial). Before the first step, the velocity set_velocity gave (State.start_velocity)."""
     state = sim.state
     if state.dt_prev is None:
-        return state.particle_dq.numpy().astype(np.float64)
+        if state.start_velocity is None:
+            return np.zeros((sim.model.particle_count, 3))
+        return state.start_velocity.astype(np.float64)
     x, xi, d = (a.numpy().astype(np.float64) for a in (state.particle_q, state.particle_q_inertial,
                                                        state.particle_dq))
     return (d + (x - xi)) / dt
