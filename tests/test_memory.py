@@ -128,3 +128,15 @@ def test_device_and_host_limits_are_named():
     # and 1 row apart (float64, for shear sticks).
     assert estimate(scene, "explicit").device_bytes == 64 * 64 * 40 + 2 * 64 * 63 * 16
     assert estimate(scene, "implicit").device_bytes == req.device_bytes == 64 * 64 * 40 + 250 * 4 + 126 * 8
+
+
+def test_a_simulator_derives_the_scenes_requirements_once(monkeypatch):
+    # The memory check, the model and the solver read one Requirements: counting every kind again (a mesh's
+    # hinges, the multilevel hierarchy's sizes) for each of them would be wasted work and could disagree.
+    from warp_verlet.stages import Requirements
+
+    calls = []
+    real_of = Requirements.of.__func__
+    monkeypatch.setattr(Requirements, "of", classmethod(lambda cls, *a, **k: calls.append(1) or real_of(cls, *a, **k)))
+    Simulator(make_scene(resolution=[6, 6], pins=["top-left"], max_bend_angle=30.0), "cpu")
+    assert len(calls) == 1

@@ -34,11 +34,12 @@ class MemoryNeed:
         return f"about {gib(self.device_bytes)} of device arrays and {gib(self.host_bytes)} of host memory to build them"
 
 
-def estimate(scene: Scene, sticks: str = "auto") -> MemoryNeed:
-    """``sticks``: the sticks' form the simulator is asked for ("auto", "explicit", "implicit")."""
+def estimate(scene: Scene, sticks: str = "auto", requirements=None) -> MemoryNeed:
+    """``sticks``: the sticks' form the simulator is asked for ("auto", "explicit", "implicit");
+    ``requirements``: the scene's stages.Requirements for that form where the caller has them already."""
     from .stages import Requirements, device_bytes
 
-    req = Requirements.of(scene, sticks)
+    req = requirements if requirements is not None else Requirements.of(scene, sticks)
     return MemoryNeed(
         particles=req.particles,
         sticks=req.sticks,
@@ -49,9 +50,9 @@ def estimate(scene: Scene, sticks: str = "auto") -> MemoryNeed:
 
 
 def check_fits(scene: Scene, device_name: str, device_free: int | None, host_free: int | None,
-               sticks: str = "auto") -> MemoryNeed:
+               sticks: str = "auto", requirements=None) -> MemoryNeed:
     """Raise one clear error when the scene cannot fit; ``device_free`` None means the device is the host."""
-    req = estimate(scene, sticks)
+    req = estimate(scene, sticks, requirements)
     host_need = req.host_bytes + (req.device_bytes if device_free is None else 0)
     what = f"{scene.source}: {req.particles:,} particles and {req.sticks:,} sticks need {req.describe()}"
     if device_free is not None and req.device_bytes > device_free:

@@ -240,16 +240,18 @@ class Model:
     kind name -> the device data its ``build`` made, documented in its module.
     """
 
-    def __init__(self, scene: Scene, device, colouring: str = "auto", sticks: str = "auto"):
+    def __init__(self, scene: Scene, device, colouring: str = "auto", sticks: str = "auto",
+                 requirements: Requirements | None = None):
         """``colouring``: "auto" (analytic when every cloth is a grid, else Warp's graph colouring), "grid"
         (grids only) or "graph". ``sticks``: "auto" (implicit grid sticks on a GPU where the scene allows
-        them: stages.implicit_grid_obstacle, :func:`stick_form`), "explicit" or "implicit"."""
+        them: stages.implicit_grid_obstacle, :func:`stick_form`), "explicit" or "implicit". ``requirements``: the
+        scene's Requirements for that stick form, where the caller has computed them already."""
         if colouring not in ("auto", "grid", "graph"):
             raise ArgumentError(f"colouring must be 'auto', 'grid' or 'graph', got {colouring!r}")
         sticks = stick_form(sticks, colouring, device)
         self.device = device
         self.relaxation = scene.simulation.relaxation
-        req = Requirements.of(scene, sticks)
+        req = requirements if requirements is not None else Requirements.of(scene, sticks)
         self.precision = req.precision
         self.stick_request = sticks  # what Requirements.of was asked: the solver's Requirements must be asked the same
         self.sticks_form = "implicit" if req.implicit_grid else "explicit"

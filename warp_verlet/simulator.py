@@ -165,16 +165,18 @@ class Simulator:
         self.scene = scene
         self.settings = scene.simulation
         self.device = resolve_device(device)
-        # Refuse a scene that cannot fit before allocating any of it.
         from .model import stick_form
 
+        # The scene's requirements, once: the memory check, the model and the solver all read them. A scene that
+        # cannot fit is refused before any of it is allocated.
+        self._sticks = stick_form(sticks, colouring, self.device)
+        req = Requirements.of(scene, self._sticks)
         self.memory = check_fits(scene, str(self.device), self.device.free_memory if self.device.is_cuda else None,
-                                 available_host_bytes(), stick_form(sticks, colouring, self.device))
+                                 available_host_bytes(), self._sticks, req)
         with wp.ScopedDevice(self.device):
-            self.model = Model(scene, self.device, colouring, sticks)
+            self.model = Model(scene, self.device, colouring, sticks, req)
             self.state = State(self.model)
-        self._sticks = self.model.stick_request
-        self.solver = VerletSolver(self.model, self.settings, Requirements.of(scene, self._sticks), threads)
+        self.solver = VerletSolver(self.model, self.settings, req, threads)
         self.threads = self.solver.threads
         self.min_dt = self.solver.min_dt
         self.precision = self.model.precision  # "float32" or "float64": the scene's precision, "auto" resolved
