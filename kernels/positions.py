@@ -34,8 +34,9 @@ def for_positions(kernel, arrays: tuple[str, ...] = (), vectors: tuple[str, ...]
 
 def instance(kernel, vec):
     """The concrete instance of ``kernel`` for positions of type ``vec``. Launching it directly skips the
-    inference of the generic argument types that ``wp.launch`` does on every call (measured on the CPU: 34 ->
-    15 us per launch); it matters for a launch issued every substep outside a capture."""
+    inference of the generic argument types that ``wp.launch`` does on every call, which costs more than the
+    launch itself on the CPU (bench/results/code_choices.md); it matters for a launch issued every substep
+    outside a capture."""
     return _INSTANCES[kernel, vec]
 
 

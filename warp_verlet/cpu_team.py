@@ -27,13 +27,12 @@ from typing import Callable, Sequence
 from .errors import ArgumentError, WarpVerletError
 
 LAUNCH_COST_S = 13e-6
-"""Fixed cost per thread and phase. With it, a 128^2 colour (51 us of one-thread work) stays on one thread
-(2 threads were 15-20% slower on the 2-core EPYC, 9% faster on the Xeon) and a 256^2 colour (205 us) gets 3
-on the Xeon (1.96x; 4 were best there, 2.06x)."""
+"""Fixed cost per thread and phase. With it, a 128^2 colour stays on one thread (two were slower on a 2-core
+machine) and a 256^2 colour is cut over a few (bench/results/code_choices.md)."""
 
 MAX_AUTO_THREADS = 8
-"""The barrier's cost grows with the thread count. At 1024^2 on the Xeon two runs agreed up to 8 threads
-(5.4x, 5.5x) and disagreed beyond (12: 5.4x and 6.4x; 16: 4.4x and 6.3x), so automatic stops at 8."""
+"""The barrier's cost grows with the thread count, and past 8 threads the speed-up stopped being repeatable
+from run to run (bench/results/code_choices.md), so automatic stops at 8."""
 
 MAX_THREADS = 1024
 """The most relaxation threads anyone may ask for. Each is an OS thread that meets the others at a barrier

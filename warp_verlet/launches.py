@@ -37,7 +37,7 @@ class BoundStage:
 
 def recorded(kernel, dim: int, inputs: list, outputs: list | None = None, block_dim: int = 256) -> PhaseTask:
     """A launch recorded once (replaying it skips ``wp.launch``'s argument packing, which dominates small
-    grids on the CPU: measured at 64^2, 2.5 -> 1.4 ms per 8 sweeps), as a PhaseTask."""
+    grids on the CPU: bench/results/code_choices.md), as a PhaseTask."""
     import warp as wp
 
     launch = wp.launch(kernel, dim, inputs=inputs, outputs=outputs or [], record_cmd=True, block_dim=block_dim)

@@ -6,8 +6,8 @@ a halt). ``warp-verlet validate`` prints it. This module imports neither warp no
 
 The device figure is the sum of what the stages and constraint sets of the table (warp_verlet/stages.py)
 declare for the scene, the same declarations the solver binds its launches from; the host figure is the
-peak of the numpy temporaries that building a grid's sticks takes, measured with tracemalloc on a 512^2
-cloth (128 B per stick coloured, 150 B Jacobi) and rounded up.
+peak of the numpy temporaries that building a grid's sticks takes, per stick, measured with tracemalloc and
+rounded up (bench/results/code_choices.md).
 """
 
 from __future__ import annotations

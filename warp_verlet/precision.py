@@ -4,8 +4,8 @@ Positions are float32 unless the scene's step is too small for float32. The limi
 moves a particle by |a| dt^2, and when that is under 4 spacings of the float type at the scene's coordinates,
 x + step rounds back (nearly) to x, the relaxation corrects the rounding-level stick errors, and that
 correction enters the implicit velocity (summed-form Verlet, kernels/integrate.py) and cancels the
-acceleration: in float32 a cloth at dt = 1e-5 s did not fall at all, and at 1e-4 s (|a| dt^2 below one
-spacing) fell 1.8% short. Without relaxation nothing feeds rounding back into velocity, so there is no limit.
+acceleration: in float32 a cloth at small enough steps fell short, or did not fall at all
+(bench/results/code_choices.md). Without relaxation nothing feeds rounding back into velocity, so there is no limit.
 
 float64 has the same limit 2^29 times lower in |a| dt^2 (about 1e-8 s for a 1 m scene under gravity, far
 below the 1.7e-6 s of the most substeps a scene may ask for), so ``simulation.precision = "auto"`` (the

@@ -192,8 +192,8 @@ class Simulator:
         self._readback: StretchReadback | None = None  # the budget's stretch, reduced on the device
         self._pending_substeps: int | None = None  # a frame whose stretch is on its way to the host (CUDA)
         # A frame's substeps are captured once and replayed: a CUDA graph, or on the CPU Warp's own capture
-        # (replayed in C++: 2.4 -> 1.2 ms per frame at 32^2, bit-identical). Threaded relaxation needs its
-        # launches issued from Python, so it is not captured.
+        # (replayed in C++, bit-identical, and faster: bench/results/code_choices.md). Threaded relaxation needs
+        # its launches issued from Python, so it is not captured.
         self._use_graph = use_graph and self.threads == 1
         if self.dt < self.min_dt:
             raise WarpVerletError(self.solver.too_small(self.dt, scene_dt=True))
