@@ -19,7 +19,8 @@ import bench_package  # noqa: F401  (makes the repository's bench/ importable as
 from bench import stability_cases as cases
 from conftest import make_scene
 from test_stability import assert_all_pass
-from warp_verlet.cpu_team import PhaseTeam, auto_threads, split
+from warp_verlet.cpu_team import PhaseTeam, auto_threads
+from warp_verlet.launches import split
 from warp_verlet.errors import WarpVerletError
 from warp_verlet.scene import parse_scene
 from warp_verlet.simulator import Simulator

@@ -15,8 +15,10 @@ import numpy as np
 
 from .cache_reader import FrameGeometry, PreviewError, open_cache, read_frame
 from .display_mesh import DisplayMesh, rope_segments
+from .colliders.plane import draw_plane
+from .colliders.sphere import draw_sphere
 from .web_view import (CLOTH_COLOURS, DEFAULT_PORT, LOCALHOST, ROPE_COLOUR, ROPE_THICKNESS_M, ClothDrawing,
-                       add_plane, add_sphere, frame_camera, start_server)
+                       frame_camera, start_server)
 
 TICK_SECONDS = 1 / 120  # how often the loop looks at the clock while playing
 
@@ -48,10 +50,10 @@ class CachePlayer:
         self.ropes = [self.server.scene.add_line_segments(f"/ropes/{i}", rope_segments(r), colors=ROPE_COLOUR,
                                                           thickness=ROPE_THICKNESS_M / max(self._metres(), 1e-12))
                       for i, r in enumerate(first.ropes)]
-        self.spheres = [add_sphere(self.server, f"sphere{i}", centre, radius)
+        self.spheres = [draw_sphere(self.server, f"sphere{i}", centre, radius)
                         for i, (centre, radius) in enumerate(first.spheres)]
         for i, corners in enumerate(first.planes):
-            add_plane(self.server, f"plane{i}", corners)
+            draw_plane(self.server, f"plane{i}", corners)
         everything = np.concatenate([g for frame in (first, last) for g in
                                      [c.points for c in frame.cloth_frames] + list(frame.ropes)
                                      + [c[None] for c, _ in frame.spheres]])

@@ -61,18 +61,6 @@ def auto_threads(phase_seconds: float, cores: int | None = None) -> int:
     return int(max(1, min(best, cores, MAX_AUTO_THREADS)))
 
 
-def split(first: int, count: int, parts: int) -> list[tuple[int, int]]:
-    """``count`` items from ``first`` cut into ``parts`` contiguous (first, count) pieces, sizes differing by at
-    most one; empty pieces are kept so that piece t always belongs to thread t."""
-    base, extra = divmod(count, parts)
-    pieces, start = [], first
-    for t in range(parts):
-        size = base + (1 if t < extra else 0)
-        pieces.append((start, size))
-        start += size
-    return pieces
-
-
 class PhaseTeam:
     """T threads that run ``repeats`` passes over ``phases``, with a barrier after every phase.
 

@@ -46,8 +46,6 @@ def recorded(kernel, dim: int, inputs: list, outputs: list | None = None, block_
 
 def split_tasks(make: Callable[[int, int], PhaseTask], first: int, count: int, threads: int) -> list[PhaseTask | None]:
     """``count`` items from ``first`` cut into one piece per thread (None for an empty piece)."""
-    from .cpu_team import split
-
     return [make(f, n) if n else None for f, n in split(first, count, threads)]
 
 
@@ -62,3 +60,15 @@ def start_compliant_substep(launches: list, tension) -> Callable[[Any, float], N
         tension.zero_()
 
     return prepare
+
+
+def split(first: int, count: int, parts: int) -> list[tuple[int, int]]:
+    """``count`` items from ``first`` cut into ``parts`` contiguous (first, count) pieces, sizes differing by at
+    most one; empty pieces are kept so that piece t always belongs to thread t."""
+    base, extra = divmod(count, parts)
+    pieces, start = [], first
+    for t in range(parts):
+        size = base + (1 if t < extra else 0)
+        pieces.append((start, size))
+        start += size
+    return pieces

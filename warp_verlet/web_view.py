@@ -31,8 +31,6 @@ DEFAULT_PORT = 8080
 # Cloths take the preview's colours (warp_verlet/preview.py), as 0-255 RGB.
 CLOTH_COLOURS = ((204, 84, 61), (59, 120, 184), (92, 158, 84), (217, 158, 51))
 ROPE_COLOUR = (38, 38, 38)
-SPHERE_COLOUR = (178, 184, 194)
-PLANE_COLOUR = (115, 115, 115)
 ROPE_THICKNESS_M = 0.005
 # The camera aims this fraction of the half-height of the view right of the content: the control panel covers
 # the right of the page.
@@ -208,13 +206,3 @@ class ClothDrawing:
         self.bytes_sent = vertices.nbytes
 
 
-def add_sphere(server, name: str, centre, radius: float):
-    return server.scene.add_icosphere(f"/colliders/{name}", radius=float(radius), color=SPHERE_COLOUR,
-                                      subdivisions=3, position=tuple(float(v) for v in centre))
-
-
-def add_plane(server, name: str, corners: np.ndarray):
-    """A plane collider as the writer draws it: one quad (4 corners), seen from both sides."""
-    corners = np.asarray(corners, dtype=np.float32)
-    return server.scene.add_mesh_simple(f"/colliders/{name}", corners, np.array([[0, 1, 2], [0, 2, 3]], np.uint32),
-                                        color=PLANE_COLOUR, opacity=0.35, side="double")

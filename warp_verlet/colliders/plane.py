@@ -148,9 +148,7 @@ class PlaneKind:
 
     def add_to_live(self, app, specs: tuple[PlaneCollider, ...]) -> LiveDrawing:
         """The quads the cache draws; they never move, and the camera frames the cloth, not the ground."""
-        from ..web_view import add_plane
-
-        return LiveDrawing([add_plane(app.server, plane.name, plane_corners(self.cached(plane))) for plane in specs])
+        return LiveDrawing([draw_plane(app.server, plane.name, plane_corners(self.cached(plane))) for plane in specs])
 
 
 @dataclass(frozen=True)
@@ -198,3 +196,16 @@ def plane_corners(plane: CachedPlane):
 
 
 PLANE = PlaneKind()
+
+
+LIVE_COLOUR = (115, 115, 115)  # sRGB, on the live and view pages
+
+
+def draw_plane(server, name: str, corners):
+    """A plane collider on a viser page (live and view), as the writer draws it: one quad (4 corners), seen
+    from both sides, half transparent."""
+    import numpy as np
+
+    corners = np.asarray(corners, dtype=np.float32)
+    return server.scene.add_mesh_simple(f"/colliders/{name}", corners, np.array([[0, 1, 2], [0, 2, 3]], np.uint32),
+                                        color=LIVE_COLOUR, opacity=0.35, side="double")

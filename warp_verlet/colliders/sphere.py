@@ -207,12 +207,10 @@ class SphereKind:
         update follows the centres (a path, a drag, or Reset)."""
         import numpy as np
 
-        from ..web_view import add_sphere
-
         drawn = []
         centres = app.session.sphere_centres()
         for i, sphere in enumerate(specs):
-            handle = add_sphere(app.server, sphere.name, centres[i], sphere.radius)
+            handle = draw_sphere(app.server, sphere.name, centres[i], sphere.radius)
             gizmo = None
             if not sphere.moving:  # a keyframed sphere follows its path; the others can be dragged
                 gizmo = app.server.scene.add_transform_controls(
@@ -273,3 +271,12 @@ class CachedSphere:
 
 
 SPHERE = SphereKind()
+
+
+LIVE_COLOUR = (178, 184, 194)  # sRGB, on the live and view pages
+
+
+def draw_sphere(server, name: str, centre, radius: float):
+    """A sphere collider on a viser page (live and view): an icosphere at ``centre``."""
+    return server.scene.add_icosphere(f"/colliders/{name}", radius=float(radius), color=LIVE_COLOUR,
+                                      subdivisions=3, position=tuple(float(v) for v in centre))
