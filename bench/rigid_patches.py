@@ -5,8 +5,8 @@ constraint kind defined here, in the bench only), on the same swinging cloth.
                                   [--out bench/results]
 
 The cloth is scenes/banner_batten.toml's swing at --cloth x --cloth particles: 1 m square, 0.3 kg, held at the
-two corners of one edge, released level at 1.5 m, structural + shear + bend sticks (bend compliance 0.5 m/N),
-60 fps, 8 substeps, damping 0.8 /s. One square patch of k x k particles sits in its middle (rows and columns
+two corners of one edge (with the default tethers to them), released level at 1.5 m, structural + shear + bend
+sticks (bend compliance 0.5 m/N), 60 fps, 8 substeps, damping 0.8 /s. One square patch of k x k particles sits in its middle (rows and columns
 (n - k) // 2 onwards). For each patch size and each sweep count, three runs of --frames frames on one CPU thread
 (``Simulator(..., threads=1)``):
 
@@ -26,7 +26,8 @@ that a kind can be added from outside. Its overflow colour is one launch whose t
 Warp's CPU backend runs one after another (Gauss-Seidel, deterministic); a GPU would race, so the bench runs on
 the CPU only.
 
-Columns: ms/frame (the frames' wall time, frame 1 excluded: it is the warm-up), the worst |distance - rest
+Columns: ms/frame (the median frame's wall time, frame 1 excluded: it is the warm-up; the median, since other
+work on a shared machine slows some frames), the worst |distance - rest
 distance| over every pair of the patch's particles at every frame (m, and relative to the patch's size, its
 largest rest distance), the cloth's structural stretch |D - L| / L (the worst per-frame RMS and the worst
 maximum over the run), the launches the patch method adds to a sweep and all launches of a sweep, and the
@@ -35,6 +36,7 @@ Simulator's construction time (the all-pairs colouring is most of it).
 
 from __future__ import annotations
 
+import statistics
 import sys
 import time
 from contextlib import contextmanager, nullcontext
@@ -159,7 +161,7 @@ def swinging_cloth(cloth: int, patch: int | None, sweeps: int, frames: int) -> S
     (none for ``patch`` None)."""
     spec = {"name": "banner", "resolution": [cloth, cloth], "size": [1.0, 1.0], "origin": [0.0, 1.5, 0.0],
             "orientation": "horizontal", "mass": 0.3, "pins": ["top-left", "top-right"],
-            "sticks": ["structural", "shear", "bend"], "compliance": {"bend": 0.5}, "tethers": False}
+            "sticks": ["structural", "shear", "bend"], "compliance": {"bend": 0.5}}
     if patch is not None:
         start = (cloth - patch) // 2
         spec["rigid_patches"] = [[[r, c] for r in range(start, start + patch) for c in range(start, start + patch)]]
@@ -203,19 +205,20 @@ def run(method: str, cloth: int, patch: int, sweeps: int, frames: int) -> dict:
         own = {"shape matching": RigidPatches.name, "all-pairs sticks": AllPairsSticks.name}.get(method)
         rest = pair_distances(sim.model.rest_positions[members])
         size = float(rest.max())
-        worst = rms = peak = seconds = 0.0
+        worst = rms = peak = 0.0
+        seconds = []
         for frame in range(frames):
             start = time.perf_counter()
             sim.step_frame()
             if frame:  # frame 0 is the warm-up
-                seconds += time.perf_counter() - start
+                seconds.append(time.perf_counter() - start)
             points = sim.positions()
             worst = max(worst, float(np.abs(pair_distances(points[members]) - rest).max()))
             stretch = sim.stretch(points)
             rms, peak = max(rms, stretch.rms), max(peak, stretch.max)
         sim.close()
     return {"patch": f"{patch}x{patch}", "sweeps": sweeps, "method": method,
-            "ms/frame": f"{1e3 * seconds / max(frames - 1, 1):.2f}",
+            "ms/frame": f"{1e3 * statistics.median(seconds):.2f}",
             "worst pair error m": f"{worst:.2e}", "worst pair error / patch size": f"{worst / size:.1e}",
             "stretch rms": f"{100 * rms:.3f}%", "stretch max": f"{100 * peak:.2f}%",
             "patch launches / sweep": counts.get(own, 0) if own else 0,
