@@ -4,6 +4,9 @@ constraint kind defined here, in the bench only), on the same swinging cloth.
     python -m bench.rigid_patches [--cloth 64] [--patches 2 5 10 20] [--sweeps 16 4] [--frames 90]
                                   [--out bench/results]
 
+--out writes rigid_patches.md and rigid_patches.csv there; bench/results/rigid_patches.md keeps a reading of
+the measured run above its table, to carry over when the run is repeated.
+
 The cloth is scenes/banner_batten.toml's swing at --cloth x --cloth particles: 1 m square, 0.3 kg, held at the
 two corners of one edge (with the default tethers to them), released level at 1.5 m, structural + shear + bend
 sticks (bend compliance 0.5 m/N), 60 fps, 8 substeps, damping 0.8 /s. One square patch of k x k particles sits in its middle (rows and columns
@@ -109,7 +112,9 @@ class AllPairsSticks(ConstraintSet):
         return req.count(self.name) * (VEC2I + FLOAT + FLOAT)  # ends, rest length, weight
 
     def build(self, model, scene, device):
-        if model.device.is_cuda:
+        import warp as wp
+
+        if wp.get_device(device).is_cuda:
             raise RuntimeError("the all-pairs overflow colour is one launch whose threads share particles: CPU only")
         return PairSticks(model, scene, device)
 
