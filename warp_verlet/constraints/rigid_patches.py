@@ -11,8 +11,8 @@ A patch is written as ``pins`` are: on a grid, particle indices, ``[row, col]`` 
 (``"top-edge"``, …) and boxes ``{ min = [x, y, z], max = [x, y, z] }`` in metres; on a mesh, vertex indices and
 boxes, and on a mesh read from USD the vertices a primvar marks (``{ primvar = "name" }``, non-zero values) or a
 GeomSubset holds (``{ subset = "name" }``), which the mesh reader looks up with the pins'
-(:meth:`RigidPatches.named_vertex_sets`). Patches may not share particles (one rigid body would be two), and a patch needs two particles or more.
-Pins inside a patch compose: the patch turns about them.
+(:meth:`RigidPatches.named_vertex_sets`). Patches may not share particles (one rigid body would be two), and a
+patch needs two particles or more. Pins inside a patch compose: the patch turns about them.
 """
 
 from __future__ import annotations
