@@ -4,7 +4,9 @@ scene.py reads the keys every cloth has and calls :func:`read_mesh_keys`, then, 
 :func:`load_mesh`. The mesh file is read there, welded and checked (warp_verlet/mesh_io.py, mesh_cloth.py),
 so that a bad mesh is one SceneError naming the scene file, the key and the mesh's problem, from
 ``warp-verlet validate`` as from ``run``. Pins and particle masses are resolved to particle indices here
-too: nothing downstream sees vertex indices, boxes or primvar names. Each key is declared once in
+too: nothing downstream sees vertex indices, boxes or primvar names. A constraint kind's options may select
+vertices by primvar or GeomSubset as well (``ConstraintKind.named_vertex_sets``): they are read here, with the
+pins', and the kind resolves them in its ``check_cloth``. Each key is declared once in
 :data:`MESH_KEYS` (scene_keys.Key): docs/scenes.md's mesh table is written from it (docs/make_scene_tables.py).
 """
 
@@ -12,11 +14,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping
 
 from .errors import SceneError
 from .mesh_cloth import MASS_DISTRIBUTIONS, ClothMesh, MeshError, prepare
-from .mesh_io import read_mesh, transform_matrix
+from .mesh_io import USD_SUFFIXES, read_mesh, transform_matrix
 from .scene_keys import (ARRAY, NUMBER, Invalid, Key, Table, accepts, any_real, choice, describe, int_text,
                          per_element, real, text, vector)
 
@@ -140,13 +142,31 @@ def read_mesh_keys(t: Table, scene_dir: Path) -> MeshKeys:
     )
 
 
-def load_mesh(t: Table, keys: MeshKeys) -> MeshSpec:
-    """Read, weld and check the mesh, and resolve its pins and particle masses to particles."""
-    named = tuple(dict.fromkeys((item[0], item[1]) for item in keys.pins if item[0] in ("primvar", "subset")))
+def kinds_vertex_sets(options: Mapping[str, Any]) -> tuple[tuple[str, str, str], ...]:
+    """The vertex sets the constraint kinds' ``options`` of a cloth select by name (each kind's
+    ``named_vertex_sets``): ("primvar" or "subset", name, key), in registry order."""
+    from .constraints import CONSTRAINT_KINDS
+
+    return tuple(found for kind in CONSTRAINT_KINDS for found in kind.named_vertex_sets(options))
+
+
+def load_mesh(t: Table, keys: MeshKeys, options: Mapping[str, Any]) -> MeshSpec:
+    """Read, weld and check the mesh, and resolve its pins and particle masses to particles. The vertex sets
+    that the pins and the constraint kinds' ``options`` (the cloth's, as read) select by primvar or GeomSubset
+    are looked up in the same read; the kinds resolve theirs in their ``check_cloth``."""
+    for_kinds = kinds_vertex_sets(options)
+    is_usd = keys.path.suffix.lower() in USD_SUFFIXES
+    wanted = [(item[0], item[1]) for item in keys.pins if item[0] in ("primvar", "subset")]
+    wanted += [(kind, name) for kind, name, _ in for_kinds] if is_usd else []
     try:
-        mesh = prepare(read_mesh(keys.path, keys.prim, keys.transform, named), keys.weld_distance)
+        mesh = prepare(read_mesh(keys.path, keys.prim, keys.transform, tuple(dict.fromkeys(wanted))),
+                       keys.weld_distance)
     except MeshError as exc:
         raise t.error("mesh", str(exc)) from None
+    if for_kinds and not is_usd:
+        kind, name, key = for_kinds[0]
+        raise SceneError(t.file, key, f"selecting vertices by {kind} ({name!r}) needs a USD file; the mesh is a "
+                         f"{keys.path.suffix or 'suffix-less'} file")
     vertices = mesh.vertex_count
     pinned: set[int] = set()
     for item in keys.pins:

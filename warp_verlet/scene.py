@@ -519,7 +519,7 @@ def _read_mesh_cloth(t: _Table, index: int, scene_dir: Path) -> ClothSpec:
         values["name"] = f"cloth{index}"
     spec = ClothSpec(resolution=None, size=None, **values, options=_read_options(t))
     t.finish()
-    spec = replace(spec, mesh=mesh_scene.load_mesh(t, request))
+    spec = replace(spec, mesh=mesh_scene.load_mesh(t, request, spec.options))
     if spec.tear_threshold is not None and spec.mesh.mesh.non_manifold_edges:
         raise t.error("tear_threshold", f"tearing needs a manifold mesh (each edge beside at most two faces, to "
                       f"know which faces a torn edge opens), and {spec.mesh.mesh.non_manifold_edges} edges have more")

@@ -24,6 +24,12 @@ class ConstraintKind(Protocol):
     cloth_keys: tuple["Key", ...]
     """The ``[[cloth]]`` keys it owns; their values reach it as ``ClothSpec.options[key.name]``."""
 
+    def named_vertex_sets(self, options) -> tuple[tuple[str, str, str], ...]:
+        """The vertex sets a cloth's ``options`` (as read, before ``check_cloth``) select by name, each
+        ("primvar" or "subset", name, the key that names it): a mesh cloth read from USD looks them up when it
+        reads the mesh (mesh_scene.load_mesh), and ``check_cloth`` finds each one's vertices in
+        ``spec.mesh.mesh.source.named_vertices[(kind, name)]``."""
+
     def check_cloth(self, spec, table: "Table") -> dict[str, Any] | None:
         """Once a cloth is read (``spec``, a scene.ClothSpec, its mesh loaded), check this kind's options against it and resolve them (say,
         selections to particle indices): the options to replace, or None. A problem raises ``table.error``."""
@@ -55,6 +61,9 @@ class ConstraintSet:
 
     name = ""
     cloth_keys: tuple = ()
+
+    def named_vertex_sets(self, options) -> tuple:
+        return ()
 
     def check_cloth(self, spec, table):
         return None

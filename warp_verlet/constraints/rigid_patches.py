@@ -9,8 +9,10 @@ so a patch stays rigid only as far as the sweeps converge (bench/results/rigid_p
 
 A patch is written as ``pins`` are: on a grid, particle indices, ``[row, col]`` pairs, pin names
 (``"top-edge"``, …) and boxes ``{ min = [x, y, z], max = [x, y, z] }`` in metres; on a mesh, vertex indices and
-boxes. Patches may not share particles (one rigid body would be two), and a patch needs two particles or more.
-Pins inside a patch compose: the patch turns about them.
+boxes, and on a mesh read from USD the vertices a primvar marks (``{ primvar = "name" }``, non-zero values) or a
+GeomSubset holds (``{ subset = "name" }``), which the mesh reader looks up with the pins'
+(:meth:`RigidPatches.named_vertex_sets`). Patches may not share particles (one rigid body would be two), and a
+patch needs two particles or more. Pins inside a patch compose: the patch turns about them.
 """
 
 from __future__ import annotations
@@ -19,19 +21,26 @@ import numpy as np
 
 from .kind import ConstraintSet
 from ..launches import FLOAT, INT, VEC3, BoundStage, recorded, split_tasks
-from ..scene_keys import Invalid, Key, accepts, ARRAY, describe, int_text
+from ..errors import SceneError
+from ..scene_keys import Invalid, Key, accepts, ARRAY, describe, int_text, per_element, text
 
 PIN_WEIGHT = 1.0e4
 """A pin's weight in a patch's fit, as a multiple of the patch's free mass: enough that the fitted rotation
 turns about the pins, little enough that float32 keeps the free members' part of the sums."""
 
 
+NAMED_SETS = ("primvar", "subset")
+"""The items that select a USD mesh's vertices by name, as ``pins`` does."""
+_name = per_element(text)  # an error names the item's own key
+
+
 def _selection(value, key: str) -> tuple[tuple, ...]:
-    """One patch as written: ("index", i), ("cell", row, col), ("name", pin name) or ("box", lo, hi), each with
-    its own key for errors."""
+    """One patch as written: ("index", i), ("cell", row, col), ("name", pin name), ("box", lo, hi) or
+    ("primvar" or "subset", name), each with its own key for errors."""
     if not isinstance(value, list) or not value:
-        raise Invalid(f"expected a non-empty array of particle indices, [row, col] pairs, pin names or boxes "
-                      f"{{ min = [x, y, z], max = [x, y, z] }}, got {describe(value)}", key)
+        raise Invalid(f"expected a non-empty array of particle indices, [row, col] pairs, pin names, boxes "
+                      f"{{ min = [x, y, z], max = [x, y, z] }}, {{ primvar = \"name\" }} or {{ subset = \"name\" }}, "
+                      f"got {describe(value)}", key)
     items = []
     for i, item in enumerate(value):
         item_key = f"{key}[{i}]"
@@ -59,9 +68,13 @@ def _selection(value, key: str) -> tuple[tuple, ...]:
                 raise Invalid(f"expected min <= max on every axis, got min = {list(corners[0])}, "
                               f"max = {list(corners[1])}", item_key)
             items.append(("box", corners[0], corners[1], item_key))
+        elif isinstance(item, dict) and len(item) == 1 and next(iter(item)) in NAMED_SETS:
+            kind = next(iter(item))
+            items.append((kind, _name(item[kind], f"{item_key}.{kind}"), item_key))
         else:
-            raise Invalid(f"expected a particle index, a [row, col] pair, a pin name or a box "
-                          f"{{ min = [x, y, z], max = [x, y, z] }}, got {describe(item)}", item_key)
+            raise Invalid(f"expected a particle index, a [row, col] pair, a pin name, a box "
+                          f"{{ min = [x, y, z], max = [x, y, z] }}, {{ primvar = \"name\" }} or "
+                          f"{{ subset = \"name\" }}, got {describe(item)}", item_key)
     return tuple(items)
 
 
@@ -78,8 +91,10 @@ RIGID_PATCHES = Key(
     allowed="each patch 2 or more particles, patches disjoint; items as for `pins`, and boxes",
     doc="Groups of particles that keep their rest shape relative to each other while the patch moves and turns "
         "with the cloth (a stiff label, a batten): on a grid, particle indices, `[row, col]` pairs, pin names and "
-        "boxes `{ min = [x, y, z], max = [x, y, z] }` (m); on a mesh, vertex indices and boxes. A pin inside a "
-        "patch holds it, and the patch turns about it.")
+        "boxes `{ min = [x, y, z], max = [x, y, z] }` (m); on a mesh, vertex indices and boxes, and on a mesh "
+        "read from USD `{ primvar = \"name\" }` (the vertices it marks non-zero) and `{ subset = \"name\" }` "
+        "(a GeomSubset's points, or its faces' corners). A pin inside a patch holds it, and the patch turns "
+        "about it.")
 
 
 def _resolve(spec, table, written) -> tuple[tuple[int, ...], ...]:
@@ -103,32 +118,40 @@ def _resolve(spec, table, written) -> tuple[tuple[int, ...], ...]:
                 else:
                     hits = np.flatnonzero(((positions >= lo) & (positions <= hi)).all(axis=1))
                 if not len(hits):
-                    raise table.error(None, f"{key}: the box min = {list(item[1])}, max = {list(item[2])} holds no "
-                                      "particle of the cloth") from None
+                    raise SceneError(table.file, key, f"the box min = {list(item[1])}, max = {list(item[2])} holds "
+                                     "no particle of the cloth")
+                found.update(int(p) for p in hits)
+            elif kind in NAMED_SETS:
+                if mesh is None:
+                    raise SceneError(table.file, key, f"a {kind} selects vertices of a mesh read from USD; a grid "
+                                     "cloth's patch lists particle indices, [row, col] pairs, pin names and boxes")
+                hits = mesh.particles_of(mesh.source.named_vertices[(kind, item[1])])
+                if not len(hits):
+                    raise SceneError(table.file, key, f"{kind} {item[1]!r} marks no vertex of the mesh")
                 found.update(int(p) for p in hits)
             elif mesh is not None:
                 if kind != "index":
-                    raise table.error(None, f"{key}: a mesh cloth's patch lists vertex indices and boxes, not "
-                                      f"{'[row, col] pairs' if kind == 'cell' else 'pin names'}") from None
+                    raise SceneError(table.file, key, "a mesh cloth's patch lists vertex indices, boxes, primvars "
+                                     f"and subsets, not {'[row, col] pairs' if kind == 'cell' else 'pin names'}")
                 if item[1] >= mesh.vertex_count:
-                    raise table.error(None, f"{key}: vertex {int_text(item[1])} is outside the mesh "
-                                      f"(0 .. {mesh.vertex_count - 1})") from None
+                    raise SceneError(table.file, key, f"vertex {int_text(item[1])} is outside the mesh "
+                                     f"(0 .. {mesh.vertex_count - 1})")
                 found.update(int(p) for p in mesh.particles_of([item[1]]))
             elif kind == "index":
                 if item[1] >= rows * cols:
-                    raise table.error(None, f"{key}: particle index {int_text(item[1])} is outside the grid "
-                                      f"(0 .. {rows * cols - 1})") from None
+                    raise SceneError(table.file, key, f"particle index {int_text(item[1])} is outside the grid "
+                                     f"(0 .. {rows * cols - 1})")
                 found.add(item[1])
             elif kind == "cell":
                 r, c = item[1], item[2]
                 if not (0 <= r < rows and 0 <= c < cols):
-                    raise table.error(None, f"{key}: [row, col] = [{int_text(r)}, {int_text(c)}] is outside the "
-                                      f"{rows} x {cols} grid") from None
+                    raise SceneError(table.file, key, f"[row, col] = [{int_text(r)}, {int_text(c)}] is outside the "
+                                     f"{rows} x {cols} grid")
                 found.add(r * cols + c)
             else:
                 if item[1] not in NAMED_PINS:
-                    raise table.error(None, f"{key}: unknown pin name {item[1]!r} (expected one of "
-                                      f"{', '.join(NAMED_PINS)})") from None
+                    raise SceneError(table.file, key, f"unknown pin name {item[1]!r} (expected one of "
+                                     f"{', '.join(NAMED_PINS)})")
                 found.update(r * cols + c for r, c in NAMED_PINS[item[1]](rows, cols))
         key = f"{RIGID_PATCHES.name}[{k}]"
         if len(found) < 2:
@@ -177,6 +200,10 @@ class RigidPatches(ConstraintSet):
 
     name = "rigid patches"
     cloth_keys = (RIGID_PATCHES,)
+
+    def named_vertex_sets(self, options):
+        return tuple((item[0], item[1], item[-1]) for patch in options.get(RIGID_PATCHES.name) or ()
+                     for item in patch if isinstance(item, tuple) and item[0] in NAMED_SETS)
 
     def check_cloth(self, spec, table):
         written = spec.options.get(RIGID_PATCHES.name) or ()
