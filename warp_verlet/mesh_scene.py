@@ -15,8 +15,8 @@ from pathlib import Path
 from typing import Any
 
 from .errors import SceneError
-from .mesh_cloth import MASS_DISTRIBUTIONS, ClothMesh, MeshError, prepare
-from .mesh_io import read_mesh, transform_matrix
+from .mesh_cloth import MASS_DISTRIBUTIONS, ClothMesh, MeshError, SourceMesh, prepare
+from .mesh_io import read_mesh, to_scene, transform_matrix
 from .scene_keys import (ARRAY, NUMBER, Invalid, Key, Table, accepts, any_real, choice, describe, int_text,
                          per_element, real, text, vector)
 
@@ -101,6 +101,10 @@ MESH_KEYS: tuple[Key, ...] = (  # in the order they are read, and of their table
 )
 
 
+FILE_KEYS = ("mesh", "prim")  # the keys that name the file: a mesh given in memory (points, faces) has neither
+IN_MEMORY = "the given points and faces"  # such a mesh, in its messages
+
+
 @dataclass(frozen=True, eq=False)
 class MeshSpec:
     """A cloth's mesh, read, welded and checked, and what the scene says about its particles, resolved to
@@ -116,7 +120,7 @@ class MeshSpec:
 class MeshKeys:
     """The mesh keys as written, checked, before the file is read."""
 
-    path: Path
+    path: Path | None  # None: the mesh is given in memory
     prim: str | None
     transform: Any  # (4, 4) numpy array
     weld_distance: float | None
@@ -125,13 +129,15 @@ class MeshKeys:
     mass_distribution: str
 
 
-def read_mesh_keys(t: Table, scene_dir: Path) -> MeshKeys:
-    """Take the mesh keys from a cloth's table, leaving the keys every cloth has (scene.py refuses a grid's)."""
-    values = {key.name: key.take(t) for key in MESH_KEYS}
-    relative = values["mesh"]
+def read_mesh_keys(t: Table, scene_dir: Path, in_memory: bool = False) -> MeshKeys:
+    """Take the mesh keys from a cloth's table, leaving the keys every cloth has (scene.py refuses a grid's).
+    ``in_memory``: the mesh is given as points and faces (SceneBuilder.add_mesh), so :data:`FILE_KEYS` are not
+    taken (a table that has them is refused as having unknown keys)."""
+    values = {key.name: key.take(t) for key in MESH_KEYS if not (in_memory and key.name in FILE_KEYS)}
+    relative = values.get("mesh")
     return MeshKeys(
-        path=Path(relative) if Path(relative).is_absolute() else scene_dir / relative,
-        prim=values["prim"],
+        path=None if in_memory else Path(relative) if Path(relative).is_absolute() else scene_dir / relative,
+        prim=values.get("prim"),
         transform=transform_matrix(values["translate"], values["rotate"], values["scale"]),
         weld_distance=values["weld_distance"],
         pins=values["pins"],
@@ -140,13 +146,23 @@ def read_mesh_keys(t: Table, scene_dir: Path) -> MeshKeys:
     )
 
 
-def load_mesh(t: Table, keys: MeshKeys) -> MeshSpec:
-    """Read, weld and check the mesh, and resolve its pins and particle masses to particles."""
+def load_mesh(t: Table, keys: MeshKeys, arrays: tuple | None = None) -> MeshSpec:
+    """Read, weld and check the mesh, and resolve its pins and particle masses to particles. ``arrays``: the mesh
+    in memory instead of a file, (points (V, 3) float64, Faces), moved by the transform keys as a file's is."""
     named = tuple(dict.fromkeys((item[0], item[1]) for item in keys.pins if item[0] in ("primvar", "subset")))
     try:
-        mesh = prepare(read_mesh(keys.path, keys.prim, keys.transform, named), keys.weld_distance)
+        if arrays is None:
+            source = read_mesh(keys.path, keys.prim, keys.transform, named)
+        else:
+            for item in keys.pins:
+                if item[0] in ("primvar", "subset"):
+                    raise SceneError(t.file, item[-1], f"pins by {item[0]} ({item[1]!r}) need a USD file; this "
+                                     "mesh is given as points and faces")
+            points, faces = arrays
+            source = SourceMesh(IN_MEMORY, None, to_scene(IN_MEMORY, keys.transform, points), faces)
+        mesh = prepare(source, keys.weld_distance)
     except MeshError as exc:
-        raise t.error("mesh", str(exc)) from None
+        raise t.error("mesh" if arrays is None else None, str(exc)) from None
     vertices = mesh.vertex_count
     pinned: set[int] = set()
     for item in keys.pins:
