@@ -329,15 +329,18 @@ def _arrays_equal(a, b, where: str) -> list[str]:
     return [] if a == b else [where]
 
 
-def test_finalize_is_the_simulators_model(tmp_path):
-    points, triangles = mesh_arrays()
+@pytest.mark.parametrize("with_mesh", [False, True], ids=["grids", "grids and a mesh"])
+def test_finalize_is_the_simulators_model(with_mesh):
+    """Grids alone are coloured analytically, with a mesh by Warp's graph colouring: both Models agree."""
     builder = build({"simulation": SIMULATION, "cloth": [GRID, ROPE, PATCHED], "collider": [SPHERE, MOVING, PLANE]})
-    builder.add_mesh(points=points, faces=triangles, name="sheet2", pins=[0], translate=(3.0, 1.0, 0.0))
+    if with_mesh:
+        points, triangles = mesh_arrays()
+        builder.add_mesh(points=points, faces=triangles, name="sheet2", pins=[0], translate=(3.0, 1.0, 0.0))
     model = builder.finalize("cpu")
     reference = Simulator(builder.scene(), "cpu").model
     assert sorted(vars(model)) == sorted(vars(reference))
     assert _arrays_equal(model, reference, "model") == []
-    assert model.particle_count == 30 + 12 + 25 + 20 and len(model.constraints) > 0
+    assert model.particle_count == 30 + 12 + 25 + (20 if with_mesh else 0) and len(model.constraints) > 0
     # The comparison sees a changed array.
     changed = builder.finalize("cpu")
     vars(changed)["host_inv_mass"] = changed.host_inv_mass + np.eye(1, changed.particle_count, 3, np.float32)[0]
