@@ -329,20 +329,24 @@ def _arrays_equal(a, b, where: str) -> list[str]:
     return [] if a == b else [where]
 
 
-@pytest.mark.parametrize("with_mesh", [False, True], ids=["grids", "grids and a mesh"])
-def test_finalize_is_the_simulators_model(with_mesh):
-    """Grids alone are coloured analytically, with a mesh by Warp's graph colouring: both Models agree."""
-    builder = build({"simulation": SIMULATION, "cloth": [GRID, ROPE, PATCHED], "collider": [SPHERE, MOVING, PLANE]})
-    if with_mesh:
+@pytest.mark.parametrize("cloths", ["one grid", "grids", "grids and a mesh"])
+def test_finalize_is_the_simulators_model(device, cloths):
+    """One grid cloth gets implicit sticks on a GPU, several grids the analytic colouring, a mesh Warp's graph
+    colouring: in each case finalize() builds the Model the Simulator builds."""
+    grids = [GRID] if cloths == "one grid" else [GRID, ROPE, PATCHED]
+    builder = build({"simulation": SIMULATION, "cloth": grids, "collider": [SPHERE, MOVING, PLANE]})
+    if cloths == "grids and a mesh":
         points, triangles = mesh_arrays()
         builder.add_mesh(points=points, faces=triangles, name="sheet2", pins=[0], translate=(3.0, 1.0, 0.0))
-    model = builder.finalize("cpu")
-    reference = Simulator(builder.scene(), "cpu").model
+    model = builder.finalize(device)
+    reference = Simulator(builder.scene(), device).model
+    assert str(model.device) == str(reference.device) and model.device.is_cpu == (device == "cpu")
+    assert model.sticks_form == reference.sticks_form
     assert sorted(vars(model)) == sorted(vars(reference))
     assert _arrays_equal(model, reference, "model") == []
-    assert model.particle_count == 30 + 12 + 25 + (20 if with_mesh else 0) and len(model.constraints) > 0
+    assert model.particle_count == {"one grid": 30, "grids": 67, "grids and a mesh": 87}[cloths]
     # The comparison sees a changed array.
-    changed = builder.finalize("cpu")
+    changed = builder.finalize(device)
     vars(changed)["host_inv_mass"] = changed.host_inv_mass + np.eye(1, changed.particle_count, 3, np.float32)[0]
     assert _arrays_equal(changed, reference, "model") == ["model['host_inv_mass']"]
 

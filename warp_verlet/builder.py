@@ -26,7 +26,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Iterable, Mapping
 
 from .colliders import SHARED_KEYS, kind_named, kinds, read_collider
-from .errors import SceneError
+from .errors import ArgumentError, SceneError
 from .scene import (CLOTH_KEYS, GRID_KEYS, OUTPUT_KEYS, SIMULATION_KEYS, ClothSpec, OutputSettings, Scene,
                     SimulationSettings, check_scene, cloth_keys_of_kinds, read_cloth, read_output, read_simulation)
 from .scene_keys import REQUIRED, Key, Table
@@ -63,9 +63,9 @@ def _table(keys: Iterable[Key], given: Mapping[str, Any]) -> dict[str, Any]:
 class SceneBuilder:
     """Builds one scene in Python, call by call, as a scene file's tables would.
 
-    ``name`` is the scene's name where a file's would be: ``Scene.source`` (in the run summary, the cache's
-    metadata and the errors :meth:`scene` raises) and the default output path ``<name>.usdc``. Mesh files given
-    by a relative path are read relative to the working directory.
+    ``name`` stands where a scene file's path would: it is ``Scene.source`` (in the run summary, the cache's
+    metadata and the errors :meth:`scene` raises) and names the default output, ``<name>.usdc`` (its stem, as a
+    scene file's). Mesh files given by a relative path are read relative to the working directory.
 
     The methods take a table's keys as keyword arguments (docs/scenes.md lists them): :meth:`set_simulation`
     ``[simulation]``, :meth:`set_output` ``[output]``, :meth:`add_grid` and :meth:`add_mesh` a ``[[cloth]]``,
@@ -76,14 +76,24 @@ class SceneBuilder:
 
     def __init__(self, name: str = "scene"):
         if not isinstance(name, str) or not name:
-            raise SceneError("SceneBuilder()", "name", f"expected a non-empty string, got {name!r}")
+            raise ArgumentError(f"SceneBuilder: name must be a non-empty string, got {name!r}")
         self.name = name
-        self._simulation: dict[str, Any] = {}
+        self._simulation: dict[str, Any] = {}  # the keys given so far, as TOML values
         self._output: dict[str, Any] = {}
         self.simulation: SimulationSettings = read_simulation(self.name, {})
         self.output: OutputSettings = read_output(self.name, {}, Path(self.name))
-        self.cloths: list[ClothSpec] = []
-        self.colliders: list = []
+        self._cloths: list[ClothSpec] = []
+        self._colliders: list = []
+
+    @property
+    def cloths(self) -> tuple[ClothSpec, ...]:
+        """The cloths added so far, in order (``cloth[i]`` in the errors of :meth:`scene`)."""
+        return tuple(self._cloths)
+
+    @property
+    def colliders(self) -> tuple:
+        """The colliders added so far, in order (``collider[i]``), each its kind's spec."""
+        return tuple(self._colliders)
 
     # ------------------------------------------------------------------ [simulation] and [output]
     def set_simulation(self, **keys: Any) -> SimulationSettings:
@@ -106,12 +116,12 @@ class SceneBuilder:
     def add_grid(self, **keys: Any) -> ClothSpec:
         """Add a grid cloth: ``resolution`` and ``size`` (required), and any other key of a grid cloth (pins,
         tethers, compliance, tear_threshold, ...) or of a constraint kind (max_bend_angle, rigid_patches)."""
-        where = f"add_grid(cloth {len(self.cloths)})"
+        where = f"add_grid(cloth {len(self._cloths)})"
         if "mesh" in keys:
             raise SceneError(where, "mesh", "a mesh cloth is added with add_mesh(mesh=...) or add_mesh(points=..., "
                              "faces=...)")
         table = _table((*CLOTH_KEYS, *GRID_KEYS, *cloth_keys_of_kinds()), keys)
-        return self._add_cloth(read_cloth(where, len(self.cloths), table, Path(), path=""))
+        return self._add_cloth(read_cloth(where, len(self._cloths), table, Path(), path=""))
 
     def add_mesh(self, mesh: str | os.PathLike | None = None, *, points: Any = None, faces: Any = None,
                  **keys: Any) -> ClothSpec:
@@ -122,7 +132,7 @@ class SceneBuilder:
         cloth's (pins, particle_masses, mass_distribution, weld_distance, ...) and every cloth's."""
         from .mesh_scene import MESH_KEYS
 
-        where = f"add_mesh(cloth {len(self.cloths)})"
+        where = f"add_mesh(cloth {len(self._cloths)})"
         in_memory = points is not None or faces is not None
         if in_memory == (mesh is not None):
             raise SceneError(where, "mesh", "expected either a mesh file (mesh = path) or the mesh itself (points "
@@ -130,13 +140,13 @@ class SceneBuilder:
                              "points and faces")
         table = _table((*CLOTH_KEYS, *MESH_KEYS, *cloth_keys_of_kinds()), keys)
         if not in_memory:
-            return self._add_cloth(read_cloth(where, len(self.cloths), {"mesh": toml_value(mesh), **table}, Path(),
+            return self._add_cloth(read_cloth(where, len(self._cloths), {"mesh": toml_value(mesh), **table}, Path(),
                                               path=""))
         arrays = _mesh_arrays(where, points, faces)
-        return self._add_cloth(read_cloth(where, len(self.cloths), table, Path(), path="", mesh_arrays=arrays))
+        return self._add_cloth(read_cloth(where, len(self._cloths), table, Path(), path="", mesh_arrays=arrays))
 
     def _add_cloth(self, spec: ClothSpec) -> ClothSpec:
-        self.cloths.append(spec)
+        self._cloths.append(spec)
         return spec
 
     # ------------------------------------------------------------------ [[collider]]
@@ -156,7 +166,7 @@ class SceneBuilder:
         return self._add_collider("add_plane", "plane", keys)
 
     def _add_collider(self, call: str, type_name: Any, keys: Mapping[str, Any]) -> Any:
-        index = len(self.colliders)
+        index = len(self._colliders)
         where = f"{call}(collider {index})"
         if "type" in keys:
             raise SceneError(where, "type", f"is the collider's kind, given once: {call} takes it as "
@@ -166,7 +176,7 @@ class SceneBuilder:
             declared += kind_named(type_name).keys
         table = {"type": toml_value(type_name), **_table(declared, keys)}
         spec = read_collider(Table(where, "", table), index)
-        self.colliders.append(spec)
+        self._colliders.append(spec)
         return spec
 
     # ------------------------------------------------------------------ the results
@@ -174,10 +184,10 @@ class SceneBuilder:
         """The validated Scene: what ``load_scene`` gives for the same tables (its ``source`` is this builder's
         name). The checks across tables run here; a problem is a SceneError naming the builder and the key
         (``cloth[1].name``: the cloths and the colliders are numbered in the order they were added)."""
-        if not self.cloths:
+        if not self._cloths:
             raise SceneError(self.name, "cloth", "expected one or more cloths: add one with add_grid or add_mesh")
-        scene = Scene(source=self.name, simulation=self.simulation, output=self.output, cloths=tuple(self.cloths),
-                      colliders=tuple(self.colliders))
+        scene = Scene(source=self.name, simulation=self.simulation, output=self.output, cloths=self.cloths,
+                      colliders=self.colliders)
         check_scene(scene)
         return scene
 
