@@ -5,6 +5,7 @@ Simulator's Model, and docs/api.md's example runs."""
 from __future__ import annotations
 
 import dataclasses
+import functools
 import re
 from pathlib import Path
 
@@ -15,6 +16,7 @@ import warp as wp
 from warp_verlet import SceneBuilder, SceneError, Simulator, load_scene
 from warp_verlet.builder import toml_value
 from warp_verlet.scene import Scene
+from warp_verlet.scene_keys import Key, real
 
 from toml_text import dump
 
@@ -203,6 +205,67 @@ def test_the_collider_shorthands_are_add_collider(tmp_path):
     with pytest.raises(SceneError) as caught:
         builder.add_grid(mesh="cloth.obj")
     assert caught.value.key == "mesh" and "add_mesh" in caught.value.problem
+
+
+@dataclasses.dataclass(frozen=True)
+class RingCollider:
+    name: str
+    inner: float
+    thickness: float = 0.0
+    friction: float = 0.0
+    purpose: str = "guide"
+
+
+class RingKind:
+    """A collider kind's scene input alone (what loading a scene asks of it), registered for one test."""
+
+    type = "ring"
+    spec = RingCollider
+    keys = (Key("inner", real(0.0, lo_open=True), 0.5, type="number", unit="m", allowed="> 0", doc="Inner radius."),)
+
+    def read(self, table, shared):
+        return RingCollider(inner=self.keys[0].take(table), **shared)
+
+    def check_numbers(self, spec, file, key):
+        return None
+
+
+class TwistKind:
+    """A constraint kind's scene input alone: one cloth key, resolved by check_cloth."""
+
+    name = "twist"
+    cloth_keys = (Key("max_twist", real(0.0, 90.0), None, type="number", unit="degrees", default_text="absent",
+                      allowed="0 … 90", doc="The most a cloth may twist."),)
+
+    def check_cloth(self, spec, table):
+        twist = spec.options.get("max_twist")
+        return None if twist is None else {"max_twist": round(twist, 1)}
+
+
+def test_kinds_registered_later_work_through_the_builder(tmp_path, monkeypatch):
+    """A collider kind and a constraint kind that the builder has never heard of: their keys are taken from their
+    declarations, checked by their parsers, and the scene equals the file's."""
+    from warp_verlet import colliders, constraints
+
+    monkeypatch.setattr(colliders, "COLLIDER_KINDS", (*colliders.COLLIDER_KINDS, RingKind()))
+    monkeypatch.setattr(constraints, "CONSTRAINT_KINDS", (*constraints.CONSTRAINT_KINDS, TwistKind()))
+    doc = {"cloth": [{**GOOD_GRID, "max_twist": 12.34}], "collider": [{"type": "ring", "inner": 0.25}]}
+    built = build_with_any_collider(doc).scene()
+    assert built.cloths[0].options["max_twist"] == 12.3 and built.colliders == (RingCollider("ring0", 0.25),)
+    assert dataclasses.replace(built, source="x") == dataclasses.replace(load(tmp_path, doc), source="x")
+    for call, keys, key in ((SceneBuilder().add_grid, {**GOOD_GRID, "max_twist": 91.0}, "max_twist"),
+                            (functools.partial(SceneBuilder().add_collider, "ring"), {"inner": 0.0}, "inner")):
+        with pytest.raises(SceneError) as caught:
+            call(**keys)
+        assert caught.value.key == key and caught.value.problem.startswith("expected a number in")
+
+
+def build_with_any_collider(doc: dict) -> SceneBuilder:
+    builder = build({**doc, "collider": []})
+    for collider in doc.get("collider", []):
+        keys = as_python(collider)
+        builder.add_collider(keys.pop("type"), **keys)
+    return builder
 
 
 # ------------------------------------------------------------------------------------------------------------
