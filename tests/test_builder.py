@@ -37,7 +37,8 @@ ROPE = {"name": "rope", "resolution": [1, 12], "size": [0.0, 1.1], "origin": [1.
         "orientation": "horizontal", "pins": [0], "max_bend_angle": 10.0}
 PATCHED = {"name": "banner", "resolution": [5, 5], "size": [0.6, 0.6], "origin": [2.0, 1.5, 0.0],
            "sticks": ["structural", "shear"], "pins": ["top-edge"],
-           "rigid_patches": [[[4, 0], [4, 1], [4, 2], [4, 3], [4, 4]], [{"min": [2.1, 1.1, -0.1], "max": [2.4, 1.4, 0.1]}]]}
+           "rigid_patches": [[[4, 0], [4, 1], [4, 2], [4, 3], [4, 4]],
+                             [{"min": [2.1, 1.1, -0.1], "max": [2.4, 1.4, 0.1]}]]}
 SPHERE = {"type": "sphere", "name": "ball", "radius": 0.2, "centre": [0.0, 0.9, 0.1], "thickness": 0.01,
           "friction": 0.3}
 MOVING = {"type": "sphere", "radius": 0.1, "path": [[0.0, 1.0, 0.5, 0.4], [0.1, 1.0, 0.5, -0.4]], "purpose": "default"}
@@ -198,7 +199,8 @@ def test_the_collider_shorthands_are_add_collider(tmp_path):
     sphere, same = builder.add_sphere(radius=0.5), builder.add_collider("sphere", radius=0.5)
     plane, same_plane = builder.add_plane(normal=(0, 0, 1)), builder.add_collider("plane", normal=[0, 0, 1])
     assert [c.name for c in builder.colliders] == ["sphere0", "sphere1", "plane2", "plane3"]
-    assert dataclasses.replace(same, name="sphere0") == sphere and dataclasses.replace(same_plane, name="plane2") == plane
+    assert dataclasses.replace(same, name="sphere0") == sphere
+    assert dataclasses.replace(same_plane, name="plane2") == plane
     with pytest.raises(SceneError) as caught:
         builder.add_sphere(radius=0.5, type="plane")
     assert (caught.value.file, caught.value.key) == ("add_sphere(collider 4)", "type")
@@ -293,7 +295,8 @@ def same_mesh_cloth(a, b) -> bool:
     compares by identity)."""
     ma, mb = a.mesh, b.mesh
     return (dataclasses.replace(a, mesh=None) == dataclasses.replace(b, mesh=None)
-            and (ma.pins, ma.particle_masses, ma.mass_distribution) == (mb.pins, mb.particle_masses, mb.mass_distribution)
+            and ma.pins == mb.pins and ma.particle_masses == mb.particle_masses
+            and ma.mass_distribution == mb.mass_distribution
             and np.array_equal(ma.mesh.source.points, mb.mesh.source.points)
             and ma.mesh.source.faces == mb.mesh.source.faces
             and np.array_equal(ma.mesh.particle_of_vertex, mb.mesh.particle_of_vertex)
@@ -371,7 +374,8 @@ def test_a_bad_mesh_in_memory_names_the_call_and_the_argument(call, key, problem
 def _arrays_equal(a, b, where: str) -> list[str]:
     """Where the Models' contents differ: device arrays by value, nested containers and objects by their parts."""
     if isinstance(a, wp.array):
-        same = isinstance(b, wp.array) and a.dtype == b.dtype and a.shape == b.shape and np.array_equal(a.numpy(), b.numpy())
+        same = (isinstance(b, wp.array) and a.dtype == b.dtype and a.shape == b.shape
+                and np.array_equal(a.numpy(), b.numpy()))
         return [] if same else [where]
     if isinstance(a, np.ndarray):
         return [] if isinstance(b, np.ndarray) and a.dtype == b.dtype and np.array_equal(a, b) else [where]

@@ -29,7 +29,7 @@ from .colliders import SHARED_KEYS, kind_named, kinds, read_collider
 from .errors import ArgumentError, SceneError
 from .scene import (CLOTH_KEYS, GRID_KEYS, OUTPUT_KEYS, SIMULATION_KEYS, ClothSpec, OutputSettings, Scene,
                     SimulationSettings, check_scene, cloth_keys_of_kinds, read_cloth, read_output, read_simulation)
-from .scene_keys import REQUIRED, Key, Table
+from .scene_keys import Key, Table
 
 if TYPE_CHECKING:  # pragma: no cover
     from .model import Model
@@ -228,7 +228,8 @@ def _mesh_arrays(where: str, points: Any, faces: Any) -> tuple:
     finite = np.isfinite(p).all(axis=1)
     if not finite.all():
         bad = int(np.flatnonzero(~finite)[0])
-        raise SceneError(where, f"points[{bad}]", f"expected a finite point, got ({', '.join(f'{v:g}' for v in p[bad])})")
+        shown = ", ".join(f"{v:g}" for v in p[bad])
+        raise SceneError(where, f"points[{bad}]", f"expected a finite point, got ({shown})")
     if isinstance(faces, Faces):
         return p, faces
     try:
