@@ -3,8 +3,8 @@ file does, and the Model from it, with no TOML.
 
 Each call takes the keys of one table of a scene file as keyword arguments: the same names, units and defaults
 (docs/scenes.md), read by the same readers as the loader's (scene.read_simulation, read_output, read_cloth and
-colliders.read_collider), so that a scene built here and the same scene loaded from a file are equal, and a bad
-value is the same :class:`~warp_verlet.errors.SceneError`, naming the call instead of the file::
+colliders.read_collider), so that a scene built here is the scene a file with the same tables loads (its ``source``
+aside), and a bad value is the same :class:`~warp_verlet.errors.SceneError`, naming the call instead of the file::
 
     add_grid(cloth 0): mass: expected a number in (0.0, inf), got 0.0
 

@@ -11,6 +11,9 @@ Every key is declared once, as a :class:`~warp_verlet.scene_keys.Key` in :data:`
 key through its declaration, and ``docs/scenes.md``'s key tables are written from the same declarations
 (``python docs/make_scene_tables.py``; tests/test_scene_docs.py fails when they are out of date). The keys that
 constraint kinds add to a cloth are taken at one place, :func:`cloth_keys_of_kinds`, into ``ClothSpec.options``.
+A scene built in Python (warp_verlet/builder.py, ``SceneBuilder``) is read by the same functions, table by table:
+:func:`read_simulation`, :func:`read_output`, :func:`read_cloth` and ``colliders.read_collider``, then
+:func:`check_scene`.
 """
 
 from __future__ import annotations
