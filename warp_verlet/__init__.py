@@ -36,12 +36,13 @@ _map_checkout_kernels()
 from .errors import (ArgumentError, DiskFullError, DivergenceError, OutputBusyError,  # noqa: E402
                      OutputError, SceneError, StateError, WarpVerletError)
 from .scene import Scene, load_scene, parse_scene  # noqa: E402
+from .builder import SceneBuilder  # noqa: E402
 
 __version__ = "0.1.0"
 
 __all__ = [
-    "ArgumentError", "DiskFullError", "DivergenceError", "OutputBusyError", "OutputError", "Scene", "SceneError",
-    "Simulator", "StateError", "WarpVerletError", "load_scene", "parse_scene", "__version__",
+    "ArgumentError", "DiskFullError", "DivergenceError", "OutputBusyError", "OutputError", "Scene", "SceneBuilder",
+    "SceneError", "Simulator", "StateError", "WarpVerletError", "load_scene", "parse_scene", "__version__",
 ]
 
 

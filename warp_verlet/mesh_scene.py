@@ -17,8 +17,8 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from .errors import SceneError
-from .mesh_cloth import MASS_DISTRIBUTIONS, ClothMesh, MeshError, prepare
-from .mesh_io import USD_SUFFIXES, read_mesh, transform_matrix
+from .mesh_cloth import MASS_DISTRIBUTIONS, ClothMesh, MeshError, SourceMesh, prepare
+from .mesh_io import USD_SUFFIXES, read_mesh, to_scene, transform_matrix
 from .scene_keys import (ARRAY, NUMBER, Invalid, Key, Table, accepts, any_real, choice, describe, int_text,
                          per_element, real, text, vector)
 
@@ -103,6 +103,10 @@ MESH_KEYS: tuple[Key, ...] = (  # in the order they are read, and of their table
 )
 
 
+FILE_KEYS = ("mesh", "prim")  # the keys that name the file: a mesh given in memory (points, faces) has neither
+IN_MEMORY = "the given points and faces"  # such a mesh, in its messages
+
+
 @dataclass(frozen=True, eq=False)
 class MeshSpec:
     """A cloth's mesh, read, welded and checked, and what the scene says about its particles, resolved to
@@ -118,7 +122,7 @@ class MeshSpec:
 class MeshKeys:
     """The mesh keys as written, checked, before the file is read."""
 
-    path: Path
+    path: Path | None  # None: the mesh is given in memory
     prim: str | None
     transform: Any  # (4, 4) numpy array
     weld_distance: float | None
@@ -127,13 +131,15 @@ class MeshKeys:
     mass_distribution: str
 
 
-def read_mesh_keys(t: Table, scene_dir: Path) -> MeshKeys:
-    """Take the mesh keys from a cloth's table, leaving the keys every cloth has (scene.py refuses a grid's)."""
-    values = {key.name: key.take(t) for key in MESH_KEYS}
-    relative = values["mesh"]
+def read_mesh_keys(t: Table, scene_dir: Path, in_memory: bool = False) -> MeshKeys:
+    """Take the mesh keys from a cloth's table, leaving the keys every cloth has (scene.py refuses a grid's).
+    ``in_memory``: the mesh is given as points and faces (SceneBuilder.add_mesh), so :data:`FILE_KEYS` are not
+    taken (a table that has them is refused as having unknown keys)."""
+    values = {key.name: key.take(t) for key in MESH_KEYS if not (in_memory and key.name in FILE_KEYS)}
+    relative = values.get("mesh")
     return MeshKeys(
-        path=Path(relative) if Path(relative).is_absolute() else scene_dir / relative,
-        prim=values["prim"],
+        path=None if in_memory else Path(relative) if Path(relative).is_absolute() else scene_dir / relative,
+        prim=values.get("prim"),
         transform=transform_matrix(values["translate"], values["rotate"], values["scale"]),
         weld_distance=values["weld_distance"],
         pins=values["pins"],
@@ -150,23 +156,33 @@ def kinds_vertex_sets(options: Mapping[str, Any]) -> tuple[tuple[str, str, str],
     return tuple(found for kind in CONSTRAINT_KINDS for found in kind.named_vertex_sets(options))
 
 
-def load_mesh(t: Table, keys: MeshKeys, options: Mapping[str, Any]) -> MeshSpec:
+def load_mesh(t: Table, keys: MeshKeys, options: Mapping[str, Any], arrays: tuple | None = None) -> MeshSpec:
     """Read, weld and check the mesh, and resolve its pins and particle masses to particles. The vertex sets
     that the pins and the constraint kinds' ``options`` (the cloth's, as read) select by primvar or GeomSubset
-    are looked up in the same read; the kinds resolve theirs in their ``check_cloth``."""
+    are looked up in the same read; the kinds resolve theirs in their ``check_cloth``. ``arrays``: the mesh in
+    memory instead of a file, (points (V, 3) float64, Faces), moved by the transform keys as a file's is."""
     for_kinds = kinds_vertex_sets(options)
-    is_usd = keys.path.suffix.lower() in USD_SUFFIXES
-    wanted = [(item[0], item[1]) for item in keys.pins if item[0] in ("primvar", "subset")]
-    wanted += [(kind, name) for kind, name, _ in for_kinds] if is_usd else []
-    try:
-        mesh = prepare(read_mesh(keys.path, keys.prim, keys.transform, tuple(dict.fromkeys(wanted))),
-                       keys.weld_distance)
-    except MeshError as exc:
-        raise t.error("mesh", str(exc)) from None
+    is_usd = arrays is None and keys.path.suffix.lower() in USD_SUFFIXES
     if for_kinds and not is_usd:
         kind, name, key = for_kinds[0]
-        raise SceneError(t.file, key, f"selecting vertices by {kind} ({name!r}) needs a USD file; the mesh is a "
-                         f"{keys.path.suffix or 'suffix-less'} file")
+        where = ("this mesh is given as points and faces" if arrays is not None
+                 else f"the mesh is a {keys.path.suffix or 'suffix-less'} file")
+        raise SceneError(t.file, key, f"selecting vertices by {kind} ({name!r}) needs a USD file; {where}")
+    wanted = [(item[0], item[1]) for item in keys.pins if item[0] in ("primvar", "subset")]
+    wanted += [(kind, name) for kind, name, _ in for_kinds]
+    try:
+        if arrays is None:
+            source = read_mesh(keys.path, keys.prim, keys.transform, tuple(dict.fromkeys(wanted)))
+        else:
+            for item in keys.pins:
+                if item[0] in ("primvar", "subset"):
+                    raise SceneError(t.file, item[-1], f"pins by {item[0]} ({item[1]!r}) need a USD file; this "
+                                     "mesh is given as points and faces")
+            points, faces = arrays
+            source = SourceMesh(IN_MEMORY, None, to_scene(IN_MEMORY, keys.transform, points), faces)
+        mesh = prepare(source, keys.weld_distance)
+    except MeshError as exc:
+        raise t.error("mesh" if arrays is None else None, str(exc)) from None
     vertices = mesh.vertex_count
     pinned: set[int] = set()
     for item in keys.pins:

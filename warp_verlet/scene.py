@@ -11,6 +11,9 @@ Every key is declared once, as a :class:`~warp_verlet.scene_keys.Key` in :data:`
 key through its declaration, and ``docs/scenes.md``'s key tables are written from the same declarations
 (``python docs/make_scene_tables.py``; tests/test_scene_docs.py fails when they are out of date). The keys that
 constraint kinds add to a cloth are taken at one place, :func:`cloth_keys_of_kinds`, into ``ClothSpec.options``.
+A scene built in Python (warp_verlet/builder.py, ``SceneBuilder``) is read by the same functions, table by table:
+:func:`read_simulation`, :func:`read_output`, :func:`read_cloth` and ``colliders.read_collider``, then
+:func:`check_scene`.
 """
 
 from __future__ import annotations
@@ -228,8 +231,10 @@ SIMULATION_KEYS: tuple[Key, ...] = (
 )
 
 
-def _read_simulation(file: str, data: Any) -> SimulationSettings:
-    t = _Table(file, "simulation", data)
+def read_simulation(file: str, data: Any, path: str = "simulation") -> SimulationSettings:
+    """The [simulation] table ``data``, checked: the loader's and SceneBuilder.set_simulation's one reader. ``path``
+    is the table's key in errors ("" where ``file`` already names it)."""
+    t = _Table(file, path, data)
     if "drag" in t.data:
         raise t.error("drag", _drag_moved(t.data))
     if "solver" in t.data:
@@ -260,7 +265,7 @@ def _usd_path(value: Any, key: str) -> Path:
 
 
 OUTPUT_KEYS: tuple[Key, ...] = (
-    # None: named after the scene file (_read_output)
+    # None: named after the scene file (read_output)
     Key("path", _usd_path, None, "string", default_text='`"<scene stem>.usdc"`',
         allowed="ends in a registered output suffix (`.usd`, `.usda` or `.usdc`)", doc="Where the USD point cache is written."),
     Key("save_every", integer(1), 10, "integer", "frames", allowed="≥ 1",
@@ -270,15 +275,17 @@ OUTPUT_KEYS: tuple[Key, ...] = (
         doc="The stage's `metersPerUnit` metadata."),
     Key("kind", choice(OUTPUT_KINDS), "cache", "string", allowed='`"cache"`, `"override"`',
         doc="A standalone point cache, or an override layer over the USD asset the cloths came from (see below)."),
-    # None: chosen by kind (_read_output)
+    # None: chosen by kind (read_output)
     Key("torn_faces", choice(TORN_FACES), None, "string",
         default_text='`"remove"` for a cache, `"holes"` for an override', allowed='`"remove"`, `"holes"`',
         doc="How a tearing cloth shows its torn faces (see below)."),
 )
 
 
-def _read_output(file: str, data: Any, scene_path: Path) -> OutputSettings:
-    t = _Table(file, "output", data)
+def read_output(file: str, data: Any, scene_path: Path, path: str = "output") -> OutputSettings:
+    """The [output] table ``data``, checked (the default path is named after ``scene_path``): the loader's and
+    SceneBuilder.set_output's one reader."""
+    t = _Table(file, path, data)
     values = {key.name: key.take(t) for key in OUTPUT_KEYS}
     if values["path"] is None:
         values["path"] = Path(scene_path.stem + ".usdc")
@@ -396,7 +403,7 @@ def _read_particle_masses(value: Any, key: str, rows: int, cols: int) -> tuple[t
 # The keys of a [[cloth]]: those every cloth has, those of a grid, and (mesh_scene.MESH_KEYS) those of a mesh.
 
 CLOTH_KEYS: tuple[Key, ...] = (  # every cloth, grid or mesh
-    # None: cloth<i>, by the cloth's place in the file (_read_cloth)
+    # None: cloth<i>, by the cloth's place in the file (read_cloth)
     Key("name", _prim_name, None, "string", default_text='`"cloth<i>"` (`cloth0`, `cloth1`, …)',
         allowed="letters, digits and `_`, not starting with a digit; unique among the cloths and the colliders; "
                 "not `Colliders`",
@@ -470,10 +477,14 @@ def _read_options(t: _Table) -> FrozenMapping:
     return kind_options({key.name: key.take(t) for key in cloth_keys_of_kinds()})
 
 
-def _read_cloth(file: str, index: int, data: Any, scene_dir: Path) -> ClothSpec:
-    t = _Table(file, f"cloth[{index}]", data)
-    if isinstance(data, dict) and "mesh" in data:
-        return _read_mesh_cloth(t, index, scene_dir)
+def read_cloth(file: str, index: int, data: Any, scene_dir: Path, path: str | None = None,
+               mesh_arrays: tuple | None = None) -> ClothSpec:
+    """One [[cloth]] table ``data``, the ``index``-th cloth, checked (a mesh file relative to ``scene_dir``): the
+    loader's and SceneBuilder.add_grid / add_mesh's one reader. ``path`` is the table's key in errors (default
+    ``cloth[index]``); ``mesh_arrays``: a mesh given in memory as (points, Faces), whose table then names no file."""
+    t = _Table(file, f"cloth[{index}]" if path is None else path, data)
+    if mesh_arrays is not None or (isinstance(data, dict) and "mesh" in data):
+        return _read_mesh_cloth(t, index, scene_dir, mesh_arrays)
 
     name = _CLOTH["name"].take(t)
     rows, cols = _GRID["resolution"].take(t)
@@ -503,9 +514,10 @@ def _read_cloth(file: str, index: int, data: Any, scene_dir: Path) -> ClothSpec:
     return check_cloth(t, spec)
 
 
-def _read_mesh_cloth(t: _Table, index: int, scene_dir: Path) -> ClothSpec:
-    """A cloth from a mesh file: the mesh keys are read by warp_verlet/mesh_scene.py (imported only here: numpy,
-    and trimesh or pxr), the keys every cloth has here; the file is read once every key has been checked."""
+def _read_mesh_cloth(t: _Table, index: int, scene_dir: Path, mesh_arrays: tuple | None = None) -> ClothSpec:
+    """A cloth from a mesh file (or from ``mesh_arrays``, points and faces in memory): the mesh keys are read by
+    warp_verlet/mesh_scene.py (imported only here: numpy, and trimesh or pxr), the keys every cloth has here; the
+    file is read once every key has been checked."""
     from . import mesh_scene
 
     mesh_keys = {key.name for key in mesh_scene.MESH_KEYS}
@@ -513,13 +525,13 @@ def _read_mesh_cloth(t: _Table, index: int, scene_dir: Path) -> ClothSpec:
         if key.name not in mesh_keys and key.name in t.data:
             raise t.error(key.name, f"a mesh cloth takes its particles from the mesh: remove {key.name} (or mesh, for "
                           "a grid)")
-    request = mesh_scene.read_mesh_keys(t, scene_dir)
+    request = mesh_scene.read_mesh_keys(t, scene_dir, in_memory=mesh_arrays is not None)
     values = {key.name: key.take(t) for key in CLOTH_KEYS}
     if values["name"] is None:
         values["name"] = f"cloth{index}"
     spec = ClothSpec(resolution=None, size=None, **values, options=_read_options(t))
     t.finish()
-    spec = replace(spec, mesh=mesh_scene.load_mesh(t, request, spec.options))
+    spec = replace(spec, mesh=mesh_scene.load_mesh(t, request, spec.options, mesh_arrays))
     if spec.tear_threshold is not None and spec.mesh.mesh.non_manifold_edges:
         raise t.error("tear_threshold", f"tearing needs a manifold mesh (each edge beside at most two faces, to "
                       f"know which faces a torn edge opens), and {spec.mesh.mesh.non_manifold_edges} edges have more")
@@ -548,16 +560,16 @@ def parse_scene(data: dict, file: str = "<scene>", scene_path: Path | None = Non
     """Validate an already-parsed TOML document. ``file`` is used in error messages."""
     scene_path = scene_path or Path(file)
     top = _Table(file, "", data)
-    simulation = (top.take("simulation", accepts(TABLE)(lambda v, k: _read_simulation(file, v)), None)
-                  or _read_simulation(file, {}))
-    output = (top.take("output", accepts(TABLE)(lambda v, k: _read_output(file, v, scene_path)), None)
-              or _read_output(file, {}, scene_path))
+    simulation = (top.take("simulation", accepts(TABLE)(lambda v, k: read_simulation(file, v)), None)
+                  or read_simulation(file, {}))
+    output = (top.take("output", accepts(TABLE)(lambda v, k: read_output(file, v, scene_path)), None)
+              or read_output(file, {}, scene_path))
 
     @accepts(ARRAY)
     def cloths(value: Any, key: str) -> tuple[ClothSpec, ...]:
         if not isinstance(value, list) or not value:
             raise _Invalid("expected one or more [[cloth]] tables")
-        return tuple(_read_cloth(file, i, c, scene_path.parent) for i, c in enumerate(value))
+        return tuple(read_cloth(file, i, c, scene_path.parent) for i, c in enumerate(value))
 
     @accepts(ARRAY)
     def colliders(value: Any, key: str) -> tuple:

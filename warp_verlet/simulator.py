@@ -146,6 +146,22 @@ class StretchReadback:
         return float(self._host.numpy()[0])
 
 
+def build_model(scene: Scene, device, colouring: str = "auto", sticks: str = "auto"):
+    """The immutable Model of ``scene`` on ``device`` (a resolved Warp device), its memory need checked first:
+    (model, the scene's Requirements, the MemoryNeed). The requirements are derived once, here: the memory check,
+    the model and the solver all read them, and a scene that cannot fit is refused before any of it is
+    allocated. ``colouring`` and ``sticks`` as for :class:`Simulator`."""
+    from .model import stick_form
+
+    form = stick_form(sticks, colouring, device)
+    req = Requirements.of(scene, form)
+    memory = check_fits(scene, str(device), device.free_memory if device.is_cuda else None, available_host_bytes(),
+                        form, req)
+    with wp.ScopedDevice(device):
+        model = Model(scene, device, colouring, sticks, req)
+    return model, req, memory
+
+
 class Simulator:
     """One scene on one device: the friendly driver over a :class:`Model`, one :class:`State` and a
     :class:`VerletSolver`.
@@ -165,16 +181,9 @@ class Simulator:
         self.scene = scene
         self.settings = scene.simulation
         self.device = resolve_device(device)
-        from .model import stick_form
-
-        # The scene's requirements, once: the memory check, the model and the solver all read them. A scene that
-        # cannot fit is refused before any of it is allocated.
-        self._sticks = stick_form(sticks, colouring, self.device)
-        req = Requirements.of(scene, self._sticks)
-        self.memory = check_fits(scene, str(self.device), self.device.free_memory if self.device.is_cuda else None,
-                                 available_host_bytes(), self._sticks, req)
+        self.model, req, self.memory = build_model(scene, self.device, colouring, sticks)
+        self._sticks = self.model.stick_request
         with wp.ScopedDevice(self.device):
-            self.model = Model(scene, self.device, colouring, sticks, req)
             self.state = State(self.model)
         self.solver = VerletSolver(self.model, self.settings, req, threads)
         self.threads = self.solver.threads
