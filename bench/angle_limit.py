@@ -17,8 +17,8 @@ import time
 import numpy as np
 
 from warp_verlet.constraints.angle_limit import grid_joints
-from warp_verlet.scene import parse_scene
-from warp_verlet.simulator import Simulator
+from warp_verlet.input.scene import parse_scene
+from warp_verlet.core.simulator import Simulator
 
 
 def rope(limit: float | None, iterations: int) -> dict:

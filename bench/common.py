@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import warp as wp
 
-from warp_verlet.scene import Scene, parse_scene
+from warp_verlet.input.scene import Scene, parse_scene
 
 
 def arg_parser(module: str, doc: str) -> argparse.ArgumentParser:

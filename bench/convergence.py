@@ -65,8 +65,8 @@ import numpy as np
 import warp as wp
 
 from warp_verlet.errors import SceneError
-from warp_verlet.scene import parse_scene
-from warp_verlet.simulator import Simulator
+from warp_verlet.input.scene import parse_scene
+from warp_verlet.core.simulator import Simulator
 
 from .common import HANGING_DAMPING, arg_parser, machine, quiet_warp
 

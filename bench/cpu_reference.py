@@ -41,8 +41,8 @@ from pathlib import Path
 
 import numpy as np
 
-from warp_verlet.cpu_team import usable_cores
-from warp_verlet.simulator import Simulator
+from warp_verlet.core.cpu_team import usable_cores
+from warp_verlet.core.simulator import Simulator
 
 from .common import arg_parser, cloth_size, hanging_cloth, machine, markdown_table, quiet_warp, time_frames, write_csv
 from .numpy_baseline import NumpyCloth

@@ -30,8 +30,8 @@ from pathlib import Path
 import numpy as np
 import warp as wp
 
-from warp_verlet.scene import parse_scene
-from warp_verlet.simulator import Simulator
+from warp_verlet.input.scene import parse_scene
+from warp_verlet.core.simulator import Simulator
 
 from .common import (HANGING_DAMPING, arg_parser, copy_bandwidth, hanging_sheet, machine, median_spread, quiet_warp,
                      scene, time_frames, write_table)
@@ -150,7 +150,7 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
     quiet_warp()
     if args.block_dim:
-        from warp_verlet import stages
+        from warp_verlet.core import stages
 
         stages.GRID_BLOCK_DIM = args.block_dim
     device = wp.get_device(args.device)

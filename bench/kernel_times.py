@@ -13,7 +13,7 @@ from collections import defaultdict
 
 import warp as wp
 
-from warp_verlet.simulator import Simulator
+from warp_verlet.core.simulator import Simulator
 
 from .common import arg_parser, quiet_warp
 from .implicit_grid import sheet
@@ -46,7 +46,7 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
     quiet_warp()
     substeps, iterations = (int(v) for v in args.budget.split("x"))
-    from warp_verlet import stages
+    from warp_verlet.core import stages
 
     chosen = stages.GRID_BLOCK_DIM
     for block in args.block_dims:

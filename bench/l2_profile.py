@@ -14,7 +14,7 @@ import sys
 
 import warp as wp
 
-from warp_verlet.simulator import Simulator
+from warp_verlet.core.simulator import Simulator
 
 from .common import arg_parser, quiet_warp
 from .implicit_grid import sheet

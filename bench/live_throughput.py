@@ -81,8 +81,8 @@ def measure(n: int, device: str, seconds: float, port: int, substeps: int = 4, i
             tethers: bool = False) -> dict:
     from dataclasses import replace
 
-    from warp_verlet.live_app import LiveApp
-    from warp_verlet.live_session import LiveSession
+    from warp_verlet.apps.live_app import LiveApp
+    from warp_verlet.apps.live_session import LiveSession
 
     scene = hanging_cloth(n, substeps=substeps, iterations=iterations)
     scene = replace(scene, cloths=tuple(replace(c, tethers=tethers) for c in scene.cloths))

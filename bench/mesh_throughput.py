@@ -31,7 +31,7 @@ Setup at 1024^2 (1M particles), measured on a shared 2-core AMD EPYC: the quad .
 loads (parse_scene: read, weld, check) in 6 s; the triangle OBJ takes 7 s to write and 18 s to load, 11 s
 of it trimesh's OBJ reader (--triangles ply, a binary PLY: 0.2 s to write, 2 s to read). The larger cost
 is the Simulator's construction for a mesh: Warp's graph colouring needs the stick-conflict graph
-(warp_verlet.colouring.stick_conflict_edges), which takes about 3.5 minutes per mesh variant at 1024^2
+(warp_verlet.geometry.colouring.stick_conflict_edges), which takes about 3.5 minutes per mesh variant at 1024^2
 (1 s at 128^2, 27 s at 512^2; a grid, coloured analytically, builds in 12 s at 1024^2). On a machine
 with a 10-minute limit per command, run 1024 on its own. The files live in a temporary directory
 removed at the end.
@@ -47,10 +47,10 @@ from pathlib import Path
 import numpy as np
 import warp as wp
 
-from warp_verlet.faces import Faces, grid_faces
-from warp_verlet.scene import Scene, parse_scene
-from warp_verlet.simulator import Simulator
-from warp_verlet.topology import grid_positions
+from warp_verlet.geometry.faces import Faces, grid_faces
+from warp_verlet.input.scene import Scene, parse_scene
+from warp_verlet.core.simulator import Simulator
+from warp_verlet.geometry.topology import grid_positions
 
 from .common import (HANGING_DAMPING, arg_parser, hanging_cloth, hanging_sheet, machine, median_spread, quiet_warp,
                      scene, time_frames, write_table)

@@ -23,7 +23,7 @@ import time
 
 import numpy as np
 
-from warp_verlet.simulator import Simulator
+from warp_verlet.core.simulator import Simulator
 
 from .common import arg_parser, hanging_cloth, quiet_warp
 

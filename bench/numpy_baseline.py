@@ -63,7 +63,7 @@ class NumpyCloth:
     def from_scene(cls, scene, solver: str = "jacobi") -> "NumpyCloth":
         """The arrays of ``scene`` as the Warp simulator builds them (coloured stick order and stick weights;
         the colouring is only used by the coloured solver)."""
-        from warp_verlet.simulator import Simulator
+        from warp_verlet.core.simulator import Simulator
 
         if scene.colliders:
             raise ValueError("the numpy baseline has no colliders")
@@ -149,7 +149,7 @@ def measure(cloth: NumpyCloth, frames: int, repeats: int = 1) -> dict:
 def compare_with_warp(scene, solver: str, frames: int) -> dict:
     """Run the Warp CPU simulator and the numpy baseline ``frames`` frames from the same start; the largest
     and RMS particle distance, and both structural stretch figures."""
-    from warp_verlet.simulator import Simulator
+    from warp_verlet.core.simulator import Simulator
 
     scene = dataclasses.replace(scene, simulation=dataclasses.replace(scene.simulation, relaxation=solver))
     sim = Simulator(scene, device="cpu")

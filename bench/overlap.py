@@ -25,8 +25,8 @@ from pathlib import Path
 
 import warp as wp
 
-from warp_verlet.runner import run_scene
-from warp_verlet.simulator import Simulator
+from warp_verlet.apps.runner import run_scene
+from warp_verlet.core.simulator import Simulator
 
 from .common import arg_parser, hanging_cloth, machine, quiet_warp, write_table
 

@@ -16,8 +16,8 @@ from pathlib import Path
 import numpy as np
 import warp as wp
 
-from warp_verlet.scene import load_scene
-from warp_verlet.simulator import Simulator
+from warp_verlet.input.scene import load_scene
+from warp_verlet.core.simulator import Simulator
 
 from .common import arg_parser, cloth_size, machine, quiet_warp, write_table
 

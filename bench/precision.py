@@ -22,8 +22,8 @@ import warp as wp
 
 from bench.common import arg_parser, machine, quiet_warp, write_table
 from bench.convergence import hanging
-from warp_verlet.scene import parse_scene
-from warp_verlet.simulator import Simulator
+from warp_verlet.input.scene import parse_scene
+from warp_verlet.core.simulator import Simulator
 
 COST_BUDGETS = ((4, 8), (16, 2))
 REACH_BUDGETS = (("float32", 16, 2), ("float32", 64, 2), ("float32", 64, 4), ("float32", 75, 2),

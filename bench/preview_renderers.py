@@ -44,8 +44,8 @@ def drape_points(n: int) -> np.ndarray:
 
 
 def drape_geometry(n: int):
-    from warp_verlet.cache_reader import ClothFrame, ClothPrim, FrameGeometry
-    from warp_verlet.faces import grid_faces
+    from warp_verlet.output.cache_reader import ClothFrame, ClothPrim, FrameGeometry
+    from warp_verlet.geometry.faces import grid_faces
 
     faces = grid_faces(n + 1, n + 1)
     prim = ClothPrim(prim=None, faces=faces, grid=(n + 1, n + 1), points_needed=(n + 1) ** 2)
@@ -67,7 +67,7 @@ def best_of(fn, repeats: int = REPEATS) -> float:
 
 
 def time_mitsuba() -> dict:
-    from warp_verlet import preview_render
+    from warp_verlet.apps import preview_render
 
     preview_render.render_frame(drape_geometry(8), "Y", 64, 64)  # loads the renderer's library once
     out = {}
@@ -84,8 +84,9 @@ def time_old_matplotlib(source: Path) -> dict:
     sys.path.insert(0, str(source))
     for name in [m for m in sys.modules if m == "warp_verlet" or m.startswith("warp_verlet.")]:
         del sys.modules[name]
-    from warp_verlet import preview as old  # the old module, from ``source``
-    from warp_verlet.cache_reader import visible_polygons
+    from warp_verlet import from ``source``
+    from warp_verlet.apps import preview as old  # the old module
+    from warp_verlet.output.cache_reader import visible_polygons
 
     out = {}
     for n in GRIDS:
@@ -145,8 +146,8 @@ def write_table(path: Path, results: dict[str, dict]) -> None:
 
 
 def export_panel(cache: Path, frame: int, out: Path, size: tuple[int, int]) -> None:
-    from warp_verlet import preview_render
-    from warp_verlet.cache_reader import open_cache, read_frame
+    from warp_verlet.apps import preview_render
+    from warp_verlet.output.cache_reader import open_cache, read_frame
 
     opened = open_cache(cache)
     geometry = read_frame(opened, frame)

@@ -16,7 +16,7 @@ sticks (bend compliance 0.5 m/N), 60 fps, 8 substeps, damping 0.8 /s. One square
 - ``shape matching``: the library's kind (warp_verlet/constraints/rigid_patches.py), one thread per patch,
   last in every sweep: one launch per sweep;
 - ``all-pairs sticks``: every pair of the patch's particles a rigid stick (rest = its rest-pose distance,
-  weight 1), coloured by ``warp_verlet.colouring.colour`` (a particle of a k x k patch touches k² - 1 of
+  weight 1), coloured by ``warp_verlet.geometry.colouring.colour`` (a particle of a k x k patch touches k² - 1 of
   them, so the patch needs that many colours or more; past 63 the rest go into the overflow colour) and
   projected by the library's ``relax_colour`` kernel, one launch per colour per sweep, last in every sweep as
   the patches are;
@@ -47,12 +47,12 @@ from pathlib import Path
 
 import numpy as np
 
-from warp_verlet.colouring import check_partition, colour, colour_ranges
+from warp_verlet.geometry.colouring import check_partition, colour, colour_ranges
 from warp_verlet.constraints import ConstraintSet
 from warp_verlet.constraints.rigid_patches import RIGID_PATCHES, RigidPatches
 from warp_verlet.launches import FLOAT, VEC2I, BoundStage, recorded, split_tasks
-from warp_verlet.scene import Scene, parse_scene
-from warp_verlet.simulator import Simulator
+from warp_verlet.input.scene import Scene, parse_scene
+from warp_verlet.core.simulator import Simulator
 
 from .common import arg_parser, machine, quiet_warp, write_table
 
@@ -131,9 +131,9 @@ class AllPairsSticks(ConstraintSet):
         return BoundStage(None, phases)
 
 
-REGISTRY_NAMES = (("warp_verlet.constraints", "CONSTRAINT_KINDS"), ("warp_verlet.model", "CONSTRAINT_KINDS"),
-                  ("warp_verlet.stages", "CONSTRAINT_KINDS"), ("warp_verlet.stages", "CONSTRAINT_SETS"),
-                  ("warp_verlet.simulator", "CONSTRAINT_SETS"))
+REGISTRY_NAMES = (("warp_verlet.constraints", "CONSTRAINT_KINDS"), ("warp_verlet.core.model", "CONSTRAINT_KINDS"),
+                  ("warp_verlet.core.stages", "CONSTRAINT_KINDS"), ("warp_verlet.core.stages", "CONSTRAINT_SETS"),
+                  ("warp_verlet.core.simulator", "CONSTRAINT_SETS"))
 """Every module-level name the constraint registry is read through."""
 
 
@@ -188,7 +188,7 @@ def pair_distances(points: np.ndarray) -> np.ndarray:
 
 def launches_per_sweep(sim: Simulator) -> dict[str, int]:
     """The launches each constraint set a sweep runs issues, by set name."""
-    from warp_verlet import stages
+    from warp_verlet.core import stages
 
     out = {}
     for kind in stages.CONSTRAINT_SETS:

@@ -32,8 +32,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from warp_verlet.sweep import load_sweep, run_sweep
-from warp_verlet.sweep_backends import InlineBackend, LocalBackend, RayBackend, Slot
+from warp_verlet.apps.sweep import load_sweep, run_sweep
+from warp_verlet.apps.sweep_backends import InlineBackend, LocalBackend, RayBackend, Slot
 
 from .common import arg_parser, machine, markdown_table, quiet_warp, write_csv
 
@@ -118,7 +118,7 @@ def noop_pool(n: int) -> float:
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor
 
-    from warp_verlet.sweep_backends import _package_of, _worker_init  # as LocalBackend starts its workers
+    from warp_verlet.apps.sweep_backends import _package_of, _worker_init  # as LocalBackend starts its workers
 
     with ProcessPoolExecutor(1, mp_context=mp.get_context("spawn"), initializer=_worker_init,
                              initargs=(_package_of(_noop),)) as pool:

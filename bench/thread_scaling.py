@@ -5,7 +5,7 @@
 The hanging cloth of bench.throughput (structural + shear + bend, 4 substeps x 8 iterations), for each
 solver, grid size and thread count: 2 warm-up frames, then the median of ``--repeats`` timed batches. Every
 threaded run's final positions are compared with the 1-thread run's (they must be bit-identical). The
-"auto" column is what the simulator picks by itself (warp_verlet/cpu_team.py ``auto_threads``); the table
+"auto" column is what the simulator picks by itself (warp_verlet/core/cpu_team.py ``auto_threads``); the table
 is what that choice is tuned from. Writes thread_scaling.md/.csv under ``--out``.
 """
 
@@ -16,8 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-from warp_verlet.cpu_team import usable_cores
-from warp_verlet.simulator import Simulator
+from warp_verlet.core.cpu_team import usable_cores
+from warp_verlet.core.simulator import Simulator
 
 from .common import arg_parser, hanging_cloth, machine, median_spread, quiet_warp, time_frames, write_table
 

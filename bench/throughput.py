@@ -34,7 +34,7 @@ import warp as wp
 
 from warp_verlet.colliders.plane import PlaneCollider
 from warp_verlet.colliders.sphere import SphereCollider
-from warp_verlet.simulator import Simulator
+from warp_verlet.core.simulator import Simulator
 
 from .common import (arg_parser, copy_bandwidth, device_arrays, hanging_cloth, machine, median_spread, quiet_warp,
                      time_frames, write_table)
@@ -64,7 +64,7 @@ def bench_scene(n: int, substeps: int, iterations: int, colliders: bool, tear: f
 
 def stage_breakdown(sim: Simulator) -> dict[str, float]:
     """ms per frame spent in each stage, run one stage at a time (see the module docstring)."""
-    from warp_verlet.usd_writer import CachedShape, PointCacheWriter
+    from warp_verlet.output.usd_writer import CachedShape, PointCacheWriter
 
     seconds = dict.fromkeys(STAGES, 0.0)
     dt = sim.settings.dt

@@ -27,7 +27,7 @@ per-second and physical quantities, the same at any S and K, so every point and 
 own values. The Jacobi solver has rigid sticks only: when the sweep includes it and the scene has a
 compliance, every point (and the reference) runs the scene with all sticks rigid, and the outputs say so.
 
-Where the points run (warp_verlet.sweep_backends): by default one at a time in this process, so that every
+Where the points run (warp_verlet.apps.sweep_backends): by default one at a time in this process, so that every
 timing is isolated; ``--workers N`` runs them in a local process pool and ``--ray [ADDRESS]`` as Ray tasks (the grid
 on a cluster). Points that ran in parallel on one machine share its cores and memory bandwidth: the outputs say how
 the timings were taken, and parallel timings are not to be mixed with isolated ones. On CUDA a local pool or Ray
@@ -59,9 +59,9 @@ try:
 except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib
 
-from warp_verlet.scene import load_scene, parse_scene
-from warp_verlet.simulator import Simulator
-from warp_verlet.sweep_backends import quiet_warp as worker_quiet_warp
+from warp_verlet.input.scene import load_scene, parse_scene
+from warp_verlet.core.simulator import Simulator
+from warp_verlet.apps.sweep_backends import quiet_warp as worker_quiet_warp
 
 from . import newton_peer
 from .common import arg_parser, cloth_size, machine, markdown_table, quiet_warp, time_frames, write_csv
@@ -194,10 +194,10 @@ def _results(backend, fn, items: dict) -> dict:
 def run(scene, iterations, substeps, solvers, seconds=0.5, repeats=3, device="cpu",
         ref_substeps=64, ref_iterations=128, ref_solver="coloured", newton_points=(), log=print,
         backend=None) -> dict:
-    """The sweep. ``backend`` (warp_verlet.sweep_backends) runs the reference runs and the points: by default
+    """The sweep. ``backend`` (warp_verlet.apps.sweep_backends) runs the reference runs and the points: by default
     ``InlineBackend(device)``, one at a time in this process (isolated timings); a local pool or Ray runs them in
     parallel, and the result's ``timing`` says so."""
-    from warp_verlet.sweep_backends import InlineBackend
+    from warp_verlet.apps.sweep_backends import InlineBackend
 
     backend = backend or InlineBackend(device)
     scene, rigid_note = rigid_for(scene, [*solvers, ref_solver])
@@ -434,7 +434,7 @@ def _backend(args):
     """Where the points run: this process (default), a local pool (--workers), or Ray (--ray). A benchmark sweep
     pins one point per device: on CUDA one per GPU; on the CPU one at a time unless --workers or --ray asks for
     more, and then every output says the timings were taken in parallel."""
-    from warp_verlet.sweep_backends import InlineBackend, LocalBackend, RayBackend, device_slots
+    from warp_verlet.apps.sweep_backends import InlineBackend, LocalBackend, RayBackend, device_slots
 
     if args.ray is not None:
         device = "cuda" if args.device.startswith("cuda") else "cpu"

@@ -52,7 +52,8 @@ class TableError(Exception):
 
 def key_tables() -> dict[str, tuple[Key, ...]]:
     """Every table of keys a marker may name -> its keys, in the order of the table."""
-    from warp_verlet import mesh_scene, scene
+    from warp_verlet.input import mesh_scene
+    from warp_verlet.input import scene
 
     tables: dict[str, tuple[Key, ...]] = {
         "simulation": scene.SIMULATION_KEYS, "output": scene.OUTPUT_KEYS, "cloth": scene.CLOTH_KEYS,

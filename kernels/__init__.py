@@ -4,5 +4,5 @@
 - :mod:`.relax`: distance-stick relaxation, graph-coloured Gauss-Seidel and gather-form Jacobi.
 
 Kernels are pure functions of their arguments; which of them a step launches is decided by
-:mod:`warp_verlet.simulator`, from the scene.
+:mod:`warp_verlet.core.simulator`, from the scene.
 """

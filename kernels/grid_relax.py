@@ -3,13 +3,13 @@ and its colour, and its rest length from the grid's coordinates, so a sweep read
 and inverse masses (which a GPU's L2 can hold) instead of streaming every stick's ends, rest length and
 weight from memory.
 
-A colour is one (direction, parity) of the analytic grid colouring (warp_verlet/colouring.py): its sticks run
+A colour is one (direction, parity) of the analytic grid colouring (warp_verlet/geometry/colouring.py): its sticks run
 (r, c) -> (r + dr, c + dc) for anchors in a block of rows and columns, where one axis keeps only the anchors
 whose ``(index // q) % 2`` is the colour's parity (q = 1 for neighbours, 2 for a bend stick, which spans two
 cells). Thread k of the colour takes the k-th anchor in row-major order, the order the explicit arrays hold
 the colour's sticks in.
 
-Rest lengths are those the explicit path computes on the host (warp_verlet/topology.py): the float64 norm of
+Rest lengths are those the explicit path computes on the host (warp_verlet/geometry/topology.py): the float64 norm of
 the difference of two float32 rest positions, rounded to float32. A grid's x depends on the column alone and its
 other coordinate on the row alone, so a stick along the rows or the columns takes its rest length from a float32
 table per row or per column, and a shear stick adds the squared column and row steps (float64 tables, rounded as

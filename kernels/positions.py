@@ -1,7 +1,7 @@
 """The two position types, and the instantiation of the generic kernels that read or write positions.
 
 Positions (the State's ``particle_q``, ``particle_q_inertial``, ``particle_dq`` and the Jacobi scratch) are
-``wp.vec3`` (float32) or ``wp.vec3d`` (float64), chosen per scene (warp_verlet/precision.py). Every kernel that
+``wp.vec3`` (float32) or ``wp.vec3d`` (float64), chosen per scene (warp_verlet/core/precision.py). Every kernel that
 touches them is one generic source (``typing.Any`` for the position arrays and for the scalars in position
 units); everything else it reads (masses, rest lengths, weights, collider data) stays float32 and is
 converted to the position scalar inside, where float32 to float32 is the identity: the float32 instance

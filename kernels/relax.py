@@ -119,7 +119,7 @@ def relax_jacobi(
     """Jacobi: every particle gathers the corrections of all its sticks from the same old positions and
     applies their average (Mueller et al. 2007, section 3.5). The gather form needs no atomics, so the
     sum order is fixed and the result is bit-for-bit repeatable on every device. Threads cover particles
-    first .. first + dim - 1 (a CPU thread team takes one piece each, warp_verlet/cpu_team.py)."""
+    first .. first + dim - 1 (a CPU thread team takes one piece each, warp_verlet/core/cpu_team.py)."""
     i = first + wp.tid()
     xi = x_in[i]
     wi = inv_mass[i]

@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 import warp as wp
 
-from warp_verlet.scene import Scene, parse_scene
+from warp_verlet.input.scene import Scene, parse_scene
 
 wp.config.quiet = True
 

@@ -7,9 +7,9 @@ from pathlib import Path
 import numpy as np
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdShade, Vt
 
-from warp_verlet.faces import Faces, grid_faces
-from warp_verlet.scene import ClothSpec, parse_scene
-from warp_verlet.topology import grid_positions
+from warp_verlet.geometry.faces import Faces, grid_faces
+from warp_verlet.input.scene import ClothSpec, parse_scene
+from warp_verlet.geometry.topology import grid_positions
 
 
 def grid_mesh(rows: int, cols: int, size=(1.0, 1.4)) -> tuple[np.ndarray, Faces]:

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from warp_verlet.faces import Faces
+from warp_verlet.geometry.faces import Faces
 
 # A flat "house" of three faces, counter-clockwise seen from +Z:
 #

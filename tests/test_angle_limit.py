@@ -12,12 +12,12 @@ import pytest
 import warp as wp
 
 from conftest import make_scene
-from warp_verlet.colouring import colour
+from warp_verlet.geometry.colouring import colour
 from warp_verlet.constraints.angle_limit import grid_joints, mesh_hinges
 from warp_verlet.errors import SceneError
-from warp_verlet.memory import estimate
-from warp_verlet.scene import parse_scene
-from warp_verlet.simulator import Simulator
+from warp_verlet.core.memory import estimate
+from warp_verlet.input.scene import parse_scene
+from warp_verlet.core.simulator import Simulator
 
 from test_memory import simulator_bytes
 
@@ -194,7 +194,7 @@ def test_elements_past_the_colour_cap_go_to_one_overflow_colour_that_still_holds
         flat = elements[capped.colour == c].reshape(-1)
         assert np.unique(flat).size == flat.size
     # A simulator whose colouring overflows after one colour projects the rest on one thread, in order.
-    monkeypatch.setattr("warp_verlet.colouring.colour", functools.partial(colour, max_colours=2))
+    monkeypatch.setattr("warp_verlet.geometry.colouring.colour", functools.partial(colour, max_colours=2))
     joints = grid_joints(1, 40)
     sim = Simulator(parse_scene(rope(8.0)), "cpu")
     assert any(per_thread > 1 for _, per_thread, _ in sim.model.constraints["angle joints"].colours)

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from conftest import make_scene
-from warp_verlet.background_writer import BackgroundWriter
-from warp_verlet.runner import run_scene
+from warp_verlet.output.background_writer import BackgroundWriter
+from warp_verlet.apps.runner import run_scene
 
 
 def test_frames_are_written_in_order_and_all_flushed_on_close():

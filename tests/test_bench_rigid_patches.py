@@ -11,8 +11,11 @@ import pytest
 
 import bench_package  # noqa: F401  (makes the repository's bench/ importable as the package "bench")
 from bench import rigid_patches
-from warp_verlet import constraints, model, simulator, stages
-from warp_verlet.colouring import MAX_COLOURS
+from warp_verlet import constraints
+from warp_verlet.core import model
+from warp_verlet.core import simulator
+from warp_verlet.core import stages
+from warp_verlet.geometry.colouring import MAX_COLOURS
 
 RIGID = 1.0e-6
 """m: shape matching leaves a patch of a 0.2 m cloth on its rest shape within float32 rounding."""

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import bench_package  # noqa: F401  (makes the repository's bench/ importable as the package "bench")
 from bench import overlap, throughput
-from warp_verlet.simulator import Simulator
+from warp_verlet.core.simulator import Simulator
 
 
 def read(path: Path) -> list[dict]:

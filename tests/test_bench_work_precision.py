@@ -19,7 +19,7 @@ from bench import newton_peer
 from bench import numpy_baseline as npb
 from bench import work_precision as wpb
 from bench.common import hanging_cloth
-from warp_verlet.simulator import Simulator
+from warp_verlet.core.simulator import Simulator
 
 TINY = ["--resolution", "8", "--iterations", "1", "4", "32", "--substeps", "1", "2", "--seconds", "0.05",
         "--repeats", "2", "--ref-substeps", "16", "--ref-iterations", "32"]

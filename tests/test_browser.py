@@ -10,10 +10,10 @@ import pytest
 
 from browser import (CHROMIUM_ARGS, REPO, Served, browser_or_skip, free_port, keep_for_docs, open_page, project,
                      read_text, reddish, screenshot, set_number, wait_until)
-from warp_verlet.cache_reader import open_cache
-from warp_verlet.runner import run_scene
-from warp_verlet.scene import load_scene
-from warp_verlet.usd_writer import validate_cache
+from warp_verlet.output.cache_reader import open_cache
+from warp_verlet.apps.runner import run_scene
+from warp_verlet.input.scene import load_scene
+from warp_verlet.output.usd_writer import validate_cache
 
 pytestmark = pytest.mark.slow  # each test drives a real Chromium
 
@@ -44,8 +44,8 @@ def page_of(browser):
 @pytest.fixture
 def live(tmp_path):
     """The shipped hanging cloth, live on the CPU, served on a free port."""
-    from warp_verlet.live_app import LiveApp
-    from warp_verlet.live_session import LiveSession
+    from warp_verlet.apps.live_app import LiveApp
+    from warp_verlet.apps.live_session import LiveSession
 
     # Waiting, as `warp-verlet live` makes it: the simulation starts when the test's page connects.
     session = LiveSession(load_scene(REPO / "scenes" / "hanging_cloth.toml"), "cpu", waiting=True)
@@ -142,7 +142,7 @@ def shipped_cache(tmp_path_factory):
 
 
 def test_view_slider_changes_the_drawing(page_of, shipped_cache, tmp_path):
-    from warp_verlet.cache_player import CachePlayer
+    from warp_verlet.apps.cache_player import CachePlayer
 
     player = CachePlayer(shipped_cache, port=free_port())
     with Served(player):

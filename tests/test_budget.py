@@ -3,10 +3,10 @@ the least substeps it found, and the scene keys."""
 
 import pytest
 
-from warp_verlet.budget import CALM_FRAMES, Budget
+from warp_verlet.core.budget import CALM_FRAMES, Budget
 from warp_verlet.errors import SceneError
-from warp_verlet.scene import TARGET_ITERATIONS, parse_scene
-from warp_verlet.simulator import Simulator
+from warp_verlet.input.scene import TARGET_ITERATIONS, parse_scene
+from warp_verlet.core.simulator import Simulator
 
 from test_multilevel import hanging  # tests/ is on sys.path (pytest, rootdir-relative imports)
 
@@ -78,7 +78,7 @@ def test_budget_keys_are_checked(simulation, words):
 
 
 def test_the_run_summary_says_what_the_budget_chose(tmp_path):
-    from warp_verlet.runner import run_scene
+    from warp_verlet.apps.runner import run_scene
 
     summary = run_scene(scene(0.001, n=16), tmp_path / "cache.usda", device="cpu", frames=5)
     line = next(l for l in summary.format().splitlines() if l.startswith("budget"))
@@ -93,7 +93,7 @@ def test_reset_starts_the_budget_over():
 
 
 def test_the_report_names_the_cap_that_bound_the_budget_and_what_lifts_it():
-    from warp_verlet.budget import FLOAT32_FLOOR, MAX_SUBSTEPS
+    from warp_verlet.core.budget import FLOAT32_FLOOR, MAX_SUBSTEPS
 
     for capped_by in (MAX_SUBSTEPS, FLOAT32_FLOOR):
         b = Budget(target=0.01, substeps=32, max_substeps=32, capped_by=capped_by)
@@ -123,7 +123,7 @@ def test_the_simulator_tells_the_budget_which_cap_binds(simulation, capped_by):
 def test_the_budget_starts_at_the_default_substeps_as_docs_say():
     # A scene with target_stretch may not give substeps, so its budget starts at the default: 4
     # (docs/scenes.md, "A budget from a target stretch"), the step a scene without a target takes.
-    from warp_verlet.scene import SimulationSettings
+    from warp_verlet.input.scene import SimulationSettings
 
     sim = Simulator(scene(0.5, n=8), "cpu")
     assert SimulationSettings().substeps == 4 and sim.substeps == 4

@@ -15,7 +15,7 @@ import warp as wp
 
 from warp_verlet import SceneBuilder, SceneError, Simulator, load_scene
 from warp_verlet.builder import toml_value
-from warp_verlet.scene import Scene
+from warp_verlet.input.scene import Scene
 from warp_verlet.scene_keys import Key, real
 
 from toml_text import dump
@@ -333,7 +333,7 @@ def test_a_built_mesh_cloth_equals_the_file(tmp_path):
 
 def test_a_mesh_of_polygons_of_any_size(tmp_path):
     """faces as a list of faces of different sizes (a quad and a triangle), as Faces would hold them."""
-    from warp_verlet.faces import Faces
+    from warp_verlet.geometry.faces import Faces
 
     points = [(0, 0, 0), (1, 0, 0), (1, 0, 1), (0, 0, 1), (2, 0, 0)]
     builder = SceneBuilder()
@@ -429,8 +429,8 @@ def api_example() -> str:
 
 
 def test_the_api_docs_example_builds_and_runs_a_scene(tmp_path, monkeypatch, capsys):
-    from warp_verlet.cache_reader import open_cache
-    from warp_verlet.usd_writer import validate_cache
+    from warp_verlet.output.cache_reader import open_cache
+    from warp_verlet.output.usd_writer import validate_cache
 
     code = api_example()
     assert "toml" not in code.lower() and "SceneBuilder" in code

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from pxr import Usd, UsdGeom
 
-from warp_verlet.cli import main
-from warp_verlet.usd_writer import validate_cache
+from warp_verlet.apps.cli import main
+from warp_verlet.output.usd_writer import validate_cache
 
 SCENE = """
 [simulation]
@@ -160,7 +160,7 @@ def test_module_and_console_script_behave_the_same(scene_file):
 def interrupt_runs_after(monkeypatch, last: int) -> None:
     """Make run_scene raise KeyboardInterrupt after frame ``last``, as Ctrl-C from the terminal would arrive
     between frames."""
-    from warp_verlet import runner
+    from warp_verlet.apps import runner
 
     real = runner.run_scene
 
@@ -186,7 +186,7 @@ def test_ctrl_c_leaves_a_valid_cache_of_the_frames_done(scene_file, monkeypatch,
 
 def test_validate_imports_no_heavy_module(scene_file):
     probe = (
-        "import sys; from warp_verlet.cli import main; rc = main(['validate', 'small.toml']); "
+        "import sys; from warp_verlet.apps.cli import main; rc = main(['validate', 'small.toml']); "
         "print(rc, *(m in sys.modules for m in ('warp', 'pxr', 'trimesh')))"
     )
     out = subprocess.run([sys.executable, "-c", probe], cwd=scene_file.parent, capture_output=True, text=True, check=True)
@@ -196,7 +196,7 @@ def test_validate_imports_no_heavy_module(scene_file):
 def test_preview_without_its_renderer_says_what_to_install(tmp_path):
     # Mitsuba is in the base install, but an install with --no-deps lacks it: the command then fails with one
     # clear line, not a traceback. sys.modules[name] = None makes the import fail as a missing package does.
-    probe = ("import sys; sys.modules['mitsuba'] = None; from warp_verlet.cli import main; "
+    probe = ("import sys; sys.modules['mitsuba'] = None; from warp_verlet.apps.cli import main; "
              "print('rc', main(['preview', 'missing.usdc', '-o', 'x.png']))")
     out = subprocess.run([sys.executable, "-c", probe], cwd=tmp_path, capture_output=True, text=True, check=True)
     assert out.stdout.split()[-2:] == ["rc", "1"]
@@ -209,7 +209,7 @@ def test_preview_without_its_renderer_says_what_to_install(tmp_path):
 
 
 def test_threads_are_bounded_with_a_message_about_threads(scene_file, capsys):
-    from warp_verlet.cpu_team import MAX_THREADS
+    from warp_verlet.core.cpu_team import MAX_THREADS
 
     for bad in ("0", "-3", str(MAX_THREADS + 1), "100000", "two"):
         with pytest.raises(SystemExit) as caught:
@@ -224,14 +224,14 @@ def test_threads_are_bounded_with_a_message_about_threads(scene_file, capsys):
 def test_the_api_bounds_threads_too(scene_file):
     from warp_verlet import Simulator
     from warp_verlet.errors import ArgumentError
-    from warp_verlet.scene import load_scene
+    from warp_verlet.input.scene import load_scene
 
     with pytest.raises(ArgumentError, match=r"threads must be a whole number in 1 \.\. 1024, got 100000"):
         Simulator(load_scene(scene_file), "cpu", threads=100000)
 
 
 def test_more_threads_than_cores_warns(scene_file, monkeypatch, capsys):
-    from warp_verlet import cli
+    from warp_verlet.apps import cli
 
     monkeypatch.setattr(cli, "usable_cores", lambda: 2)
     assert main(["run", str(scene_file), "--device", "cpu", "-q", "--threads", "2"]) == 0
@@ -252,7 +252,7 @@ def test_a_cpu_run_does_not_print_warps_cuda_driver_warning(scene_file):
 def test_the_native_stderr_filter_drops_only_the_cuda_warning(capfd):
     import os
 
-    from warp_verlet.warp_setup import CUDA_DRIVER_WARNING, _native_stderr_without
+    from warp_verlet.core.warp_setup import CUDA_DRIVER_WARNING, _native_stderr_without
 
     with _native_stderr_without(CUDA_DRIVER_WARNING):
         os.write(2, f"Warp CUDA warning: {CUDA_DRIVER_WARNING}. GPU execution will not be available.\n".encode())
@@ -273,7 +273,7 @@ def test_an_unwritable_warp_cache_chosen_by_the_user_is_one_clear_error(scene_fi
 def test_an_unwritable_default_warp_cache_falls_back_with_a_note(tmp_path, monkeypatch):
     import warp as wp
 
-    from warp_verlet import warp_setup
+    from warp_verlet.core import warp_setup
 
     blocked = tmp_path / "file"
     blocked.write_text("HOME's .cache is a file here")
@@ -296,9 +296,9 @@ def test_an_unwritable_default_warp_cache_falls_back_with_a_note(tmp_path, monke
 def test_public_api_errors_derive_from_warp_verlet_error(scene_file):
     from warp_verlet import Simulator
     from warp_verlet.errors import ArgumentError, StateError, WarpVerletError
-    from warp_verlet.faces import Faces
-    from warp_verlet.scene import load_scene
-    from warp_verlet.usd_writer import CachedPlane, CachedShape, PointCacheWriter
+    from warp_verlet.geometry.faces import Faces
+    from warp_verlet.input.scene import load_scene
+    from warp_verlet.output.usd_writer import CachedPlane, CachedShape, PointCacheWriter
 
     sim = Simulator(load_scene(scene_file), "cpu")
     rope = CachedShape("rope", np.zeros((0, 4), np.int32), np.zeros((4, 2), np.float32), 4)
@@ -352,12 +352,12 @@ def test_kernel_loading_is_timed_apart_from_the_frames(scene_file, monkeypatch, 
     # the start-up on its own line.
     import warp as wp
 
-    from warp_verlet import runner
-    from warp_verlet.scene import load_scene
+    from warp_verlet.apps import runner
+    from warp_verlet.input.scene import load_scene
 
     import warp_verlet.kernels.readback  # noqa: F401  (imported by the first step otherwise, unloaded here)
     import warp_verlet.kernels.relax  # noqa: F401
-    import warp_verlet.simulator  # noqa: F401
+    import warp_verlet.core.simulator  # noqa: F401
 
     if budget:  # a target_stretch budget reduces the stretch on the device every frame
         scene_file.write_text(SCENE.replace("substeps = 2\niterations = 4\n", "target_stretch = 0.01\n"))

@@ -4,8 +4,8 @@ what a scene does not use."""
 import numpy as np
 import pytest
 
-from warp_verlet.scene import parse_scene
-from warp_verlet.simulator import Simulator
+from warp_verlet.input.scene import parse_scene
+from warp_verlet.core.simulator import Simulator
 
 # Clamping is exact up to float32 rounding of the projected position, so after every substep no free
 # particle may be inside a collider by more than TOL.
@@ -136,8 +136,8 @@ def test_only_the_collider_kinds_present_are_launched_and_allocated(launches):
 def test_colliders_are_written_into_the_cache(tmp_path):
     from pxr import Usd, UsdGeom
 
-    from warp_verlet.runner import run_scene
-    from warp_verlet.usd_writer import validate_cache
+    from warp_verlet.apps.runner import run_scene
+    from warp_verlet.output.usd_writer import validate_cache
 
     sweep = {"type": "sphere", "name": "ball", "radius": 0.2, "thickness": 0.05,
              "path": [[0.0, 0.0, 0.4, -1.0], [0.1, 0.0, 0.4, 1.0]]}
@@ -161,7 +161,7 @@ def test_colliders_are_written_into_the_cache(tmp_path):
 def test_a_scene_without_colliders_writes_none(tmp_path):
     from pxr import Usd
 
-    from warp_verlet.runner import run_scene
+    from warp_verlet.apps.runner import run_scene
 
     out = tmp_path / "plain.usda"
     run_scene(scene(DROP, [], frames=2), output=out, device="cpu")

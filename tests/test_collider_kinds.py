@@ -20,11 +20,11 @@ from warp_verlet.colliders import (SHARED_KEYS, ColliderKind, ColliderLaunches, 
 from warp_verlet.colliders.plane import PLANE, PlaneCollider
 from warp_verlet.colliders.sphere import SPHERE, SphereCollider
 from warp_verlet.errors import SceneError
-from warp_verlet.memory import estimate
-from warp_verlet.scene import parse_scene
+from warp_verlet.core.memory import estimate
+from warp_verlet.input.scene import parse_scene
 from warp_verlet.scene_keys import Key, choice, real
-from warp_verlet.scene_warnings import start_inside_warnings
-from warp_verlet.simulator import Simulator
+from warp_verlet.input.scene_warnings import start_inside_warnings
+from warp_verlet.core.simulator import Simulator
 
 # Every member the protocol declares: its methods and its annotated attributes.
 PROTOCOL_METHODS = sorted(n for n, v in vars(ColliderKind).items() if callable(v) and not n.startswith("_"))
@@ -161,7 +161,7 @@ class LevelKind:
         return {"level_floors": None if start is None else wp.clone(start)}
 
     def bind(self, model, state) -> ColliderLaunches:
-        from warp_verlet.stages import recorded
+        from warp_verlet.core.stages import recorded
 
         c = model.colliders
         return ColliderLaunches((), (recorded(keep_above_levels, model.particle_count,
@@ -279,8 +279,8 @@ def test_a_kind_registered_in_a_test_clamps_is_estimated_and_launched(with_level
 def test_a_kind_registered_in_a_test_is_written_to_the_cache_and_read_back(monkeypatch, tmp_path):
     from pxr import Usd
 
-    from warp_verlet.cache_reader import open_cache, read_frame
-    from warp_verlet.runner import run_scene
+    from warp_verlet.output.cache_reader import open_cache, read_frame
+    from warp_verlet.apps.runner import run_scene
 
     # Before the plane: the cache reader asks the kinds in registry order, and the plane claims any mesh under
     # /World/Colliders.

@@ -5,8 +5,8 @@ import pytest
 import trimesh
 
 from conftest import make_scene
-from warp_verlet.colouring import check_partition, graph_colouring, grid_colouring, stick_conflict_edges
-from warp_verlet.topology import build_cloth
+from warp_verlet.geometry.colouring import check_partition, graph_colouring, grid_colouring, stick_conflict_edges
+from warp_verlet.geometry.topology import build_cloth
 
 ALL = ["structural", "shear", "bend"]
 

@@ -9,7 +9,7 @@ import warp as wp
 
 from conftest import make_scene
 from warp_verlet.kernels.relax import relax_colour, relax_colour_compliant
-from warp_verlet.simulator import Simulator
+from warp_verlet.core.simulator import Simulator
 
 G = 9.81
 

@@ -1,4 +1,4 @@
-"""The CPU relaxation spread over threads (warp_verlet/cpu_team.py) and the captured CPU frame.
+"""The CPU relaxation spread over threads (warp_verlet/core/cpu_team.py) and the captured CPU frame.
 
 Cutting a colour over threads must not change a single bit: every particle still sees its sticks in colour
 order. The analytic cases below (stability suite) run with the relaxation forced onto three threads, and the
@@ -14,16 +14,16 @@ import numpy as np
 import pytest
 import warp as wp
 
-import warp_verlet.cpu_team as cpu_team
+import warp_verlet.core.cpu_team as cpu_team
 import bench_package  # noqa: F401  (makes the repository's bench/ importable as the package "bench")
 from bench import stability_cases as cases
 from conftest import make_scene
 from test_stability import assert_all_pass
-from warp_verlet.cpu_team import PhaseTeam, auto_threads
+from warp_verlet.core.cpu_team import PhaseTeam, auto_threads
 from warp_verlet.launches import split
 from warp_verlet.errors import WarpVerletError
-from warp_verlet.scene import parse_scene
-from warp_verlet.simulator import Simulator
+from warp_verlet.input.scene import parse_scene
+from warp_verlet.core.simulator import Simulator
 
 
 def test_split_cuts_a_range_into_contiguous_pieces_in_order():

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from conftest import make_scene
-from warp_verlet.simulator import Simulator
+from warp_verlet.core.simulator import Simulator
 
 EPS32 = float(np.finfo(np.float32).eps)
 

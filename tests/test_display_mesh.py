@@ -1,4 +1,4 @@
-"""What the browser views draw of a cloth (warp_verlet/display_mesh.py): a large grid as a coarser grid, a large
+"""What the browser views draw of a cloth (warp_verlet/apps/display_mesh.py): a large grid as a coarser grid, a large
 mesh decimated by edge collapses to vertices of its own, and torn faces hidden on both."""
 
 from __future__ import annotations
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from mesh_files import grid_mesh, mesh_scene, triangulated, write_obj
-from warp_verlet.display_mesh import DisplayMesh, fan_triangles
+from warp_verlet.apps.display_mesh import DisplayMesh, fan_triangles
 
 fast_simplification = pytest.importorskip("fast_simplification", reason="pip install 'warp-verlet[live]'")
 
@@ -102,7 +102,7 @@ def test_a_torn_face_hides_the_coarse_triangles_around_it():
 
 
 def test_a_live_session_gathers_the_decimated_vertices(tmp_path):
-    from warp_verlet.live_session import LiveSession
+    from warp_verlet.apps.live_session import LiveSession
 
     points, faces = wavy_sheet(40)
     write_obj(tmp_path / "sheet.obj", points, faces)
@@ -125,10 +125,10 @@ def test_live_and_view_pages_draw_a_large_mesh_decimated(tmp_path):
     drawn vertices, at the simulation's positions) and in ``view`` (from the cache's first frame), and says so."""
     pytest.importorskip("viser", reason="pip install 'warp-verlet[live]'")
     from browser import free_port
-    from warp_verlet.cache_player import CachePlayer
-    from warp_verlet.live_app import LiveApp
-    from warp_verlet.live_session import LiveSession
-    from warp_verlet.runner import run_scene
+    from warp_verlet.apps.cache_player import CachePlayer
+    from warp_verlet.apps.live_app import LiveApp
+    from warp_verlet.apps.live_session import LiveSession
+    from warp_verlet.apps.runner import run_scene
 
     points, faces = wavy_sheet(40)
     write_obj(tmp_path / "sheet.obj", points, faces)

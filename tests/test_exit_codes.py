@@ -1,4 +1,4 @@
-"""Every exit code the command line documents (warp_verlet/cli.py's docstring), one test each; where another file
+"""Every exit code the command line documents (warp_verlet/apps/cli.py's docstring), one test each; where another file
 already tests a code end to end, this one names it rather than run it twice:
 
 - 0 success: tests/test_cli.py::test_run_writes_a_valid_cache_with_every_frame, ::test_validate_command
@@ -27,7 +27,7 @@ import sys
 import pytest
 
 from test_cli import SCENE
-from warp_verlet.cli import STDOUT_CLOSED, main
+from warp_verlet.apps.cli import STDOUT_CLOSED, main
 
 
 @pytest.fixture
@@ -101,7 +101,7 @@ def test_a_closed_standard_output_ends_quietly(work, args, code):
 
 
 def test_a_bad_output_name_is_refused_before_warp_starts(work):
-    probe = ("import sys; from warp_verlet.cli import main; rc = main(['run', 'small.toml', '-o', 'out.txt', '-q']); "
+    probe = ("import sys; from warp_verlet.apps.cli import main; rc = main(['run', 'small.toml', '-o', 'out.txt', '-q']); "
              "print(rc, 'warp' in sys.modules)")
     done = subprocess.run([sys.executable, "-c", probe], cwd=work, capture_output=True, text=True, check=True)
     assert done.stdout.split()[-2:] == ["2", "False"], done.stderr

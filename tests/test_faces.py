@@ -1,4 +1,4 @@
-"""Faces of any size (warp_verlet.faces): the flat layout, the grid's quads, and which faces lie beside an edge,
+"""Faces of any size (warp_verlet.geometry.faces): the flat layout, the grid's quads, and which faces lie beside an edge,
 checked against the grid-only topology code and against meshes worked out by hand."""
 
 from __future__ import annotations
@@ -6,9 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from warp_verlet.faces import Faces, as_faces, edge_faces, grid_faces, next_corner
-from warp_verlet.scene import ClothSpec
-from warp_verlet.topology import STRUCT_H, STRUCT_V, build_cloth
+from warp_verlet.geometry.faces import Faces, as_faces, edge_faces, grid_faces, next_corner
+from warp_verlet.input.scene import ClothSpec
+from warp_verlet.geometry.topology import STRUCT_H, STRUCT_V, build_cloth
 
 from meshes import HOUSE, HOUSE_POINTS  # tests/meshes.py (pytest puts tests/ on sys.path)
 

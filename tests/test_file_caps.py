@@ -10,10 +10,10 @@ from pathlib import Path
 
 import pytest
 
-from warp_verlet import scene as scene_module
+from warp_verlet.input import scene as scene_module
 from warp_verlet.errors import SceneError
-from warp_verlet.scene import MAX_TOML_BYTES, load_scene
-from warp_verlet.sweep import load_sweep
+from warp_verlet.input.scene import MAX_TOML_BYTES, load_scene
+from warp_verlet.apps.sweep import load_sweep
 
 SCENE = """
 [simulation]

@@ -21,8 +21,8 @@ import numpy as np
 import pytest
 import warp as wp
 
-from warp_verlet.scene import parse_scene
-from warp_verlet.simulator import Simulator
+from warp_verlet.input.scene import parse_scene
+from warp_verlet.core.simulator import Simulator
 
 if sys.version_info >= (3, 11):
     import tomllib

@@ -12,9 +12,9 @@ import pytest
 
 from conftest import make_scene
 from warp_verlet.errors import ArgumentError
-from warp_verlet.scene import parse_scene
-from warp_verlet.simulator import Simulator
-from warp_verlet.stages import MAX_GRID_TETHER_PINS, implicit_grid_obstacle
+from warp_verlet.input.scene import parse_scene
+from warp_verlet.core.simulator import Simulator
+from warp_verlet.core.stages import MAX_GRID_TETHER_PINS, implicit_grid_obstacle
 
 SCENES = Path(__file__).resolve().parent.parent / "scenes"
 SMALL = 14  # rows and columns at most: the shipped configurations, small enough to step a few frames quickly
@@ -122,7 +122,7 @@ def test_the_rule_picks_implicit_sticks_for_one_grid_cloth_that_cannot_tear(devi
 
 def test_auto_on_a_gpu_computes_the_sticks_and_keeps_the_tether_table(monkeypatch):
     """What "auto" does on a GPU, on the CPU: the rule's device test answered as a GPU would."""
-    import warp_verlet.model as model_module
+    import warp_verlet.core.model as model_module
 
     real = model_module.stick_form
     monkeypatch.setattr(model_module, "stick_form", lambda sticks, colouring, device: real(
@@ -181,8 +181,8 @@ def test_retune_keeps_the_sticks_form():
 
 
 def test_a_lattice_that_is_not_uniform_is_refused():
-    from warp_verlet.model import grid_axes
-    from warp_verlet.topology import build_cloth
+    from warp_verlet.core.model import grid_axes
+    from warp_verlet.geometry.topology import build_cloth
 
     top = build_cloth(make_scene(resolution=[4, 5]).cloths[0])
     grid_axes(top)  # a built grid is a lattice

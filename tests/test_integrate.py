@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from conftest import make_scene
-from warp_verlet.simulator import Simulator
+from warp_verlet.core.simulator import Simulator
 
 EPS32 = float(np.finfo(np.float32).eps)
 G = np.array([0.0, -9.81, 0.0])

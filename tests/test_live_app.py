@@ -6,7 +6,7 @@ import pytest
 
 from browser import REPO, free_port, wait_until
 from conftest import make_scene
-from warp_verlet.scene import parse_scene
+from warp_verlet.input.scene import parse_scene
 
 pytest.importorskip("viser", reason="the browser views need viser: pip install 'warp-verlet[live]'")
 
@@ -16,8 +16,8 @@ HANGING = dict(resolution=[12, 12], pins=["top-left", "top-right"], sticks=["str
 @pytest.fixture
 def app_of(tmp_path):
     """A LiveApp of a scene, served on a free port, its loop not running (the tests drive it)."""
-    from warp_verlet.live_app import LiveApp
-    from warp_verlet.live_session import LiveSession
+    from warp_verlet.apps.live_app import LiveApp
+    from warp_verlet.apps.live_session import LiveSession
 
     apps = []
 
@@ -74,9 +74,9 @@ def test_the_drag_gizmo_goes_back_with_its_sphere_on_reset(app_of):
 
 
 def test_play_at_the_last_frame_plays_again_from_the_first(tmp_path):
-    from warp_verlet.cache_player import CachePlayer
-    from warp_verlet.runner import run_scene
-    from warp_verlet.scene import load_scene
+    from warp_verlet.apps.cache_player import CachePlayer
+    from warp_verlet.apps.runner import run_scene
+    from warp_verlet.input.scene import load_scene
 
     cache = tmp_path / "rope.usdc"
     run_scene(load_scene(REPO / "scenes" / "rope.toml"), cache, device="cpu", frames=5)
@@ -128,7 +128,7 @@ def test_a_waiting_session_starts_when_the_first_page_connects(app_of):
 
 
 def test_live_from_the_command_line_waits_for_a_page(monkeypatch, capsys):
-    from warp_verlet import cli
+    from warp_verlet.apps import cli
 
     made = []
 
@@ -141,7 +141,7 @@ def test_live_from_the_command_line_waits_for_a_page(monkeypatch, capsys):
         def run(self, seconds):
             pass
 
-    monkeypatch.setattr("warp_verlet.live_app.LiveApp", Unserved)
+    monkeypatch.setattr("warp_verlet.apps.live_app.LiveApp", Unserved)
     assert cli.main(["live", str(REPO / "scenes" / "rope.toml"), "--device", "cpu", "--port", str(free_port()),
                      "--seconds", "0"]) == 0
     assert made[0].waiting and made[0].frame == 0

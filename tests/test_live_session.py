@@ -1,16 +1,16 @@
 """The live session without a browser: real-time ticks, edits at frame boundaries, pins, tearing, dragging,
-the event log and recording (warp_verlet/live_session.py, Simulator.advance/retune/take_state)."""
+the event log and recording (warp_verlet/apps/live_session.py, Simulator.advance/retune/take_state)."""
 
 import numpy as np
 import pytest
 
 from conftest import make_scene
-from warp_verlet.cache_reader import open_cache, read_cloths
+from warp_verlet.output.cache_reader import open_cache, read_cloths
 from warp_verlet.errors import StateError, WarpVerletError
-from warp_verlet.live_session import LiveSession
-from warp_verlet.scene import parse_scene
-from warp_verlet.simulator import Simulator
-from warp_verlet.usd_writer import validate_cache
+from warp_verlet.apps.live_session import LiveSession
+from warp_verlet.input.scene import parse_scene
+from warp_verlet.core.simulator import Simulator
+from warp_verlet.output.usd_writer import validate_cache
 
 FRAME = 1 / 60
 HANGING = dict(resolution=[12, 12], pins=["top-left", "top-right"], sticks=["structural", "shear"], tethers=False)

@@ -12,10 +12,10 @@ import warp as wp
 from conftest import make_scene
 from warp_verlet.errors import WarpVerletError
 from bench.common import device_arrays as every_device_array
-from warp_verlet.memory import check_fits, estimate, stick_count
-from warp_verlet.scene import parse_scene
-from warp_verlet.simulator import Simulator
-from warp_verlet.topology import build_cloth
+from warp_verlet.core.memory import check_fits, estimate, stick_count
+from warp_verlet.input.scene import parse_scene
+from warp_verlet.core.simulator import Simulator
+from warp_verlet.geometry.topology import build_cloth
 
 FAMILIES = [["structural"], ["shear"], ["bend"], ["structural", "shear", "bend"]]
 
@@ -133,7 +133,7 @@ def test_device_and_host_limits_are_named():
 def test_a_simulator_derives_the_scenes_requirements_once(monkeypatch):
     # The memory check, the model and the solver read one Requirements: counting every kind again (a mesh's
     # hinges, the multilevel hierarchy's sizes) for each of them would be wasted work and could disagree.
-    from warp_verlet.stages import Requirements
+    from warp_verlet.core.stages import Requirements
 
     calls = []
     real_of = Requirements.of.__func__

@@ -11,11 +11,11 @@ import trimesh
 from mesh_files import grid_mesh, mesh_scene, triangulated, write_obj, write_usd_mesh
 from meshes import HOUSE, HOUSE_POINTS
 from warp_verlet.errors import SceneError
-from warp_verlet.faces import Faces
-from warp_verlet.mesh_cloth import NonManifoldWarning, SourceMesh, prepare, stick_families, weld
-from warp_verlet.scene import parse_scene
-from warp_verlet.simulator import Simulator
-from warp_verlet.topology import build_cloth
+from warp_verlet.geometry.faces import Faces
+from warp_verlet.geometry.mesh_cloth import NonManifoldWarning, SourceMesh, prepare, stick_families, weld
+from warp_verlet.input.scene import parse_scene
+from warp_verlet.core.simulator import Simulator
+from warp_verlet.geometry.topology import build_cloth
 
 ALL = ["structural", "shear", "bend"]
 
@@ -331,7 +331,7 @@ def test_bad_mesh_keys_name_the_key(tmp_path):
 
 def test_validate_reports_the_mesh_and_its_welding(tmp_path, capsys):
     """`warp-verlet validate` as a user runs it on a mesh scene: the weld and pins are stated, nothing is run."""
-    from warp_verlet.cli import main
+    from warp_verlet.apps.cli import main
 
     points, faces = grid_mesh(3, 4)
     write_usd_mesh(tmp_path / "a.usda", np.concatenate([points, points[:2]]),

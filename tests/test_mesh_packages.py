@@ -1,5 +1,5 @@
 """A mesh reader that needs a Python package which is not installed says so, naming the package to install, instead
-of calling the mesh file unreadable (warp_verlet/mesh_io.read_mesh). Each case makes the module missing the way an
+of calling the mesh file unreadable (warp_verlet/geometry/mesh_io.read_mesh). Each case makes the module missing the way an
 install without it would: None in sys.modules, which makes every import of it raise ModuleNotFoundError."""
 
 from __future__ import annotations
@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from warp_verlet.mesh_cloth import MeshError
-from warp_verlet.mesh_io import read_mesh
+from warp_verlet.geometry.mesh_cloth import MeshError
+from warp_verlet.geometry.mesh_io import read_mesh
 
 ROOT = Path(__file__).resolve().parent.parent
 ASSETS = ROOT / "scenes" / "assets"
@@ -28,7 +28,7 @@ def test_tablecloth_without_pillow_names_pillow():
         import sys
         sys.modules["PIL"] = None
         from warp_verlet.errors import SceneError
-        from warp_verlet.scene import load_scene
+        from warp_verlet.input.scene import load_scene
         try:
             load_scene("scenes/tablecloth.toml")
         except SceneError as err:

@@ -8,9 +8,9 @@ import pytest
 from pxr import Usd, UsdGeom, UsdShade
 
 from mesh_files import grid_mesh, mesh_scene, write_usd_mesh
-from warp_verlet.faces import Faces
-from warp_verlet.runner import run_scene
-from warp_verlet.usd_writer import validate_cache
+from warp_verlet.geometry.faces import Faces
+from warp_verlet.apps.runner import run_scene
+from warp_verlet.output.usd_writer import validate_cache
 
 ROWS, COLS = 6, 8
 CENTIMETRES = 0.01  # the asset's metersPerUnit

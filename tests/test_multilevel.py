@@ -8,8 +8,8 @@ import warp as wp
 from warp_verlet.errors import SceneError
 from warp_verlet.kernels.multilevel import limit_coarse_colour, prolongate
 from warp_verlet.constraints.multilevel import grid_hierarchy, hierarchy_counts, level_axes
-from warp_verlet.scene import parse_scene
-from warp_verlet.simulator import Simulator
+from warp_verlet.input.scene import parse_scene
+from warp_verlet.core.simulator import Simulator
 
 
 def hanging(n: int, substeps: int = 4, iterations: int = 8, multilevel: bool = False, tethers: bool = False,

@@ -20,9 +20,9 @@ from browser import REPO, free_port
 from sweep_helpers import BASE_SCENE
 from test_cli import SCENE
 from test_mesh_cloth import brute_force_weld
-from warp_verlet.cli import main
-from warp_verlet.faces import Faces
-from warp_verlet.mesh_cloth import MeshError, SourceMesh, prepare, weld
+from warp_verlet.apps.cli import main
+from warp_verlet.geometry.faces import Faces
+from warp_verlet.geometry.mesh_cloth import MeshError, SourceMesh, prepare, weld
 
 LONG_NAME = "a" * 300 + ".usdc"  # 305 bytes: every common file system stops at 255
 
@@ -189,8 +189,8 @@ def test_view_of_a_cache_with_no_readable_points_is_one_error(tmp_path):
 def test_a_save_path_typed_in_the_live_page_is_refused_in_its_log_not_with_a_traceback(tmp_path, monkeypatch):
     pytest.importorskip("viser", reason="live needs viser: pip install 'warp-verlet[live]'")
     from conftest import make_scene
-    from warp_verlet.live_app import LiveApp
-    from warp_verlet.live_session import LiveSession
+    from warp_verlet.apps.live_app import LiveApp
+    from warp_verlet.apps.live_session import LiveSession
 
     app = LiveApp(LiveSession(make_scene(resolution=[4, 4]), "cpu", waiting=False), port=free_port(),
                   record_path=tmp_path / "live.usdc")
@@ -221,7 +221,7 @@ def test_a_save_path_typed_in_the_live_page_is_refused_in_its_log_not_with_a_tra
 
 def test_view_says_a_damaged_frame_on_the_page_and_plays_on(tmp_path):
     pytest.importorskip("viser", reason="view needs viser: pip install 'warp-verlet[live]'")
-    from warp_verlet.cache_player import CachePlayer
+    from warp_verlet.apps.cache_player import CachePlayer
 
     # Frame 2 holds NaN: it cannot be drawn.
     path = one_triangle_cache(tmp_path / "holed.usda", {1: 0.0, 2: float("nan"), 3: 0.5})
@@ -238,9 +238,9 @@ def test_view_says_a_damaged_frame_on_the_page_and_plays_on(tmp_path):
 
 def test_view_keeps_usds_cpp_locations_from_stderr(tmp_path, capfd):
     # A cache whose layer names a sublayer that is missing: USD warns at open, with its C++ source file and line.
-    from warp_verlet.cache_reader import open_cache, read_frame
-    from warp_verlet.runner import run_scene
-    from warp_verlet.scene import parse_scene
+    from warp_verlet.output.cache_reader import open_cache, read_frame
+    from warp_verlet.apps.runner import run_scene
+    from warp_verlet.input.scene import parse_scene
 
     run_scene(parse_scene({"simulation": {"frames": 2}, "cloth": [{"resolution": [3, 3], "size": [1.0, 1.0]}]},
                           file="<test>"), tmp_path / "cloth.usdc", device="cpu", frames=2)
@@ -257,9 +257,9 @@ def test_view_keeps_usds_cpp_locations_from_stderr(tmp_path, capfd):
 def test_validate_cache_says_a_missing_layer_plainly_and_prints_nothing(tmp_path, capfd):
     # The same wrapper as above: validate_cache (and a sweep's resume, through it) names the missing layer as a
     # problem, without USD's C++ source file and line on stderr.
-    from warp_verlet.runner import run_scene
-    from warp_verlet.scene import parse_scene
-    from warp_verlet.usd_writer import validate_cache
+    from warp_verlet.apps.runner import run_scene
+    from warp_verlet.input.scene import parse_scene
+    from warp_verlet.output.usd_writer import validate_cache
 
     run_scene(parse_scene({"simulation": {"frames": 2}, "cloth": [{"resolution": [3, 3], "size": [1.0, 1.0]}]},
                           file="<test>"), tmp_path / "cloth.usdc", device="cpu", frames=2)
@@ -275,9 +275,9 @@ def test_validate_cache_says_a_missing_layer_plainly_and_prints_nothing(tmp_path
 
 
 def test_run_scene_from_python_refuses_a_name_too_long_as_the_command_line_does(tmp_path):
-    from warp_verlet.output_file import OutputNameError
-    from warp_verlet.runner import run_scene
-    from warp_verlet.scene import parse_scene
+    from warp_verlet.output.output_file import OutputNameError
+    from warp_verlet.apps.runner import run_scene
+    from warp_verlet.input.scene import parse_scene
 
     scene = parse_scene({"simulation": {"frames": 1}, "cloth": [{"resolution": [3, 3], "size": [1.0, 1.0]}]},
                         file="<test>")

@@ -24,14 +24,14 @@ import pytest
 from filelock import FileLock
 from pxr import Usd, UsdGeom
 
-from warp_verlet import output_file
-from warp_verlet.cli import main
+from warp_verlet.output import output_file
+from warp_verlet.apps.cli import main
 from warp_verlet.errors import DiskFullError, OutputBusyError, OutputError, WarpVerletError
-from warp_verlet.output_file import CacheOutput, estimate_cache, output_report
+from warp_verlet.output.output_file import CacheOutput, estimate_cache, output_report
 from test_cli import SCENE as CLI_SCENE, interrupt_runs_after
-from warp_verlet.runner import run_scene
-from warp_verlet.scene import load_scene
-from warp_verlet.usd_writer import CachedShape, PointCacheWriter, validate_cache
+from warp_verlet.apps.runner import run_scene
+from warp_verlet.input.scene import load_scene
+from warp_verlet.output.usd_writer import CachedShape, PointCacheWriter, validate_cache
 
 # test_cli's small scene, its first cloth only (one cloth keeps the frame sizes simple to reason about).
 SCENE = CLI_SCENE[:CLI_SCENE.index("[[cloth]]", CLI_SCENE.index("[[cloth]]") + 1)]
@@ -102,12 +102,12 @@ def test_a_rerun_interrupted_by_ctrl_c_keeps_the_previous_cache(work, good_cache
 
 
 def test_ctrl_c_before_the_output_is_opened_claims_no_cache(work, monkeypatch, capsys):
-    import warp_verlet.simulator
+    import warp_verlet.core.simulator
 
     def interrupted(*args, **kwargs):
         raise KeyboardInterrupt  # as if Ctrl-C came while the kernels compiled
 
-    monkeypatch.setattr(warp_verlet.simulator.Simulator, "__init__", interrupted)
+    monkeypatch.setattr(warp_verlet.core.simulator.Simulator, "__init__", interrupted)
     assert run("small.toml") == 130
     err = capsys.readouterr().err
     assert "interrupted: nothing was written; small.usdc was not written" in err

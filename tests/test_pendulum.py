@@ -3,7 +3,7 @@
 import numpy as np
 
 from conftest import make_scene
-from warp_verlet.simulator import Simulator
+from warp_verlet.core.simulator import Simulator
 
 
 LENGTH, G, THETA0 = 1.0, 9.81, 0.05

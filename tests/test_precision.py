@@ -10,10 +10,10 @@ import warp as wp
 
 from conftest import make_scene
 from warp_verlet.errors import SceneError, WarpVerletError
-from warp_verlet.memory import estimate
-from warp_verlet.precision import coordinate_scale, smallest_dt
-from warp_verlet.scene import parse_scene
-from warp_verlet.simulator import Simulator
+from warp_verlet.core.memory import estimate
+from warp_verlet.core.precision import coordinate_scale, smallest_dt
+from warp_verlet.input.scene import parse_scene
+from warp_verlet.core.simulator import Simulator
 
 EPS64 = float(np.finfo(np.float64).eps)
 G = np.array([0.0, -9.81, 0.0])
@@ -134,7 +134,7 @@ def test_coordinate_scale_from_the_specs_is_that_of_the_built_model(cloth):
 @pytest.mark.parametrize("value, got", [("'double'", "str 'double'"), ("64", "int 64"), ("true", "boolean true"),
                                         ("'Float64'", "str 'Float64'")])
 def test_a_bad_precision_names_the_key_and_the_choices(tmp_path, value, got):
-    from warp_verlet.scene import load_scene
+    from warp_verlet.input.scene import load_scene
 
     path = tmp_path / "scene.toml"
     path.write_text(f"[simulation]\nprecision = {value}\n[[cloth]]\nresolution = [2, 2]\nsize = [1, 1]\n")
@@ -348,7 +348,7 @@ def test_two_float64_runs_are_bit_identical(device, solver):
 def test_the_cache_gets_float32_points_from_a_float64_run(tmp_path):
     from pxr import Usd, UsdGeom
 
-    from warp_verlet.runner import run_scene
+    from warp_verlet.apps.runner import run_scene
 
     scene = falling_cloth("float64", 100)
     summary = run_scene(scene, tmp_path / "f64.usdc", device="cpu", frames=3, overlap=False)

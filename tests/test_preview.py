@@ -11,12 +11,12 @@ import pytest
 from PIL import Image
 from pxr import Usd, UsdGeom, Vt
 
-from warp_verlet import preview
-from warp_verlet import preview_render as render
-from warp_verlet.cache_reader import ClothFrame, ClothPrim
-from warp_verlet.cli import main, parse_frame_slice, parse_size
-from warp_verlet.faces import Faces
-from warp_verlet.usd_writer import CachedPlane, CachedShape, CachedSphere, PointCacheWriter
+from warp_verlet.apps import preview
+from warp_verlet.apps import preview_render as render
+from warp_verlet.output.cache_reader import ClothFrame, ClothPrim
+from warp_verlet.apps.cli import main, parse_frame_slice, parse_size
+from warp_verlet.geometry.faces import Faces
+from warp_verlet.output.usd_writer import CachedPlane, CachedShape, CachedSphere, PointCacheWriter
 
 from meshes import HOUSE, HOUSE_POINTS  # tests/meshes.py (pytest puts tests/ on sys.path)
 
@@ -619,7 +619,7 @@ def test_without_the_flag_run_writes_no_preview(tmp_path, monkeypatch, capsys):
 @pytest.mark.slow
 def test_preview_needs_no_simulator_and_leaves_pyplot_alone(cache):
     probe = (
-        "import sys; from warp_verlet.cli import main; "
+        "import sys; from warp_verlet.apps.cli import main; "
         "rc = main(['preview', 'cache.usdc', '-o', 'probe.png', '--size', '64x64']); "
         "print(rc, *(m in sys.modules for m in ('warp', 'matplotlib.pyplot')))"
     )
@@ -630,7 +630,7 @@ def test_preview_needs_no_simulator_and_leaves_pyplot_alone(cache):
 def test_validate_imports_no_renderer(tmp_path):
     (tmp_path / "tiny.toml").write_text(RUN_SCENE)
     probe = (
-        "import sys; from warp_verlet.cli import main; rc = main(['validate', 'tiny.toml']); "
+        "import sys; from warp_verlet.apps.cli import main; rc = main(['validate', 'tiny.toml']); "
         "print(rc, *(m in sys.modules for m in ('warp', 'pxr', 'matplotlib', 'mitsuba')))"
     )
     out = subprocess.run([sys.executable, "-c", probe], cwd=tmp_path, capture_output=True, text=True, check=True)

@@ -12,7 +12,9 @@ from pathlib import Path
 
 import pytest
 
-from warp_verlet import output_file, warp_setup
+from warp_verlet.output import output_file
+
+from warp_verlet.core import warp_setup
 from warp_verlet.errors import OutputError, WarpVerletError
 
 OTHER_UID = OTHER_GID = 65534  # "nobody"

@@ -6,7 +6,7 @@ import warp as wp
 
 from conftest import make_scene
 from warp_verlet.kernels.relax import relax_colour, relax_jacobi
-from warp_verlet.simulator import Simulator
+from warp_verlet.core.simulator import Simulator
 
 
 def relax_one_stick(xi, xj, wi, wj, rest, device, k=1.0):

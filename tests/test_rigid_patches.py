@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from warp_verlet.errors import SceneError
-from warp_verlet.scene import parse_scene
-from warp_verlet.simulator import Simulator
+from warp_verlet.input.scene import parse_scene
+from warp_verlet.core.simulator import Simulator
 
 RIGID_TOLERANCE = 1.0e-6
 """Metres a pairwise distance inside a 0.2 m patch may be off its rest value at a frame: the patch's last
@@ -266,7 +266,7 @@ def test_bad_named_patches_are_refused_naming_the_key(tmp_path, patch, key, prob
 
 def test_named_patches_need_a_usd_mesh(tmp_path):
     from mesh_files import write_obj
-    from warp_verlet.faces import grid_faces
+    from warp_verlet.geometry.faces import grid_faces
 
     write_obj(tmp_path / "grid.obj", np.array([[x, y, 0.0] for y in range(3) for x in range(3)]), grid_faces(3, 3))
     data = {"cloth": [{"mesh": "grid.obj", "pins": [0], "rigid_patches": [[1, 2], [{"subset": "hem"}]]}]}
@@ -282,7 +282,7 @@ def test_named_patches_need_a_usd_mesh(tmp_path):
 def test_only_the_named_sets_asked_for_are_read(tmp_path):
     # The seam: each constraint kind declares the vertex sets its options name; the mesh reader looks up the
     # pins' and theirs, each once, and nothing else.
-    from warp_verlet import mesh_scene
+    from warp_verlet.input import mesh_scene
     from warp_verlet.constraints.rigid_patches import RigidPatches
 
     data, _ = marked_grid_scene(tmp_path, [[{"primvar": "tabs"}], [{"subset": "hem"}, {"primvar": "label"}]],

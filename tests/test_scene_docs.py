@@ -19,8 +19,11 @@ from pathlib import Path
 import pytest
 from key_ranges import documented_range, is_scalar_number
 
-from warp_verlet import mesh_scene, scene
-from warp_verlet.scene import CLOTH_KEYS, GRID_KEYS, OUTPUT_KEYS, SIMULATION_KEYS, ClothSpec, OutputSettings
+from warp_verlet.errors import ArgumentError
+from warp_verlet.input import mesh_scene
+
+from warp_verlet.input import scene
+from warp_verlet.input.scene import CLOTH_KEYS, GRID_KEYS, OUTPUT_KEYS, SIMULATION_KEYS, ClothSpec, OutputSettings
 from warp_verlet.scene_keys import REQUIRED, Invalid, Key, real
 
 REPO = Path(__file__).resolve().parent.parent
@@ -196,15 +199,15 @@ def test_the_documented_range_is_the_range_the_parser_enforces(key):
 def test_a_key_that_needs_context_is_bound_first():
     """pins and particle_masses need the grid: their declaration makes the parser from (rows, cols)."""
     pins = scene._GRID["pins"]
-    with pytest.raises(TypeError, match="needs its context"):
+    with pytest.raises(ArgumentError, match="needs its context"):
         pins.take(scene._Table("k.toml", "cloth[0]", {"pins": [0]}))
     table = scene._Table("k.toml", "cloth[0]", {"pins": ["bottom-right", 1]})
     assert pins.bound(3, 4).take(table) == ((0, 1), (2, 3))
-    with pytest.raises(TypeError, match="takes no context"):
+    with pytest.raises(ArgumentError, match="takes no context"):
         SIMULATION_KEYS[0].bound(3, 4)
-    with pytest.raises(TypeError, match="exactly one of parse and bind"):
+    with pytest.raises(ArgumentError, match="exactly one of parse and bind"):
         Key("both", real(), bind=lambda: real())
-    with pytest.raises(TypeError, match="exactly one of parse and bind"):
+    with pytest.raises(ArgumentError, match="exactly one of parse and bind"):
         Key("neither")
 
 

@@ -35,8 +35,8 @@ from hypothesis import strategies as st
 from warp_verlet.errors import SceneError
 from warp_verlet.colliders.plane import PlaneCollider
 from warp_verlet.colliders.sphere import SphereCollider
-from warp_verlet.mesh_scene import MESH_KEYS
-from warp_verlet.scene import NAMED_PINS, ClothSpec, OutputSettings, Scene, SimulationSettings, load_scene, parse_scene
+from warp_verlet.input.mesh_scene import MESH_KEYS
+from warp_verlet.input.scene import NAMED_PINS, ClothSpec, OutputSettings, Scene, SimulationSettings, load_scene, parse_scene
 from warp_verlet.scene_keys import Table, real, recorded_keys
 
 if sys.version_info >= (3, 11):

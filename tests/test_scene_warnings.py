@@ -1,4 +1,4 @@
-"""Scenes that load but will not do what they say (warp_verlet/scene_warnings.py): each warning fires exactly where
+"""Scenes that load but will not do what they say (warp_verlet/input/scene_warnings.py): each warning fires exactly where
 it should, says why and what to change, agrees with what a run does, and reaches the user through validate and run."""
 
 from __future__ import annotations
@@ -6,10 +6,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from warp_verlet import runner, scene_warnings
-from warp_verlet.cli import main
-from warp_verlet.scene import parse_scene
-from warp_verlet.scene_warnings import (free_fall, start_inside_warnings, stretch_warnings, tether_warnings,
+from warp_verlet.apps import runner
+
+from warp_verlet.input import scene_warnings
+from warp_verlet.apps.cli import main
+from warp_verlet.input.scene import parse_scene
+from warp_verlet.input.scene_warnings import (free_fall, start_inside_warnings, stretch_warnings, tether_warnings,
                                         thickness_warnings)
 
 
@@ -47,7 +49,7 @@ def test_no_tether_warning_without_tethers_or_without_tearing():
 def test_the_tether_warning_is_what_a_run_shows():
     # A hanging sheet under 200 g: without tethers its sticks tear; with tethers at their rest distances
     # (tether_scale 1 <= tear_threshold 1.3) none does; with the fix the warning gives, it tears again.
-    from warp_verlet.simulator import Simulator
+    from warp_verlet.core.simulator import Simulator
 
     def torn(**cloth) -> int:
         sim = Simulator(scene(hanging_sheet(tear_threshold=1.3, **cloth), gravity=[0.0, -2000.0, 0.0]), "cpu")
@@ -76,7 +78,7 @@ HANGING = {"name": "sheet", "resolution": [3, 2], "size": [1.0, 0.5], "origin": 
 
 def moved_by_the_first_substep(s) -> int:
     """Particles the collider clamp moves in one substep with nothing else acting (no gravity, no sweeps)."""
-    from warp_verlet.simulator import Simulator
+    from warp_verlet.core.simulator import Simulator
 
     sim = Simulator(s, "cpu")
     before = sim.positions().copy()

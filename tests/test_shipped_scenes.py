@@ -14,9 +14,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from warp_verlet.cache_reader import open_cache, read_cloths
-from warp_verlet.runner import run_scene
-from warp_verlet.scene import load_scene
+from warp_verlet.output.cache_reader import open_cache, read_cloths
+from warp_verlet.apps.runner import run_scene
+from warp_verlet.input.scene import load_scene
 
 SCENES = Path(__file__).resolve().parent.parent / "scenes"
 
@@ -79,6 +79,6 @@ def test_swinging_cloth_ends_converged(swinging):
 def test_every_shipped_scene_validates_without_a_warning(path):
     """A shipped scene is an example to copy: none may show a trap that `validate` warns about (a collider of
     thickness 0, tethers that stop tearing, a cloth starting inside a collider, a budget the run will flag)."""
-    from warp_verlet.scene_warnings import scene_warnings
+    from warp_verlet.input.scene_warnings import scene_warnings
 
     assert scene_warnings(load_scene(path)) == []

@@ -7,8 +7,8 @@ from pathlib import Path
 import pytest
 import warp as wp
 
-from warp_verlet.scene import load_scene
-from warp_verlet.simulator import Simulator
+from warp_verlet.input.scene import load_scene
+from warp_verlet.core.simulator import Simulator
 
 SCENES = Path(__file__).resolve().parent.parent / "scenes"
 RMS, MAX = 0.01, 0.10

@@ -5,7 +5,7 @@ import pytest
 import warp as wp
 
 from conftest import make_scene
-from warp_verlet.simulator import Simulator
+from warp_verlet.core.simulator import Simulator
 
 HANGING = dict(resolution=[10, 12], pins=["top-left", "top-right"], sticks=["structural", "shear", "bend"])
 
@@ -134,7 +134,7 @@ def test_arrays_are_allocated_only_for_the_solver_in_use():
 
 
 def test_multiple_cloths_share_launches_and_stay_independent():
-    from warp_verlet.scene import parse_scene
+    from warp_verlet.input.scene import parse_scene
 
     cloth = {"resolution": [6, 6], "size": [1.0, 1.0], "pins": ["top-edge"], "sticks": ["structural", "shear", "bend"]}
     two = parse_scene({"cloth": [dict(cloth, name="a"), dict(cloth, name="b", origin=[3.0, 0.0, 0.0])]})

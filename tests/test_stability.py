@@ -171,7 +171,7 @@ def test_the_summary_says_when_the_sticks_are_far_from_satisfied(tmp_path):
     (With its default tethers the 48^2 cloth ends at 0.39 max stretch and no warning: tethers are what make that
     budget converge.)"""
     from conftest import make_scene
-    from warp_verlet.runner import UNCONVERGED_STRETCH, run_scene
+    from warp_verlet.apps.runner import UNCONVERGED_STRETCH, run_scene
 
     pins = ["top-left", "top-right"]
     loose = run_scene(make_scene({"frames": 20, "substeps": 1, "iterations": 1}, resolution=[48, 48], pins=pins,
@@ -188,7 +188,7 @@ def test_the_summary_says_when_the_sticks_are_far_from_satisfied(tmp_path):
 
 
 def _scene(tmp_path, text: str):
-    from warp_verlet.scene import load_scene
+    from warp_verlet.input.scene import load_scene
 
     path = tmp_path / "edge.toml"
     path.write_text(text)
@@ -216,7 +216,7 @@ def test_an_overflowing_plane_normal_keeps_its_direction_and_the_plane_holds(dev
     import numpy as np
 
     from warp_verlet import Simulator
-    from warp_verlet.usd_writer import plane_corners, CachedPlane
+    from warp_verlet.output.usd_writer import plane_corners, CachedPlane
 
     scene = _scene(tmp_path, EDGE + '[[collider]]\ntype = "plane"\nnormal = [1e300, 1e300, 0.0]\n')
     (plane,) = scene.planes
@@ -260,7 +260,7 @@ def test_mass_1e50_was_a_frozen_cloth(device):
 
     from conftest import make_scene
     from warp_verlet import Simulator
-    from warp_verlet.scene import FLOAT32_TINY
+    from warp_verlet.input.scene import FLOAT32_TINY
 
     heaviest = 25 / FLOAT32_TINY  # the largest mass the loader takes for 5 x 5 particles
     assert np.float32(25 / 1e50) == 0.0
@@ -273,7 +273,7 @@ def test_mass_1e50_was_a_frozen_cloth(device):
 
 def test_a_cloth_starting_beyond_position_bound_is_a_bad_input_not_a_divergence(tmp_path):
     from warp_verlet.errors import SceneError
-    from warp_verlet.runner import run_scene
+    from warp_verlet.apps.runner import run_scene
 
     scene = _scene(tmp_path, EDGE.replace("iterations = 4", "iterations = 4\nposition_bound = 10.0")
                    .replace("origin = [-0.2, 0.3, -0.2]", "origin = [20.0, 0.3, -0.2]"))

@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 from conftest import make_scene
-from warp_verlet.model import Model
-from warp_verlet.scene import parse_scene
-from warp_verlet.simulator import Simulator
-from warp_verlet.state import State
+from warp_verlet.core.model import Model
+from warp_verlet.input.scene import parse_scene
+from warp_verlet.core.simulator import Simulator
+from warp_verlet.core.state import State
 
 EPS32 = float(np.finfo(np.float32).eps)
 SWEEP = {"type": "sphere", "radius": 0.15, "path": [[0.0, 0.2, -0.3, 0.6], [0.6, 0.2, -0.6, -0.6]]}

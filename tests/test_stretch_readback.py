@@ -9,9 +9,9 @@ import pytest
 import warp as wp
 
 from conftest import make_scene
-from warp_verlet.budget import Budget
-from warp_verlet.scene import parse_scene
-from warp_verlet.simulator import Simulator, StretchReadback
+from warp_verlet.core.budget import Budget
+from warp_verlet.input.scene import parse_scene
+from warp_verlet.core.simulator import Simulator, StretchReadback
 
 from test_multilevel import hanging  # tests/ is on sys.path (pytest, rootdir-relative imports)
 
@@ -95,7 +95,7 @@ def test_on_cuda_the_budget_reads_the_stretch_a_frame_late_and_meets_its_target(
 def test_the_run_summary_counts_every_frame_in_the_budget_on_cuda(tmp_path):
     """On CUDA the last frame's stretch is still on its way when the frames end: the summary's budget line
     must count it (run_scene settles the budget before reporting)."""
-    from warp_verlet.runner import run_scene
+    from warp_verlet.apps.runner import run_scene
 
     frames = 12
     summary = run_scene(budget_scene(0.00002), tmp_path / "budget.usdc", device="cuda", frames=frames)

@@ -18,11 +18,11 @@ import pytest
 
 from sweep_helpers import (DIVERGING_SWEEP, GRID_SWEEP, read_cache, read_rows, square_or_die, square_unless_killed,
                            structural_stretch, write_sweep)
-from warp_verlet.cli import main
+from warp_verlet.apps.cli import main
 from warp_verlet.errors import OutputBusyError, OutputError
-from warp_verlet.output_file import OutputNameError
-from warp_verlet.sweep import cache_problems, load_sweep, run_sweep
-from warp_verlet.sweep_backends import InlineBackend, LocalBackend, Slot, device_slots
+from warp_verlet.output.output_file import OutputNameError
+from warp_verlet.apps.sweep import cache_problems, load_sweep, run_sweep
+from warp_verlet.apps.sweep_backends import InlineBackend, LocalBackend, Slot, device_slots
 
 
 def local(workers: int = 2) -> LocalBackend:
@@ -114,7 +114,7 @@ def test_resume_runs_again_a_short_cache_a_changed_parameter_and_a_failure(tmp_p
     out = tmp_path / "out"
     first = run_sweep(load_sweep(path), InlineBackend("cpu"), progress=False)
     # Variant 0: a cache cut short (a run killed after 2 frames), its sidecar still saying ok.
-    from warp_verlet.runner import run_scene
+    from warp_verlet.apps.runner import run_scene
 
     sweep = load_sweep(path)
     run_scene(sweep.variants[0].scene, output=out / f"{first.rows[0]['name']}.usdc", device="cpu", frames=2)
@@ -391,7 +391,7 @@ def test_cli_sweep_runs_resumes_and_reports(tmp_path, capsys):
 def test_warps_start_up_messages_come_from_the_workers_only_with_verbose(tmp_path):
     """Each worker starts Warp as `run` does: no banner, no module-load lines, and no CUDA-driver warning on the CPU,
     unless -v. The warning is expected with -v where Warp, started bare, prints it on this machine (no driver)."""
-    from warp_verlet.warp_setup import CUDA_DRIVER_WARNING
+    from warp_verlet.core.warp_setup import CUDA_DRIVER_WARNING
 
     bare = subprocess.run([sys.executable, "-c", "import warp; warp.init()"], capture_output=True, text=True)
     no_driver = CUDA_DRIVER_WARNING in bare.stderr

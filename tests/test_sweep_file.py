@@ -15,7 +15,7 @@ from sweep_helpers import BASE_SCENE
 from test_scene_fuzz import RANGES, assert_number_loaded, extreme_numbers, full_scene, loaded_value, same
 from toml_text import dump
 from warp_verlet.errors import SceneError
-from warp_verlet.sweep import Sweep, load_sweep, parameter_hash
+from warp_verlet.apps.sweep import Sweep, load_sweep, parameter_hash
 
 if sys.version_info >= (3, 11):
     import tomllib

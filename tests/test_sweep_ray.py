@@ -17,8 +17,8 @@ pytestmark = pytest.mark.slow  # each test starts or uses a local Ray instance
 
 from sweep_helpers import (DIVERGING_SWEEP, GRID_SWEEP, read_rows, square_or_die, square_unless_killed,  # noqa: E402
                            write_sweep)
-from warp_verlet.sweep import cache_problems, load_sweep, run_sweep  # noqa: E402
-from warp_verlet.sweep_backends import LocalBackend, RayBackend, Slot, device_slots  # noqa: E402
+from warp_verlet.apps.sweep import cache_problems, load_sweep, run_sweep  # noqa: E402
+from warp_verlet.apps.sweep_backends import LocalBackend, RayBackend, Slot, device_slots  # noqa: E402
 
 # What may differ between two runs of one variant: the timings, and where and when it ran.
 MEASURED = {"wall_s", "task_s", "host", "resumed"}
@@ -119,7 +119,7 @@ def test_rays_start_up_messages_only_with_verbose(tmp_path):
 def test_ray_ships_the_cache_back_from_a_node_without_the_drivers_disk(tmp_path, ray_instance, monkeypatch):
     # One host here: pretend the task ran on another node (a different node id), so that it writes to a local
     # temporary file and sends the bytes back through the object store; the driver writes them.
-    import warp_verlet.sweep_backends as sb
+    import warp_verlet.apps.sweep_backends as sb
 
     path = write_sweep(tmp_path)
     local = run_sweep(load_sweep(path, tmp_path / "local"), LocalBackend([Slot("cpu", 1)]), progress=False)

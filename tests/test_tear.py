@@ -12,12 +12,12 @@ import pytest
 from pxr import Usd, UsdGeom
 
 from conftest import make_scene
-from warp_verlet.colouring import check_partition
-from warp_verlet.faces import grid_faces
-from warp_verlet.runner import run_scene
-from warp_verlet.usd_writer import validate_cache
-from warp_verlet.scene import parse_scene
-from warp_verlet.simulator import Simulator
+from warp_verlet.geometry.colouring import check_partition
+from warp_verlet.geometry.faces import grid_faces
+from warp_verlet.apps.runner import run_scene
+from warp_verlet.output.usd_writer import validate_cache
+from warp_verlet.input.scene import parse_scene
+from warp_verlet.core.simulator import Simulator
 
 G = 9.81
 
@@ -275,7 +275,7 @@ def test_stretch_statistics_leave_torn_sticks_out():
 def test_shipped_tearing_scenes_tear(name, frames):
     from pathlib import Path
 
-    from warp_verlet.scene import load_scene
+    from warp_verlet.input.scene import load_scene
 
     scene = load_scene(Path(__file__).resolve().parent.parent / "scenes" / f"{name}.toml")
     sim = Simulator(scene, "cpu")

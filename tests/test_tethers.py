@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from conftest import make_scene
-from warp_verlet.simulator import Simulator
+from warp_verlet.core.simulator import Simulator
 
 G = 9.81
 

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from mesh_files import grid_mesh, write_usd_mesh
-from warp_verlet.cli import main
+from warp_verlet.apps.cli import main
 
 # The asset: top.usda takes the cloth from its sublayer base.usda, has a second sublayer, and a prim that
 # references ref.usda, whose prim has a payload in pay.usda.

@@ -12,8 +12,8 @@ import pytest
 from pxr import Usd, UsdGeom, Vt
 
 from warp_verlet.errors import OutputError
-from warp_verlet.faces import Faces
-from warp_verlet.usd_writer import CachedShape, PointCacheWriter, validate_cache
+from warp_verlet.geometry.faces import Faces
+from warp_verlet.output.usd_writer import CachedShape, PointCacheWriter, validate_cache
 
 from meshes import HOUSE  # tests/meshes.py (pytest puts tests/ on sys.path)
 
@@ -179,7 +179,7 @@ def test_validate_cache_missing_file(tmp_path):
 CRASH_SCRIPT = textwrap.dedent("""
     import os, sys
     import numpy as np
-    from warp_verlet.usd_writer import CachedShape, PointCacheWriter
+    from warp_verlet.output.usd_writer import CachedShape, PointCacheWriter
 
     faces = np.array([[0, 2, 3, 1]], np.int32)
     shape = CachedShape("cloth", faces, np.zeros((4, 2), np.float32), 4)
@@ -281,7 +281,7 @@ def test_bad_frames_raise_value_error(tmp_path):
 
 
 def test_writer_does_not_import_warp():
-    code = "import sys, warp_verlet.usd_writer; sys.exit('warp' in sys.modules)"
+    code = "import sys, warp_verlet.output.usd_writer; sys.exit('warp' in sys.modules)"
     assert subprocess.run([sys.executable, "-c", code]).returncode == 0
 
 

@@ -1,4 +1,4 @@
-"""How Warp is started (warp_verlet/warp_setup.py): its CUDA-driver warning on a run that asked for CUDA on a machine
+"""How Warp is started (warp_verlet/core/warp_setup.py): its CUDA-driver warning on a run that asked for CUDA on a machine
 without the driver. (The CPU run and the sweep's workers are tested in test_cli.py and test_sweep.py.)"""
 
 import subprocess
@@ -6,7 +6,7 @@ import sys
 
 import pytest
 
-from warp_verlet.warp_setup import CUDA_DRIVER_WARNING
+from warp_verlet.core.warp_setup import CUDA_DRIVER_WARNING
 
 SCENE = """\
 [simulation]

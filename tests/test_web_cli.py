@@ -31,8 +31,8 @@ def busy_port():
 
 @pytest.fixture
 def rope_cache(tmp_path):
-    from warp_verlet.runner import run_scene
-    from warp_verlet.scene import load_scene
+    from warp_verlet.apps.runner import run_scene
+    from warp_verlet.input.scene import load_scene
 
     cache = tmp_path / "rope.usdc"
     run_scene(load_scene(REPO / "scenes" / "rope.toml"), cache, device="cpu", frames=3)
@@ -73,7 +73,7 @@ def test_view_refuses_what_is_not_a_cache(tmp_path):
 def test_the_player_never_imports_warp(viser, rope_cache):
     # The player serves a cache and plays it to its end, all without Warp (the cache was made in this process).
     code = ("import sys\n"
-            "from warp_verlet.cache_player import CachePlayer\n"
+            "from warp_verlet.apps.cache_player import CachePlayer\n"
             f"player = CachePlayer({str(rope_cache)!r}, port={free_port()})\n"
             "player.show(player.cache.frames[-1]); player.slider.value = 0; player.toggle(); player.run(0.3)\n"
             "assert player.frame > 0, 'did not play'\n"
@@ -100,8 +100,8 @@ def test_live_refuses_a_bad_record_path_before_starting(tmp_path):
 
 
 def test_record_limit_takes_gibibytes_and_its_help_names_the_default(monkeypatch):
-    from warp_verlet import cli as cli_module
-    from warp_verlet.live_session import RECORD_LIMIT_BYTES
+    from warp_verlet.apps import cli as cli_module
+    from warp_verlet.apps.live_session import RECORD_LIMIT_BYTES
 
     parser = cli_module.build_parser()
     live = parser._subparsers._group_actions[0].choices["live"]
@@ -111,7 +111,7 @@ def test_record_limit_takes_gibibytes_and_its_help_names_the_default(monkeypatch
         assert result.returncode == 2 and "--record-limit" in result.stderr and "GiB" in result.stderr, bad
     # The limit reaches the session: 1 byte holds no frame, so the recording is full at once.
     made = []
-    monkeypatch.setattr("warp_verlet.live_app.LiveApp", lambda session, *a: made.append(session) or _Stopped())
+    monkeypatch.setattr("warp_verlet.apps.live_app.LiveApp", lambda session, *a: made.append(session) or _Stopped())
     assert cli_module.main(["live", str(REPO / "scenes" / "rope.toml"), "--device", "cpu", "--port",
                             str(free_port()), "--record-limit", str(1 / 2**30), "--seconds", "0"]) == 0
     assert made[0].record_limit == 1 and made[0].readout().recording_full
@@ -145,7 +145,7 @@ def test_a_page_of_another_origin_cannot_open_the_websocket(viser, caplog):
     from websockets.exceptions import ConnectionClosed
     from websockets.sync.client import connect
 
-    from warp_verlet.web_view import start_server
+    from warp_verlet.apps.web_view import start_server
 
     server = start_server(port=free_port())
     port = server.get_port()
@@ -180,7 +180,7 @@ def test_a_page_of_another_origin_cannot_open_the_websocket(viser, caplog):
 def test_a_viser_without_the_internals_the_origin_check_needs_warns_instead():
     from types import SimpleNamespace
 
-    from warp_verlet.web_view import refuse_foreign_origins
+    from warp_verlet.apps.web_view import refuse_foreign_origins
 
     with pytest.warns(UserWarning, match="no way to check a connection's web origin"):
         refuse_foreign_origins(SimpleNamespace(), loopback=True)

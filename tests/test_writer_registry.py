@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from warp_verlet.errors import OutputError, SceneError
-from warp_verlet.output_file import CacheOutput, OutputNameError
-from warp_verlet.runner import run_scene
-from warp_verlet.scene import parse_scene
-from warp_verlet.sweep import formats
+from warp_verlet.output.output_file import CacheOutput, OutputNameError
+from warp_verlet.apps.runner import run_scene
+from warp_verlet.input.scene import parse_scene
+from warp_verlet.apps.sweep import formats
 from warp_verlet.writer_registry import (USD_SUFFIXES, CacheRequest, CacheWriter, format_for, output_suffixes,
                                          register_format, unregister_format)
 
@@ -89,7 +89,7 @@ def scene(frames: int = 5, **output):
 
 
 def test_a_registered_format_is_written_by_run_scene_with_the_simulators_positions(tmp_path, npz_format):
-    from warp_verlet.simulator import Simulator
+    from warp_verlet.core.simulator import Simulator
 
     frames = 5
     out = tmp_path / "cloth.npz"
@@ -111,7 +111,7 @@ def test_a_registered_format_is_written_by_run_scene_with_the_simulators_positio
     assert not np.array_equal(got[0], got[-1])  # the pinned cloth fell: the frames are not one repeated
 
     # The sweep's resume check asks the format of the cache's suffix.
-    from warp_verlet.sweep import cache_problems
+    from warp_verlet.apps.sweep import cache_problems
 
     assert cache_problems(out, frames) == []
     assert cache_problems(out, frames + 1) != []
@@ -161,7 +161,7 @@ def test_a_taken_suffix_is_refused_unless_replaced():
 
 
 def test_the_real_writers_have_every_member_of_the_interface(tmp_path, npz_format):
-    from warp_verlet.usd_writer import USD_POINT_CACHE, CachedShape
+    from warp_verlet.output.usd_writer import USD_POINT_CACHE, CachedShape
 
     members = set(CacheWriter.__annotations__) | {"write_frame", "close", "__enter__", "__exit__"}
     assert members >= {"path", "start_frame", "save_every", "frames_written", "saved_frames", "saved_frame"}

@@ -35,7 +35,7 @@ _map_checkout_kernels()
 
 from .errors import (ArgumentError, DiskFullError, DivergenceError, OutputBusyError,  # noqa: E402
                      OutputError, SceneError, StateError, WarpVerletError)
-from .scene import Scene, load_scene, parse_scene  # noqa: E402
+from .input.scene import Scene, load_scene, parse_scene  # noqa: E402
 from .builder import SceneBuilder  # noqa: E402
 
 __version__ = "0.1.0"
@@ -48,7 +48,7 @@ __all__ = [
 
 def __getattr__(name):
     if name == "Simulator":  # imports warp: keep it off the import path of validate/--help
-        from .simulator import Simulator
+        from .core.simulator import Simulator
 
         return Simulator
     raise AttributeError(name)

@@ -1,4 +1,4 @@
-"""Scenes built in Python: :class:`SceneBuilder` makes the same validated :class:`~warp_verlet.scene.Scene` a scene
+"""Scenes built in Python: :class:`SceneBuilder` makes the same validated :class:`~warp_verlet.input.scene.Scene` a scene
 file does, and the Model from it, with no TOML.
 
 Each call takes the keys of one table of a scene file as keyword arguments: the same names, units and defaults
@@ -27,12 +27,12 @@ from typing import TYPE_CHECKING, Any, Iterable, Mapping
 
 from .colliders import SHARED_KEYS, kind_named, kinds, read_collider
 from .errors import ArgumentError, SceneError
-from .scene import (CLOTH_KEYS, GRID_KEYS, OUTPUT_KEYS, SIMULATION_KEYS, ClothSpec, OutputSettings, Scene,
+from .input.scene import (CLOTH_KEYS, GRID_KEYS, OUTPUT_KEYS, SIMULATION_KEYS, ClothSpec, OutputSettings, Scene,
                     SimulationSettings, check_scene, cloth_keys_of_kinds, read_cloth, read_output, read_simulation)
 from .scene_keys import Key, Table
 
 if TYPE_CHECKING:  # pragma: no cover
-    from .model import Model
+    from .core.model import Model
 
 
 def toml_value(value: Any) -> Any:
@@ -127,10 +127,10 @@ class SceneBuilder:
                  **keys: Any) -> ClothSpec:
         """Add a mesh cloth, from a file (``mesh``: a path, and ``prim`` for USD) or from ``points`` ((V, 3)
         metres) and ``faces`` (an (F, k) array of vertex indices, a list of faces of any size, or a
-        :class:`~warp_verlet.faces.Faces`), counter-clockwise seen from the front. Either way the mesh is moved by
+        :class:`~warp_verlet.geometry.faces.Faces`), counter-clockwise seen from the front. Either way the mesh is moved by
         ``scale``, ``rotate`` and ``translate``, welded and checked as a file's is; the other keys are a mesh
         cloth's (pins, particle_masses, mass_distribution, weld_distance, ...) and every cloth's."""
-        from .mesh_scene import MESH_KEYS
+        from .input.mesh_scene import MESH_KEYS
 
         where = f"add_mesh(cloth {len(self._cloths)})"
         in_memory = points is not None or faces is not None
@@ -195,7 +195,7 @@ class SceneBuilder:
         """The immutable Model of :meth:`scene` on ``device`` (as ``Simulator``: "cpu", "cuda", "cuda:1"; default
         CUDA when a GPU is present), its memory need checked first as ``Simulator`` checks it. ``colouring`` and
         ``sticks`` are ``Simulator``'s arguments of the same names. A State of it is ``state.State(model)``."""
-        from .simulator import build_model, resolve_device
+        from .core.simulator import build_model, resolve_device
 
         return build_model(self.scene(), resolve_device(device), colouring, sticks)[0]
 
@@ -204,7 +204,7 @@ def _mesh_arrays(where: str, points: Any, faces: Any) -> tuple:
     """``points`` as a finite (V, 3) float64 array and ``faces`` as Faces, or a SceneError naming the argument."""
     import numpy as np
 
-    from .faces import Faces
+    from .geometry.faces import Faces
 
     if points is None or faces is None:
         missing = "points" if points is None else "faces"

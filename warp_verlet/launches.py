@@ -1,7 +1,7 @@
 """The pieces every stage and constraint kind binds its launches with: a recorded launch (a PhaseTask), the
 work a stage does against one State (a BoundStage), and the byte sizes their memory declarations count in.
 
-Kept apart from the table of stages (warp_verlet/stages.py), so that the constraint kinds
+Kept apart from the table of stages (warp_verlet/core/stages.py), so that the constraint kinds
 (warp_verlet/constraints/) and the collider kinds can bind launches without importing the table that lists
 them.
 """

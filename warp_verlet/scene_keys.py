@@ -22,7 +22,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from typing import Any, Callable, Iterator, Mapping
 
-from .errors import SceneError
+from .errors import ArgumentError, SceneError
 
 PRIM_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")  # a USD prim name
 
@@ -135,18 +135,18 @@ class Key:
 
     def __post_init__(self):
         if (self.parse is None) == (self.bind is None):
-            raise TypeError(f"scene key {self.name!r}: declare exactly one of parse and bind")
+            raise ArgumentError(f"scene key {self.name!r}: declare exactly one of parse and bind")
 
     def bound(self, *context: Any) -> "Key":
         """This key with the parser its ``bind`` makes of ``context``."""
         if self.bind is None:
-            raise TypeError(f"scene key {self.name!r} takes no context: take it as it is")
+            raise ArgumentError(f"scene key {self.name!r} takes no context: take it as it is")
         return replace(self, parse=self.bind(*context), bind=None)
 
     def take(self, table: "Table") -> Any:
         """The key's value from ``table``, parsed, or its default."""
         if self.parse is None:
-            raise TypeError(f"scene key {self.name!r} needs its context first: take it as key.bound(...).take(t)")
+            raise ArgumentError(f"scene key {self.name!r} needs its context first: take it as key.bound(...).take(t)")
         keys = _RECORDING.get()
         if keys is not None:
             keys.declared[table.key(self.name)] = self

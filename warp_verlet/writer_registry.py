@@ -180,7 +180,7 @@ USD_SUFFIXES = (".usd", ".usda", ".usdc")
 
 def _register_builtin_formats() -> None:
     # One line per format: its suffixes, where it lives, whether it writes override layers.
-    register_format(USD_SUFFIXES, "warp_verlet.usd_writer:USD_POINT_CACHE", overrides=True)
+    register_format(USD_SUFFIXES, "warp_verlet.output.usd_writer:USD_POINT_CACHE", overrides=True)
 
 
 _register_builtin_formats()

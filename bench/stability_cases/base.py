@@ -22,8 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from warp_verlet.scene import Scene
-from warp_verlet.simulator import Simulator
+from warp_verlet.input.scene import Scene
+from warp_verlet.core.simulator import Simulator
 
 from ..common import HANGING_FAMILIES, cloth_size, damping_for_drag, hanging_sheet
 from ..common import scene as bench_scene

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from warp_verlet.errors import SceneError
-from warp_verlet.simulator import Simulator
+from warp_verlet.core.simulator import Simulator
 
 from ..common import HANGING_FAMILIES
 from .base import (Check, EnergyLog, count_check, damping, free_cloth, free_fall_error, implicit_velocity, nonfinite,

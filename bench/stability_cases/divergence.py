@@ -21,8 +21,8 @@ def divergence(device: str = "cpu", size: str = "test", out_dir: Path | None = N
 
     from pxr import Usd, UsdGeom
 
-    from warp_verlet.runner import run_scene
-    from warp_verlet.usd_writer import validate_cache
+    from warp_verlet.apps.runner import run_scene
+    from warp_verlet.output.usd_writer import validate_cache
 
     case = "divergence: run_scene end to end"
     bound, g, fps = 20.0, 1000.0, 60

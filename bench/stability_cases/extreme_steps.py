@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from warp_verlet.errors import WarpVerletError
-from warp_verlet.simulator import Simulator
+from warp_verlet.core.simulator import Simulator
 
 from .base import (G, Check, EnergyLog, count_check, free_cloth, free_fall_error, hanging, run_with_energy,
                    ulp)

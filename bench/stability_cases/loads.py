@@ -6,7 +6,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from warp_verlet.simulator import Simulator
+from warp_verlet.core.simulator import Simulator
 
 from .base import Check, count_check, hanging, run_with_energy, scene, ulp
 

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from warp_verlet.simulator import Simulator
+from warp_verlet.core.simulator import Simulator
 
 from .base import Check, hanging, run_with_energy
 

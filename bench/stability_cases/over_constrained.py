@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from warp_verlet.simulator import Simulator
+from warp_verlet.core.simulator import Simulator
 
 from ..common import HANGING_FAMILIES
 from .base import Check, count_check, nonfinite, scene

@@ -6,7 +6,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from warp_verlet.simulator import Simulator
+from warp_verlet.core.simulator import Simulator
 
 from .base import G, Check, count_check, damping, hanging, nonfinite, run_with_energy, scene
 

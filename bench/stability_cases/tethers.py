@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from warp_verlet.simulator import Simulator
+from warp_verlet.core.simulator import Simulator
 
 from ..common import HANGING_DAMPING, hanging_sheet
 from .base import G, Check, count_check, free_cloth, free_fall_error, hanging, nonfinite, run_with_energy, scene, ulp

@@ -5,8 +5,8 @@ from dataclasses import replace
 from pathlib import Path
 import numpy as np
 import warp as wp
-from warp_verlet.scene import load_scene
-from warp_verlet.simulator import Simulator
+from warp_verlet.input.scene import load_scene
+from warp_verlet.core.simulator import Simulator
 
 FRAMES = {"big_grid_1024": 3}
 out = {}

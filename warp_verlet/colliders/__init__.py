@@ -14,6 +14,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from ..errors import ArgumentError
 from ..scene_keys import STRING, Key, accepts, choice, prim_name
 from .kind import (COLLIDER_PURPOSES, FLOAT, FLOAT64, FRICTION, INT, PURPOSE, THICKNESS, VEC3,  # noqa: F401
                    ColliderKind, ColliderLaunches, FrameReader, InsideReport, LiveDrawing)  # the kinds' names, here too
@@ -37,7 +38,7 @@ def kind_named(type_name: str) -> ColliderKind:
     for kind in kinds():
         if kind.type == type_name:
             return kind
-    raise KeyError(f"no collider kind {type_name!r} is registered")
+    raise ArgumentError(f"no collider kind {type_name!r} is registered")
 
 
 def kind_of(spec: Any) -> ColliderKind:
@@ -45,7 +46,7 @@ def kind_of(spec: Any) -> ColliderKind:
     for kind in kinds():
         if isinstance(spec, kind.spec):
             return kind
-    raise TypeError(f"{type(spec).__name__} is not the spec of a registered collider kind")
+    raise ArgumentError(f"{type(spec).__name__} is not the spec of a registered collider kind")
 
 
 def specs_of(colliders: tuple, kind: ColliderKind) -> tuple:
@@ -84,7 +85,7 @@ class ColliderModel:
     (flat, so that the memory check, bench.common.device_arrays, finds every array as it did).
 
     Only the kinds a scene has get arrays and launches: no planes, no ``collide_planes``; no moving sphere, no
-    clock and no ``place_spheres``. What moves lives in the :class:`~warp_verlet.state.State` (each kind's
+    clock and no ``place_spheres``. What moves lives in the :class:`~warp_verlet.core.state.State` (each kind's
     ``state_arrays``); this object holds what does not.
     """
 

@@ -5,10 +5,10 @@ Each kind declares, in its own module, everything the rest of the program needs 
 docs' tables are written from them), how many elements a scene gives it before anything is built, the device
 bytes it allocates, its device data built from the Model's particles, its launches against a State, and what it
 does when sticks tear. :data:`CONSTRAINT_KINDS` lists them in the order a sweep projects them; the stage table
-(warp_verlet/stages.py) runs the ones a scene needs. A new kind is one module here, one kernel file in
+(warp_verlet/core/stages.py) runs the ones a scene needs. A new kind is one module here, one kernel file in
 kernels/, and one line in :data:`CONSTRAINT_KINDS`.
 
-Elements on more than two particles are coloured by :func:`warp_verlet.colouring.colour`, which works for any
+Elements on more than two particles are coloured by :func:`warp_verlet.geometry.colouring.colour`, which works for any
 number of particles per element and keeps an overflow colour for the few that do not fit.
 """
 

@@ -5,7 +5,7 @@ successive structural sticks, 0 when they are straight, never exceeds the limit:
 On a mesh, the dihedral angle across each interior edge between its two faces, 0 when they are flat, never
 exceeds it either way: a *hinge* of four particles. The limit is unilateral, so a cloth straighter than it is
 untouched, and its corrections are weighted by inverse mass (a pin does not move). Joints and hinges are each
-coloured by :func:`warp_verlet.colouring.colour`, projected after the sticks in every sweep
+coloured by :func:`warp_verlet.geometry.colouring.colour`, projected after the sticks in every sweep
 (kernels/angle_limit.py). A limit of 180 degrees builds nothing.
 
 A torn stick would leave its joints holding the torn pieces at an angle, so a cloth with ``tear_threshold``
@@ -48,7 +48,7 @@ def grid_joints(rows: int, cols: int) -> np.ndarray:
 def mesh_hinges(faces) -> np.ndarray:
     """(H, 4) int32 hinges (wing A, wing B, p, q) across every interior edge p-q (exactly two faces A and B) of
     ``faces`` (a faces.Faces): a wing is p's other neighbour in its face, a triangle's third corner."""
-    from ..faces import edge_keys, next_corner
+    from ..geometry.faces import edge_keys, next_corner
 
     if len(faces) == 0:
         return np.zeros((0, 4), np.int32)
@@ -81,7 +81,7 @@ def _coloured(elements: np.ndarray, limits: np.ndarray, vector, device):
     the overflow colour, if any, is one thread's work)."""
     import warp as wp
 
-    from ..colouring import check_partition, colour, colour_ranges
+    from ..geometry.colouring import check_partition, colour, colour_ranges
 
     colouring = colour(elements)
     overflow = colouring.count - 1 if colouring.overflow else None

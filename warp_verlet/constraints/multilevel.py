@@ -27,9 +27,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from .kind import ConstraintSet
-from ..colouring import grid_colouring
+from ..geometry.colouring import grid_colouring
 from ..launches import FLOAT, INT, VEC2I, BoundStage, recorded
-from ..topology import SHEAR_ANTI, SHEAR_DIAG, STRUCT_H, STRUCT_V
+from ..geometry.topology import SHEAR_ANTI, SHEAR_DIAG, STRUCT_H, STRUCT_V
 
 
 def coarser(index: np.ndarray) -> np.ndarray:

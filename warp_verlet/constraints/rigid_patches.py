@@ -100,7 +100,7 @@ RIGID_PATCHES = Key(
 def _resolve(spec, table, written) -> tuple[tuple[int, ...], ...]:
     """Each patch as sorted particle indices of the cloth, checked."""
     from ..scene_keys import NAMED_PINS
-    from ..topology import grid_positions
+    from ..geometry.topology import grid_positions
 
     mesh = spec.mesh.mesh if spec.mesh is not None else None
     if mesh is None:

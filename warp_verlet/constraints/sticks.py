@@ -1,7 +1,7 @@
 """Distance sticks: the cloth's structural, shear and bend families, as stick arrays or, on one grid cloth,
 computed from the grid in the kernel.
 
-The Model builds the sticks themselves (warp_verlet/model.py: they are the cloth's core, which colouring,
+The Model builds the sticks themselves (warp_verlet/core/model.py: they are the cloth's core, which colouring,
 tearing and the stretch metrics share); this module binds their sweeps.
 """
 

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .kind import ConstraintSet
-from ..mesh_cloth import connected_labels
+from ..geometry.mesh_cloth import connected_labels
 from ..launches import FLOAT, FLOAT64, INT, BoundStage, recorded, split_tasks
 
 # Distances are computed for this many (particle, pin) pairs at a time, to bound the temporary memory.

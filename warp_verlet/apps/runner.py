@@ -1,0 +1,303 @@
+"""Batch runs: scene -> simulator -> point cache (the writer of the output's suffix: writer_registry.py), one
+frame at a time, with a divergence guard.
+
+The output is checked and locked, and the writer opened, before the first substep, so an unwritable,
+busy or too small output fails before any simulation time is spent. Frames are written on a background
+thread (``background_writer.py``) while the next frame is simulated, to ``NAME.partial.EXT`` beside the
+output, which is renamed over the output only when the run succeeds (``output_file.py``). The cache is
+closed (saved) on every exit path: an error, a divergence or Ctrl-C leaves a valid partial file holding the
+frames simulated before it, and the previous output untouched; the exception carries an ``output_report``
+saying where each went.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from .. import __version__
+from ..output.background_writer import BackgroundWriter
+from ..errors import DivergenceError, SceneError
+from ..output.output_file import CacheOutput, input_files
+from ..input.scene import Scene
+from ..writer_registry import CacheRequest, format_for
+
+
+# A structural stick stretched to twice its rest length: far outside anything cloth does, so the solver has
+# not converged (the summary says so rather than presenting the result as a cloth).
+UNCONVERGED_STRETCH = 1.0
+
+
+@dataclass(frozen=True)
+class RunSummary:
+    scene: str
+    output: Path
+    device: str
+    frames: int
+    simulated_seconds: float
+    wall_seconds: float
+    particles: int
+    sticks: int
+    colours: int
+    colour_balance: float
+    stretch_max: float
+    stretch_rms: float
+    torn: int | None = None  # sticks torn by the end; None when no cloth can tear
+    threads: int = 1  # CPU threads the relaxation ran on
+    budget: str | None = None  # what a target_stretch budget chose (warp_verlet/core/budget.py)
+    notes: tuple[str, ...] = ()  # what the run noticed about its output (leftovers of an earlier run removed)
+    startup_seconds: float = 0.0  # before the first frame: the model built and the kernels loaded (not in wall)
+    unconverged: str | None = None  # where the stretch check failed, and what to change (unconverged_advice)
+    kernel_seconds: float = 0.0  # of which Warp's kernel modules, compiled or loaded from its kernel cache
+
+    def format(self) -> str:
+        rate = self.frames / self.wall_seconds if self.wall_seconds > 0 else float("inf")
+        colours = f"{self.colours} (balance max/min {self.colour_balance:.2f})" if self.colours else "none (jacobi)"
+        lines = [
+            f"scene            {self.scene}",
+            f"output           {self.output}",
+            f"device           {self.device}" + (f" (relaxation on {self.threads} threads)" if self.threads > 1 else ""),
+            f"frames           {self.frames}",
+            f"simulated        {self.simulated_seconds:.4f} s",
+            f"startup          {self.startup_seconds:.3f} s (of which Warp's kernels {self.kernel_seconds:.3f} s, "
+            "compiled or loaded from its cache; not in the wall time)",
+            f"wall             {self.wall_seconds:.3f} s ({rate:.1f} frames/s, the frames alone)",
+            f"particles        {self.particles}",
+            f"sticks           {self.sticks}",
+            f"colours          {colours}",
+            f"stretch |D-L|/L  max {self.stretch_max:.3e}, rms {self.stretch_rms:.3e} (structural sticks, last frame)",
+        ]
+        if self.budget is not None:
+            lines.append(f"budget           {self.budget}")
+        if self.torn is not None:
+            lines.append(f"torn sticks      {self.torn} of {self.sticks}")
+        if self.stretch_max > UNCONVERGED_STRETCH:
+            lines.append(
+                f"warning          the sticks are far from satisfied (a structural stick at {1 + self.stretch_max:.3g} x "
+                "its rest length): the relaxation has not converged"
+                + (f" {self.unconverged}" if self.unconverged else ""))
+        return "\n".join(lines)
+
+
+def divergence_reason(point: np.ndarray, bound: float) -> str:
+    return "not a finite number" if not np.isfinite(point).all() else f"beyond position_bound = {bound} m"
+
+
+def run_scene(
+    scene: Scene,
+    output: Path | None = None,
+    device: str | None = None,
+    frames: int | None = None,
+    progress: Callable[[int], None] | None = None,
+    overlap: bool = True,
+    threads: int | None = None,
+    note: Callable[[str], None] | None = None,
+) -> RunSummary:
+    """Simulate ``scene`` and write its point cache. ``progress(frame)`` is called after each frame.
+    ``overlap=False`` writes each frame before simulating the next (for measuring what overlap saves).
+    ``threads`` is the CPU relaxation's thread count (None: chosen from the cores and the grid size).
+    ``note(text)`` hears what an earlier run to this output left behind (also in ``RunSummary.notes``).
+
+    A run that does not finish raises, and ``warp_verlet.output.output_file.output_report(exc)`` says which frames
+    are in the partial file and that the previous output was left as it was."""
+    if frames is not None:
+        scene = replace(scene, simulation=replace(scene.simulation, frames=frames))
+    output = Path(output) if output is not None else scene.output.path
+    target = CacheOutput(output, inputs=input_files(scene), note=note)  # checks the path; opens nothing
+    with target:  # the lock: a second run to this output is refused until the cache is in place
+        return _simulate(scene, output, target, device, progress, overlap, threads)
+
+
+def _simulate(scene: Scene, output: Path, target: CacheOutput, device: str | None,
+              progress: Callable[[int], None] | None, overlap: bool, threads: int | None) -> RunSummary:
+    from ..core.simulator import Simulator  # imports warp
+
+    settings = scene.simulation
+    began = time.perf_counter()
+    sim = Simulator(scene, device, threads=threads)
+    kernel_seconds = load_kernels(sim)
+    model = sim.model
+    override = scene.output.kind == "override"
+    check_initial_state(scene, sim)
+    writer = open_writer(scene, sim, target, settings.frames + 1)
+    to_cache = CacheVertices(model, scene, override)
+    start = time.perf_counter()
+    startup = start - began
+    points = sim.positions()
+    with writer:
+        writer.write_frame(0, to_cache(points), model.colliders.moving_centres(sim.state))
+        background = BackgroundWriter(writer.write_frame) if overlap else None
+        write = background.submit if background else writer.write_frame
+        try:
+            _step_loop(sim, settings, write, progress, to_cache)
+        finally:
+            if background is not None:
+                background.close()  # the frames already handed over are written before the cache is saved
+    target.commit()
+    wall = time.perf_counter() - start
+    sim.settle_budget()  # on CUDA the last frame's stretch is read a frame late: count it before reporting
+    points = sim.positions()
+    stretch = sim.stretch(points)
+    unconverged = unconverged_advice(scene, sim, points) if stretch.max > UNCONVERGED_STRETCH else None
+    colouring = model.colouring
+    return RunSummary(
+        scene=scene.source, output=output, device=str(sim.device), frames=settings.frames,
+        simulated_seconds=sim.time, wall_seconds=wall, particles=model.particle_count, sticks=model.stick_count,
+        colours=model.colour_count, colour_balance=colouring.balance if colouring else 0.0,
+        stretch_max=stretch.max, stretch_rms=stretch.rms, torn=sim.torn_count() if model.tears else None,
+        threads=sim.threads, budget=sim.budget.report() if sim.budget is not None else None,
+        notes=tuple(target.notes), startup_seconds=startup, kernel_seconds=kernel_seconds, unconverged=unconverged,
+    )
+
+
+def unconverged_advice(scene: Scene, sim, points: np.ndarray) -> str:
+    """Where the stretch check failed (the cloth of the longest structural stick) and what would help that
+    cloth, from what the scene already has. Whether a budget converges depends on the run (how far the sweeps
+    of a frame carry a correction against the load), so this is said after it, not predicted."""
+    model = sim.model
+    torn = sim.torn_sticks() if model.tears else None
+    keep = np.flatnonzero(model.structural if torn is None else model.structural & ~torn)
+    worst = keep[int(np.argmax(model.structural_stretch(points, torn)))]
+    particle = int(model.host_sticks[worst, 0])
+    index = next(i for i, s in enumerate(model.cloths) if s.first <= particle < s.first + s.count)
+    spec, settings = scene.cloths[index], sim.settings
+    shape = f"a {spec.resolution[0]} x {spec.resolution[1]} grid" if spec.mesh is None else \
+        f"a mesh of {spec.particle_count} particles"
+    load = float(np.linalg.norm(np.add(settings.gravity, settings.wind)))
+    fixes = []
+    if settings.iterations == 0:
+        fixes.append("iterations (0 relaxes no stick)")
+    elif settings.target_stretch is None:
+        fixes.append("more substeps (smaller steps converge more per sweep than more iterations do), or "
+                     "target_stretch to choose them")
+    else:
+        fixes.append("a higher max_substeps (see the budget line)")
+    if spec.pin_count and not spec.uses_tethers:
+        fixes.append("tethers = true (with a tether_scale above its tear_threshold)" if spec.tear_threshold
+                     else "tethers = true")
+    if spec.mesh is None and spec.tear_threshold is None and not settings.multilevel:
+        fixes.append("multilevel = true")
+    fixes.append(f"or a lighter load (gravity + wind: {load:.3g} m/s^2)")
+    return (f"in cloth '{spec.name}' ({shape}) at {sim.substeps} substeps x {settings.iterations} iterations a "
+            f"frame; what helps: {'; '.join(fixes)}")
+
+
+def load_kernels(sim) -> float:
+    """Load the Warp kernel modules the run launches onto its device before the clock starts (Warp loads a
+    module at its first launch, compiling it when its kernel cache has no copy: seconds, which would count as
+    the first frame's). Binding the solver's stages records their launches, which loads their modules; the
+    simulator itself launches the divergence check, the first step's start and, with a target_stretch budget,
+    the stretch reduction. Only these: a module imported but never launched is not compiled. Returns the seconds
+    it took."""
+    import warp as wp
+
+    from warp_verlet.kernels import guard, integrate
+
+    start = time.perf_counter()
+    sim.solver.bind(sim.state)
+    modules = [guard, integrate]
+    if sim.budget is not None:
+        from warp_verlet.kernels import readback
+
+        modules.append(readback)
+    for module in modules:
+        wp.load_module(module, device=sim.device)
+    return time.perf_counter() - start
+
+
+def open_writer(scene: Scene, sim, target: CacheOutput, samples: int, every_sphere_moves: bool = False,
+                tears: bool = False):
+    """The cache writer for ``scene``, writing to ``target``'s partial file in the format of its suffix
+    (writer_registry.py), once its disk space for ``samples`` frames is checked. ``every_sphere_moves``: sample every sphere's centre per frame (a live
+    session, where spheres are dragged); ``tears``: author torn faces even for cloths whose scene cannot tear
+    (a live session whose tear threshold was set later)."""
+    from ..colliders import by_kind
+
+    override = scene.output.kind == "override"
+    shapes = [cached_shape(s.topology, spec, override, tears) for s, spec in zip(sim.model.cloths, scene.cloths)]
+    colliders = [] if override else [kind.cached(c, every_sphere_moves) for kind, specs in by_kind(scene.colliders)
+                                     for c in specs]  # in clamp order, as ColliderModel.moving_centres samples
+    cache_format = format_for(target.partial, override)
+    request = CacheRequest(
+        shapes, fps=scene.simulation.fps, colliders=colliders, up_axis=scene.output.up_axis,
+        meters_per_unit=scene.output.meters_per_unit, save_every=scene.output.save_every,
+        metadata={"generator": f"warp-verlet {__version__}", "scene": scene.source, "device": str(sim.device)},
+        torn_faces=scene.output.torn_faces, before_save=target.before_save,
+        override_asset=scene.cloths[0].mesh.mesh.source.file if override else None,
+    )
+    target.check_space(cache_format.estimate(request, target.partial), samples, scene.output.save_every)
+    return cache_format.open(target.partial, request)
+
+
+def cached_shape(topology, spec, override: bool, tears: bool = False):
+    """What the cache writes of one cloth, from its topology: the vertices, faces and UVs of its source."""
+    from ..output.usd_writer import CachedShape
+
+    return CachedShape(topology.name, topology.cache_faces, topology.uvs, topology.vertex_count,
+                       tears=tears or spec.tear_threshold is not None, uv_interpolation=topology.uv_interpolation,
+                       left_handed=topology.left_handed,
+                       prim_path=spec.mesh.mesh.source.prim_path if override else None)
+
+
+def check_initial_state(scene: Scene, sim) -> None:
+    """Refuse, as a bad input, a scene whose rest pose is already not finite or beyond ``position_bound``,
+    rather than report it as a divergence at frame 1. One integer comes back from the device."""
+    particle = sim.diverged_particle()
+    if particle is None:
+        return
+    index, slot = next((i, s) for i, s in enumerate(sim.model.cloths) if s.first <= particle < s.first + s.count)
+    point = sim.positions()[particle]
+    reason = divergence_reason(point, scene.simulation.position_bound)
+    raise SceneError(scene.source, f"cloth[{index}]", f"particle {particle - slot.first} of cloth '{slot.name}' "
+                     f"starts at {tuple(float(v) for v in point)} ({reason}): its origin, size or mesh "
+                     "positions must put every particle within simulation.position_bound")
+
+
+class CacheVertices:
+    """All particles' positions -> each cloth's cache vertices, float32: a mesh's welded particles gathered
+    to its vertices and, for an override layer, moved back into its prim's own space. A grid in float32
+    costs nothing: views of the one array."""
+
+    def __init__(self, model, scene, override: bool):
+        self.model = model
+        self.to_local = [spec.mesh.mesh.source.to_local if override else None for spec in scene.cloths]
+
+    def __call__(self, points: np.ndarray) -> list[np.ndarray]:
+        out = []
+        for slot, to_local, particles in zip(self.model.cloths, self.to_local, self.model.split(points)):
+            vertices = slot.topology.cache_points(particles)
+            if to_local is not None:
+                vertices = vertices.astype(np.float64) @ to_local[:3, :3].T + to_local[:3, 3]
+            # Converted here, once per frame, when the simulation runs in float64 (no copy in float32).
+            # Divergence and stretch checks use the simulation's own precision.
+            out.append(np.asarray(vertices, dtype=np.float32))
+        return out
+
+
+def _step_loop(sim, settings, write: Callable[..., None], progress: Callable[[int], None] | None,
+               to_cache: Callable[[np.ndarray], list[np.ndarray]]) -> None:
+    """Simulate frames 1 .. frames, handing each one to ``write`` (frame, points per cloth, moving sphere
+    centres, hidden faces or None)."""
+    model = sim.model
+    torn = 0
+    for frame in range(1, settings.frames + 1):
+        sim.step_frame()
+        points = sim.positions()  # the one host copy per frame, which the writer needs anyway
+        particle = sim.diverged_particle()  # checked on the device: one integer comes back
+        if particle is not None:
+            slot = next(s for s in model.cloths if s.first <= particle < s.first + s.count)
+            reason = divergence_reason(points[particle], settings.position_bound)
+            raise DivergenceError(frame, slot.name, particle - slot.first, points[particle], reason)
+        hidden = None
+        if model.tears:  # one integer per frame; the stick flags only when it changed
+            count = sim.torn_count()
+            if count != torn:
+                torn = count
+                hidden = model.hidden_faces(sim.sync_tears())
+        write(frame, to_cache(points), model.colliders.moving_centres(sim.state), hidden)
+        if progress is not None:
+            progress(frame)

@@ -1,0 +1,287 @@
+"""The one table of what a substep runs: its stages, and inside the relaxation its constraint sets.
+
+Every stage and constraint set is declared once, here, as a class that says
+
+- ``needed(req)``: whether a scene uses it, from its counts alone (before anything is built);
+- ``device_bytes(req)``: the device arrays it allocates, in the Model, the State and the solver;
+- ``bind(...)``: its launches, recorded against one State's arrays.
+
+From that one declaration the rest is derived: the solver runs the bound stages (the launches), the memory
+estimate sums ``device_bytes`` (warp_verlet/core/memory.py), the CPU thread team runs the constraint sets'
+phases, and ``Simulator.stages()`` names them. A new constraint kind is one kernel file, one class here
+(appended to CONSTRAINT_SETS) and its scene keys.
+
+This module does not import warp at the top, so that ``memory.estimate`` (and ``warp-verlet validate``)
+stays light; the binding code imports it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # pragma: no cover
+    from ..input.scene import Scene
+
+from ..constraints import CONSTRAINT_KINDS
+from ..launches import FLOAT, VEC2I, VEC3, VEC3D, BoundStage, recorded
+
+
+@dataclass(frozen=True)
+class Requirements:
+    """What a scene asks of the step, known from its counts before anything is built."""
+
+    particles: int
+    sticks: int
+    relaxation: str
+    iterations: int
+    free_particles: bool
+    compliant: bool
+    tears: bool
+    colliders: tuple[tuple[str, tuple[int, ...]], ...]  # (kind's type, its counts) per kind present, clamp order
+    tethered: int = 0  # free particles of tethered cloths
+    tethers_per_particle: int = 0
+    coarse_sticks: int = 0  # multilevel: coarse sticks over all levels
+    coarse_children: int = 0  # multilevel: particles moved by interpolation, over all levels
+    precision: str = "float32"  # the positions' float type, resolved ("auto" never appears here)
+    grid_rows: int = 0  # implicit grid sticks: the cloth's rows and columns (0: the sticks are arrays)
+    grid_cols: int = 0
+    soft_sticks: int = 0  # implicit grid sticks of families with a compliance (each keeps an XPBD tension)
+    grid_pins: int = 0  # implicit grid tethers: the cloth's pins (0: the tethers are arrays)
+    weight_pins: int = 0  # implicit grid sticks of a cloth whose free particles weigh alike: its pins
+    elements: tuple[tuple[str, object], ...] = ()  # (kind name, its count(scene)) of the kinds a scene uses
+
+    def count(self, kind: str):
+        """Constraint kind ``kind``'s ``count(scene)`` (0 when the scene does not use it)."""
+        return dict(self.elements).get(kind, 0)
+
+    @property
+    def position_bytes(self) -> int:
+        """Bytes of one position (a vec3 of the precision's float)."""
+        return VEC3D if self.precision == "float64" else VEC3
+
+    @property
+    def implicit_grid(self) -> bool:
+        """Whether the sticks are implicit grid sticks (computed from the grid, no stick arrays)."""
+        return self.grid_rows > 0
+
+    @classmethod
+    def of(cls, scene: "Scene", sticks: str = "auto") -> "Requirements":
+        """The scene's need, with ``simulation.precision`` resolved (warp_verlet/core/precision.py) and the sticks'
+        form chosen (``sticks``: "auto", "explicit" or "implicit"; see :func:`implicit_grid_obstacle`)."""
+        from dataclasses import replace
+
+        from ..constraints.multilevel import hierarchy_counts  # counts from the grid's size, without building anything
+        from ..geometry.topology import stick_count
+        from .precision import resolve
+
+        from ..colliders import counts as collider_counts
+
+        free = any(c.pin_count < c.particle_count for c in scene.cloths)
+        counts = [hierarchy_counts(*c.resolution) for c in scene.cloths] if scene.simulation.multilevel else []
+        coarse = (sum(n for n, _ in counts), sum(n for _, n in counts))
+        req = cls(
+            particles=scene.particle_count, sticks=sum(stick_count(c) for c in scene.cloths),
+            relaxation=scene.simulation.relaxation, iterations=scene.simulation.iterations, free_particles=free,
+            compliant=scene.compliant, tears=scene.tears, colliders=collider_counts(scene.colliders),
+            tethered=scene.tethered_particles, tethers_per_particle=scene.tethers_per_particle,
+            coarse_sticks=coarse[0], coarse_children=coarse[1],
+            elements=tuple((kind.name, n) for kind in CONSTRAINT_KINDS if (n := kind.count(scene))),
+        )
+        req = replace(req, **grid_counts(scene, sticks))
+        return replace(req, precision=resolve(scene, relaxes=RELAX.needed(req)))
+
+
+STICK_FORMS = ("auto", "explicit", "implicit")
+MAX_UNIFORM_MASS_PINS = 8
+"""Implicit grid sticks find a particle's weight without reading it (0 for a pin, the free particles' for any
+other) when the cloth sets no particle masses and has at most this many pins, which each projection checks."""
+MAX_GRID_TETHER_PINS = 8
+"""Implicit tethers find each particle's nearest pins in every sweep, among all the cloth's pins: above this
+many pins the tether table (kernels/tether.py) serves instead."""
+
+
+def implicit_grid_obstacle(scene: "Scene") -> str | None:
+    """Why the scene's sticks cannot be implicit grid sticks, or None when they can: one grid cloth (whose
+    particles lie on a uniform lattice), relaxed by the coloured solver, that cannot tear."""
+    from ..geometry.topology import stick_count
+
+    if scene.simulation.relaxation != "coloured":
+        return "the Jacobi solver gathers each particle's sticks from a neighbour list"
+    if len(scene.cloths) != 1:
+        return "the scene has several cloths"
+    cloth = scene.cloths[0]
+    if cloth.mesh is not None:
+        return "the cloth is a mesh"
+    if scene.tears:
+        return "the cloth can tear (the tear kernel reads each stick's ends and weight)"
+    if stick_count(cloth) == 0:
+        return "the cloth has no sticks"
+    return None
+
+
+def grid_counts(scene: "Scene", sticks: str) -> dict:
+    """Requirements's implicit-grid fields: all 0 when the sticks are arrays ("explicit", or "auto" where
+    :func:`implicit_grid_obstacle` names one); "implicit" where one is named raises ArgumentError. "auto"
+    computes the sticks and keeps the tether table; "implicit" computes the tethers too (of a cloth with at most
+    MAX_GRID_TETHER_PINS pins), so that no per-stick or per-particle table is left on the device."""
+    from ..errors import ArgumentError
+
+    if sticks not in STICK_FORMS:
+        raise ArgumentError(f"sticks must be one of {', '.join(STICK_FORMS)}, got {sticks!r}")
+    obstacle = implicit_grid_obstacle(scene)
+    if sticks == "implicit" and obstacle is not None:
+        raise ArgumentError(f"sticks = 'implicit' needs one grid cloth that cannot tear and the coloured solver, "
+                            f"but {obstacle}")
+    if sticks == "explicit" or obstacle is not None:
+        return {}
+    cloth = scene.cloths[0]
+    r, c = cloth.resolution
+    per_family = {"structural": r * (c - 1) + (r - 1) * c, "shear": 2 * (r - 1) * (c - 1),
+                  "bend": r * max(c - 2, 0) + max(r - 2, 0) * c}
+    soft = sum(per_family[f] for f in cloth.sticks if cloth.compliance.get(f, 0.0) > 0.0)
+    # Implicit tethers only when asked for: on an H100 the tether table's pass measured faster than computing
+    # each particle's nearest pins and their float64 distances in every sweep (bench/results/implicit_grid).
+    pins = cloth.pin_count if (sticks == "implicit" and cloth.uses_tethers
+                               and 0 < cloth.pin_count <= MAX_GRID_TETHER_PINS) else 0
+    weight_pins = cloth.pin_count if not cloth.particle_masses and 0 < cloth.pin_count <= MAX_UNIFORM_MASS_PINS else 0
+    return {"grid_rows": r, "grid_cols": c, "soft_sticks": soft, "grid_pins": pins, "weight_pins": weight_pins}
+
+
+
+class Integrate:
+    """The Verlet step (kernels/integrate.py): gravity and wind in one acceleration, damping per second."""
+
+    name = "integrate"
+
+    def needed(self, req: Requirements) -> bool:
+        return req.free_particles
+
+    def device_bytes(self, req: Requirements) -> int:
+        return 0  # it updates the State's positions, prediction and increment, which every scene has
+
+    def bind(self, model, state, solver) -> BoundStage:
+        import warp as wp
+
+        from warp_verlet.kernels.integrate import verlet_step
+        from warp_verlet.kernels.positions import instance
+
+        settings, accel, real = solver.settings, solver.accel, model.position_scalar
+        kernel = instance(verlet_step, model.position_dtype)  # launched every substep: resolved once here
+        x, x_inertial, dq, inv_mass, n = (state.particle_q, state.particle_q_inertial, state.particle_dq,
+                                          model.inv_mass, model.particle_count)
+
+        def run(state, dt: float) -> None:
+            ratio = min(dt / state.dt_prev, settings.max_dt_ratio)
+            # In the positions' type (accel is one too): a float32 factor would cost float64 its precision.
+            velocity_scale = real(math.exp(-settings.damping * dt) * ratio)
+            accel_offset = accel * real(dt * (dt + state.dt_prev) * 0.5)
+            wp.launch(kernel, n, inputs=[x, x_inertial, dq, inv_mass, velocity_scale, accel_offset])
+
+        return BoundStage(run)
+
+
+class Relax:
+    """``iterations`` sweeps; a sweep runs every constraint set of CONSTRAINT_SETS that the scene needs, in
+    table order (Gauss-Seidel across sets, and across colours inside a set). Before the sweeps, each set's
+    per-substep work runs, in table order (the multilevel pass, a soft stick's tension reset)."""
+
+    name = "relax"
+
+    def needed(self, req: Requirements) -> bool:
+        return req.iterations > 0 and any(c.needed(req) for c in CONSTRAINT_SETS)
+
+    def device_bytes(self, req: Requirements) -> int:
+        return sum(c.device_bytes(req) for c in CONSTRAINT_SETS if c.needed(req))
+
+    def bind(self, model, state, solver) -> BoundStage:
+        sets = [c.bind(model, state, solver) for c in CONSTRAINT_SETS if c.needed(solver.req)]
+        phases = [phase for bound in sets for phase in bound.phases]
+        before = [bound.run for bound in sets if bound.run is not None]  # per-substep set-up (dt, zeroing)
+        team = solver.team(phases)
+        sweep = [task.run for phase in phases for task in phase if task is not None]
+        iterations = solver.settings.iterations
+
+        def run(state, dt: float) -> None:
+            for prepare in before:
+                prepare(state, dt)
+            if team is not None:
+                team.run()
+                return
+            for _ in range(iterations):
+                for task in sweep:
+                    task()
+
+        return BoundStage(run, phases)
+
+
+class Collide:
+    """Collider clamping after the sweeps: every collider kind of the registry (warp_verlet/colliders) the scene
+    has, in registry order (spheres first, planes last, so that a sphere resting on the ground cannot push
+    cloth through the ground). Each kind's ``before`` (a moving sphere placed on the device clock) runs before
+    any clamp."""
+
+    name = "collide"
+
+    def needed(self, req: Requirements) -> bool:
+        return bool(req.colliders)
+
+    def device_bytes(self, req: Requirements) -> int:
+        from ..colliders import device_bytes
+
+        return device_bytes(req.colliders)
+
+    def bind(self, model, state, solver) -> BoundStage:
+        bound = [kind.bind(model, state) for kind, _ in model.colliders.kinds]
+        before = [prepare for launches in bound for prepare in launches.before]
+        clamps = [task for launches in bound for task in launches.clamps]
+
+        def run(state, dt: float) -> None:
+            for prepare in before:
+                prepare(dt)
+            for task in clamps:
+                task.run()
+
+        return BoundStage(run)
+
+
+class Tear:
+    """Threshold tearing after the clamping (kernels/tear.py): zeroes the State's weight of an overlong
+    stick."""
+
+    name = "tear"
+
+    def needed(self, req: Requirements) -> bool:
+        return req.tears
+
+    def device_bytes(self, req: Requirements) -> int:
+        # Per entry a tear length (Model) and a live weight (State); Jacobi has two entries per stick and keeps
+        # their ends.
+        return req.sticks * (2 * FLOAT if req.relaxation == "coloured" else 2 * (2 * FLOAT + VEC2I))
+
+    def bind(self, model, state, solver) -> BoundStage:
+        from warp_verlet.kernels.tear import tear_sticks
+
+        task = recorded(tear_sticks, model.tear_ends.shape[0], [state.particle_q, model.tear_ends, model.tear_length],
+                        [state.stick_weight, state.torn_entries])
+        return BoundStage(lambda state, dt: task.run())
+
+
+CONSTRAINT_SETS = CONSTRAINT_KINDS
+"""Constraint sets in the order a sweep projects them (warp_verlet/constraints/)."""
+
+RELAX = Relax()
+STAGES = (Integrate(), RELAX, Collide(), Tear())
+"""The stages of a substep, in order."""
+
+
+def particle_bytes(req: Requirements) -> int:
+    """Every scene's per-particle arrays: the State's positions, prediction and increment (12 bytes each in
+    float32, 24 in float64), the Model's inverse mass (float32 either way)."""
+    return 3 * req.position_bytes + FLOAT
+
+
+def device_bytes(req: Requirements) -> int:
+    """The device memory a scene's arrays take: the sum of what its stages declare."""
+    return req.particles * particle_bytes(req) + sum(s.device_bytes(req) for s in STAGES if s.needed(req))
