@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import pytest
 
+import bench_package  # noqa: F401  (makes the repository's bench/ importable as the package "bench")
 from bench import l2_profile
 
 

@@ -11,6 +11,7 @@ import warp as wp
 
 from conftest import make_scene
 from warp_verlet.errors import WarpVerletError
+import bench_package  # noqa: F401  (makes the repository's bench/ importable as the package "bench")
 from bench.common import device_arrays as every_device_array
 from warp_verlet.core.memory import check_fits, estimate, stick_count
 from warp_verlet.input.scene import parse_scene
