@@ -84,9 +84,9 @@ def time_old_matplotlib(source: Path) -> dict:
     sys.path.insert(0, str(source))
     for name in [m for m in sys.modules if m == "warp_verlet" or m.startswith("warp_verlet.")]:
         del sys.modules[name]
-    from warp_verlet import from ``source``
-    from warp_verlet.apps import preview as old  # the old module
-    from warp_verlet.output.cache_reader import visible_polygons
+    # The old tree's layout (a flat package), imported from ``source``.
+    from warp_verlet import preview as old  # the old module
+    from warp_verlet.cache_reader import visible_polygons
 
     out = {}
     for n in GRIDS:
