@@ -131,10 +131,8 @@ class AllPairsSticks(ConstraintSet):
         return BoundStage(None, phases)
 
 
-REGISTRY_NAMES = (("warp_verlet.constraints", "CONSTRAINT_KINDS"), ("warp_verlet.core.model", "CONSTRAINT_KINDS"),
-                  ("warp_verlet.core.stages", "CONSTRAINT_KINDS"), ("warp_verlet.core.stages", "CONSTRAINT_SETS"),
-                  ("warp_verlet.core.simulator", "CONSTRAINT_SETS"))
-"""Every module-level name the constraint registry is read through."""
+REGISTRY_NAMES = (("warp_verlet.constraints", "CONSTRAINT_KINDS"),)
+"""The registry's one name: everything else reads it through ``constraints.kinds()`` at each call."""
 
 
 @contextmanager
@@ -188,10 +186,10 @@ def pair_distances(points: np.ndarray) -> np.ndarray:
 
 def launches_per_sweep(sim: Simulator) -> dict[str, int]:
     """The launches each constraint set a sweep runs issues, by set name."""
-    from warp_verlet.core import stages
+    from warp_verlet import constraints
 
     out = {}
-    for kind in stages.CONSTRAINT_SETS:
+    for kind in constraints.kinds():
         if kind.needed(sim.solver.req):
             bound = kind.bind(sim.model, sim.state, sim.solver)
             out[kind.name] = sum(1 for phase in bound.phases for task in phase if task is not None)

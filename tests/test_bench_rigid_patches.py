@@ -12,9 +12,6 @@ import pytest
 import bench_package  # noqa: F401  (makes the repository's bench/ importable as the package "bench")
 from bench import rigid_patches
 from warp_verlet import constraints
-from warp_verlet.core import model
-from warp_verlet.core import simulator
-from warp_verlet.core import stages
 from warp_verlet.geometry.colouring import MAX_COLOURS
 
 RIGID = 1.0e-6
@@ -27,8 +24,7 @@ def read(path: Path) -> list[dict]:
 
 
 def registry() -> list:
-    return [constraints.CONSTRAINT_KINDS, model.CONSTRAINT_KINDS, stages.CONSTRAINT_KINDS, stages.CONSTRAINT_SETS,
-            simulator.CONSTRAINT_SETS]
+    return [constraints.CONSTRAINT_KINDS, constraints.kinds()]
 
 
 def test_both_methods_on_the_same_cloth(tmp_path):

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from .kind import ConstraintKind, ConstraintSet
 
-__all__ = ["CONSTRAINT_KINDS", "ConstraintKind", "ConstraintSet", "cloth_keys"]
+__all__ = ["CONSTRAINT_KINDS", "ConstraintKind", "ConstraintSet", "cloth_keys", "kinds"]
 
 
 def _kinds() -> tuple:
@@ -37,6 +37,12 @@ CONSTRAINT_KINDS: tuple = _kinds()
 """Every constraint kind, in the order a sweep projects them."""
 
 
+def kinds() -> tuple:
+    """The registered kinds, in sweep order, read at each call: everything that loops over the kinds asks here,
+    so that a kind registered later (a test's, a benchmark's) is one assignment to :data:`CONSTRAINT_KINDS`."""
+    return CONSTRAINT_KINDS
+
+
 def cloth_keys() -> tuple:
     """The ``[[cloth]]`` keys of every kind, in registry order."""
-    return tuple(key for kind in CONSTRAINT_KINDS for key in kind.cloth_keys)
+    return tuple(key for kind in kinds() for key in kind.cloth_keys)

@@ -22,7 +22,7 @@ import warp as wp
 from ..colliders import ColliderModel
 from ..geometry.colouring import Colouring, check_partition, graph_colouring, grid_colouring
 from ..errors import ArgumentError
-from ..constraints import CONSTRAINT_KINDS
+from ..constraints import kinds as constraint_kinds
 from ..constraints.multilevel import grid_hierarchy, merge_levels
 from ..constraints.tethers import TetherTable, build_tethers
 from ..input.scene import Scene
@@ -338,7 +338,7 @@ class Model:
             self.tether_pin = wp.array2d(table.pin, dtype=int, device=device)
             self.tether_length = wp.array2d(table.length, dtype=float, device=device)
         self.constraints = {}  # constraint kind name -> the device data its build made (kinds with data only)
-        for kind in CONSTRAINT_KINDS:
+        for kind in constraint_kinds():
             data = kind.build(self, scene, device) if kind.needed(req) else None
             if data is not None:
                 self.constraints[kind.name] = data

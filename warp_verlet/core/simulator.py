@@ -35,7 +35,8 @@ from .model import Model
 from ..input.scene import Scene
 from .solver import VerletSolver
 from .budget import FLOAT32_FLOOR, MAX_SUBSTEPS, Budget
-from .stages import CONSTRAINT_SETS, Requirements
+from ..constraints import kinds as constraint_kinds
+from .stages import Requirements
 from .state import State
 from .warp_setup import ensure_kernel_cache
 
@@ -248,11 +249,11 @@ class Simulator:
 
     @property
     def constraint_sets(self) -> tuple[str, ...]:
-        """The constraint sets a sweep projects, in order (stages.CONSTRAINT_SETS): "grid sticks" and "grid
+        """The constraint sets a sweep projects, in order (constraints.CONSTRAINT_KINDS): "grid sticks" and "grid
         tethers" where they are computed from the grid, "sticks" and "tethers" where they are arrays."""
         if "relax" not in self.solver.stage_names:
             return ()
-        return tuple(c.name for c in CONSTRAINT_SETS if c.needed(self.solver.req))
+        return tuple(c.name for c in constraint_kinds() if c.needed(self.solver.req))
 
     def reset(self) -> None:
         """Back to the state the simulator started from (rest positions, at rest, nothing torn)."""
@@ -539,7 +540,7 @@ class Simulator:
         dropped), and return which sticks are torn. Call it when ``torn_count()`` has changed; the runner does,
         once per frame."""
         torn = self.torn_sticks()
-        for constraint_set in CONSTRAINT_SETS:
+        for constraint_set in constraint_kinds():
             if constraint_set.needed(self.solver.req):
                 constraint_set.on_tear(self.model, self.state, torn)
         return torn

@@ -1,15 +1,17 @@
-"""The one table of what a substep runs: its stages, and inside the relaxation its constraint sets.
+"""The one table of what a substep runs: its stages. Inside the relaxation run the constraint kinds
+(warp_verlet/constraints/), inside the clamp the collider kinds (warp_verlet/colliders/), each declared in its
+own module.
 
-Every stage and constraint set is declared once, here, as a class that says
+Every stage is declared once, here, as a class that says
 
 - ``needed(req)``: whether a scene uses it, from its counts alone (before anything is built);
 - ``device_bytes(req)``: the device arrays it allocates, in the Model, the State and the solver;
 - ``bind(...)``: its launches, recorded against one State's arrays.
 
 From that one declaration the rest is derived: the solver runs the bound stages (the launches), the memory
-estimate sums ``device_bytes`` (warp_verlet/core/memory.py), the CPU thread team runs the constraint sets'
-phases, and ``Simulator.stages()`` names them. A new constraint kind is one kernel file, one class here
-(appended to CONSTRAINT_SETS) and its scene keys.
+estimate sums ``device_bytes`` (warp_verlet/core/memory.py), the CPU thread team runs the constraint kinds'
+phases, and ``Simulator.stages()`` names them. A new stage is one class in STAGES and one kernel file; a new
+constraint or collider kind is one module of its package, one kernel file and one registry line.
 
 This module does not import warp at the top, so that ``memory.estimate`` (and ``warp-verlet validate``)
 stays light; the binding code imports it.
@@ -24,7 +26,7 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:  # pragma: no cover
     from ..input.scene import Scene
 
-from ..constraints import CONSTRAINT_KINDS
+from ..constraints import kinds as constraint_kinds
 from ..launches import FLOAT, VEC2I, VEC3, VEC3D, BoundStage, recorded
 
 
@@ -87,7 +89,7 @@ class Requirements:
             compliant=scene.compliant, tears=scene.tears, colliders=collider_counts(scene.colliders),
             tethered=scene.tethered_particles, tethers_per_particle=scene.tethers_per_particle,
             coarse_sticks=coarse[0], coarse_children=coarse[1],
-            elements=tuple((kind.name, n) for kind in CONSTRAINT_KINDS if (n := kind.count(scene))),
+            elements=tuple((kind.name, n) for kind in constraint_kinds() if (n := kind.count(scene))),
         )
         req = replace(req, **grid_counts(scene, sticks))
         return replace(req, precision=resolve(scene, relaxes=RELAX.needed(req)))
@@ -183,20 +185,20 @@ class Integrate:
 
 
 class Relax:
-    """``iterations`` sweeps; a sweep runs every constraint set of CONSTRAINT_SETS that the scene needs, in
+    """``iterations`` sweeps; a sweep runs every constraint kind (warp_verlet/constraints/) that the scene needs, in
     table order (Gauss-Seidel across sets, and across colours inside a set). Before the sweeps, each set's
     per-substep work runs, in table order (the multilevel pass, a soft stick's tension reset)."""
 
     name = "relax"
 
     def needed(self, req: Requirements) -> bool:
-        return req.iterations > 0 and any(c.needed(req) for c in CONSTRAINT_SETS)
+        return req.iterations > 0 and any(c.needed(req) for c in constraint_kinds())
 
     def device_bytes(self, req: Requirements) -> int:
-        return sum(c.device_bytes(req) for c in CONSTRAINT_SETS if c.needed(req))
+        return sum(c.device_bytes(req) for c in constraint_kinds() if c.needed(req))
 
     def bind(self, model, state, solver) -> BoundStage:
-        sets = [c.bind(model, state, solver) for c in CONSTRAINT_SETS if c.needed(solver.req)]
+        sets = [c.bind(model, state, solver) for c in constraint_kinds() if c.needed(solver.req)]
         phases = [phase for bound in sets for phase in bound.phases]
         before = [bound.run for bound in sets if bound.run is not None]  # per-substep set-up (dt, zeroing)
         team = solver.team(phases)
@@ -267,9 +269,6 @@ class Tear:
                         [state.stick_weight, state.torn_entries])
         return BoundStage(lambda state, dt: task.run())
 
-
-CONSTRAINT_SETS = CONSTRAINT_KINDS
-"""Constraint sets in the order a sweep projects them (warp_verlet/constraints/)."""
 
 RELAX = Relax()
 STAGES = (Integrate(), RELAX, Collide(), Tear())

@@ -151,9 +151,9 @@ def read_mesh_keys(t: Table, scene_dir: Path, in_memory: bool = False) -> MeshKe
 def kinds_vertex_sets(options: Mapping[str, Any]) -> tuple[tuple[str, str, str], ...]:
     """The vertex sets the constraint kinds' ``options`` of a cloth select by name (each kind's
     ``named_vertex_sets``): ("primvar" or "subset", name, key), in registry order."""
-    from ..constraints import CONSTRAINT_KINDS
+    from ..constraints import kinds
 
-    return tuple(found for kind in CONSTRAINT_KINDS for found in kind.named_vertex_sets(options))
+    return tuple(found for kind in kinds() for found in kind.named_vertex_sets(options))
 
 
 def load_mesh(t: Table, keys: MeshKeys, options: Mapping[str, Any], arrays: tuple | None = None) -> MeshSpec:

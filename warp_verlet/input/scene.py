@@ -547,9 +547,9 @@ def check_cloth(t: _Table, spec: ClothSpec) -> ClothSpec:
     if missing:
         raise t.error(f"compliance.{missing[0]}", f"gives a compliance to the {missing[0]} family, which sticks = "
                       f"{_toml_list(spec.sticks)} does not build")
-    from ..constraints import CONSTRAINT_KINDS
+    from ..constraints import kinds
 
-    for kind in CONSTRAINT_KINDS:
+    for kind in kinds():
         resolved = kind.check_cloth(spec, t)
         if resolved:
             spec = replace(spec, options=kind_options({**spec.options, **resolved}))
