@@ -38,8 +38,9 @@ def verlet_start(
 ):
     """Exact start for constant acceleration: x_prev = x0 - v0 dt + a dt^2 / 2, so the first step lands on
     x0 + v0 dt + a dt^2 / 2. ``delta`` holds the initial velocity v0 (m/s) on entry (State.start_velocity, put
-    there by the solver just before) and leaves as delta = x0 - x_prev, with x_inertial = x0. ``accel`` and ``dt`` come in the position type: in
-    float64 a float32 dt would put a relative error of 6e-8 into every step."""
+    there by the solver just before) and leaves as delta = x0 - x_prev, with x_inertial = x0. ``accel`` and
+    ``dt`` come in the position type: in float64 a float32 dt would put a relative error of 6e-8 into every
+    step."""
     i = wp.tid()
     x_inertial[i] = x[i]
     if inv_mass[i] == 0.0:

@@ -3,10 +3,11 @@ turned and moved as the patch has moved, by shape matching (Mueller, Heidelberge
 "Meshless deformations based on shape matching").
 
 One thread per patch (patches share no particle), its members in order: the mass-weighted centroid c of the
-current positions (summed as offsets from the first member), the rotation R nearest to A = sum m_i (x_i - c) q_i^T (q_i: the member's rest offset from
-the rest centroid), from the polar decomposition of A by ``wp.svd3`` with the sign that keeps R a rotation, and
-every free member set to c + R q_i. The weights give a pin an overwhelming mass, so a patch holding a pin turns
-about it; the centroid of the weights does not move, so the patch's momentum is kept.
+current positions (summed as offsets from the first member, in float64), the rotation R nearest to
+A = sum m_i (x_i - c) q_i^T (q_i: the member's rest offset from the rest centroid) from the polar decomposition
+of A by ``wp.svd3``, with the sign that keeps R a rotation, and every free member set to c + R q_i. The weights
+give a pin an overwhelming mass, so a patch holding a pin turns about it; the centroid of the weights does not
+move, so the patch's momentum is kept.
 """
 
 from typing import Any

@@ -180,7 +180,8 @@ class AngleHinges(ConstraintSet):
         import warp as wp
 
         parts = [(mesh_hinges(slot.topology.faces) + slot.first, limit_of(spec))
-                 for slot, spec in zip(model.cloths, scene.cloths) if spec.mesh is not None and limit_of(spec) is not None]
+                 for slot, spec in zip(model.cloths, scene.cloths)
+                 if spec.mesh is not None and limit_of(spec) is not None]
         elements = np.concatenate([e for e, _ in parts])
         limits = np.concatenate([np.full(len(e), lim) for e, lim in parts])
         return _AngleData(elements, limits, wp.vec4i, device)

@@ -31,8 +31,9 @@ class ConstraintKind(Protocol):
         ``spec.mesh.mesh.source.named_vertices[(kind, name)]``."""
 
     def check_cloth(self, spec, table: "Table") -> dict[str, Any] | None:
-        """Once a cloth is read (``spec``, a scene.ClothSpec, its mesh loaded), check this kind's options against it and resolve them (say,
-        selections to particle indices): the options to replace, or None. A problem raises ``table.error``."""
+        """Once a cloth is read (``spec``, a scene.ClothSpec, its mesh loaded), check this kind's options against
+        it and resolve them (say, selections to particle indices): the options to replace, or None. A problem
+        raises ``table.error``."""
 
     def count(self, scene) -> int | tuple[int, ...]:
         """Its elements in ``scene`` (a scene.Scene), known before anything is built: a number, or a tuple of
@@ -49,7 +50,8 @@ class ConstraintKind(Protocol):
         ``model.constraints[name]`` and names its arrays for the memory accounting."""
 
     def bind(self, model, state, solver) -> "BoundStage":
-        """Its launches against ``state`` (a State of ``model``, stepped by ``solver``, a VerletSolver): per-substep set-up as ``run``, one sweep as ``phases``."""
+        """Its launches against ``state`` (a State of ``model``, stepped by ``solver``, a VerletSolver): per-substep
+        set-up as ``run``, one sweep as ``phases``."""
 
     def on_tear(self, model, state, torn: "np.ndarray") -> None:
         """React to the torn set changing (``torn``: per stick in ``model.host_sticks`` order)."""

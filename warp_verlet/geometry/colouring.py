@@ -80,8 +80,8 @@ def stick_conflict_edges(sticks: np.ndarray) -> np.ndarray:
     if not pairs:
         return np.zeros((0, 2), np.int32)
     # Two distinct sticks share at most one particle, so no pair comes out twice: a lexicographic sort gives
-    # what np.unique(axis=0) gave, many times faster on large grids (bench/results/code_choices.md). Elements of more particles may
-    # share several, so their pairs are made unique.
+    # what np.unique(axis=0) gave, many times faster on large grids (bench/results/code_choices.md). Elements
+    # of more particles may share several, so their pairs are made unique.
     edges = np.sort(np.concatenate(pairs), axis=1)
     if k > 2:
         return np.unique(edges, axis=0).astype(np.int32)
