@@ -14,8 +14,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from warp_verlet.errors import SceneError
-from warp_verlet.input.scene import (CLOTH_KEYS, GRID_KEYS, NAMED_PINS, OUTPUT_KEYS, SIMULATION_KEYS, STICK_FAMILIES, ClothSpec,
-                               OutputSettings, Scene, SimulationSettings, load_scene)
+from warp_verlet.input.scene import (CLOTH_KEYS, GRID_KEYS, NAMED_PINS, OUTPUT_KEYS, SIMULATION_KEYS, STICK_FAMILIES,
+                                     ClothSpec, OutputSettings, Scene, SimulationSettings, load_scene)
 from warp_verlet.geometry.topology import build_cloth
 
 if sys.version_info >= (3, 11):

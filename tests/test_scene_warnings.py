@@ -12,7 +12,7 @@ from warp_verlet.input import scene_warnings
 from warp_verlet.apps.cli import main
 from warp_verlet.input.scene import parse_scene
 from warp_verlet.input.scene_warnings import (free_fall, start_inside_warnings, stretch_warnings, tether_warnings,
-                                        thickness_warnings)
+                                              thickness_warnings)
 
 
 def scene(cloth: dict, colliders=(), **simulation):

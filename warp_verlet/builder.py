@@ -28,7 +28,8 @@ from typing import TYPE_CHECKING, Any, Iterable, Mapping
 from .colliders import SHARED_KEYS, kind_named, kinds, read_collider
 from .errors import ArgumentError, SceneError
 from .input.scene import (CLOTH_KEYS, GRID_KEYS, OUTPUT_KEYS, SIMULATION_KEYS, ClothSpec, OutputSettings, Scene,
-                    SimulationSettings, check_scene, cloth_keys_of_kinds, read_cloth, read_output, read_simulation)
+                          SimulationSettings, check_scene, cloth_keys_of_kinds, read_cloth, read_output,
+                          read_simulation)
 from .scene_keys import Key, Table
 
 if TYPE_CHECKING:  # pragma: no cover

@@ -7,8 +7,7 @@ import numpy as np
 from warp_verlet.errors import WarpVerletError
 from warp_verlet.core.simulator import Simulator
 
-from .base import (G, Check, EnergyLog, count_check, free_cloth, free_fall_error, hanging, run_with_energy,
-                   ulp)
+from .base import (G, Check, EnergyLog, count_check, free_cloth, free_fall_error, hanging, run_with_energy, ulp)
 
 
 STEP_RANGE = (1e-5, 1e-4, 1e-3, 1e-2, 1e-1)

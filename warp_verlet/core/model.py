@@ -29,8 +29,8 @@ from ..input.scene import Scene
 from .stages import MAX_UNIFORM_MASS_PINS, Requirements
 from ..geometry.faces import edge_faces
 from ..geometry.mesh_cloth import STRUCTURAL
-from ..geometry.topology import (BEND_H, BEND_V, FAMILY_OF_CLASS, SHEAR_ANTI, SHEAR_DIAG, STRUCT_H, STRUCT_V, ClothTopology,
-                       build_cloth)
+from ..geometry.topology import (BEND_H, BEND_V, FAMILY_OF_CLASS, SHEAR_ANTI, SHEAR_DIAG, STRUCT_H, STRUCT_V,
+                                 ClothTopology, build_cloth)
 
 
 @dataclass(frozen=True)

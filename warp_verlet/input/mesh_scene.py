@@ -20,7 +20,7 @@ from ..errors import SceneError
 from ..geometry.mesh_cloth import MASS_DISTRIBUTIONS, ClothMesh, MeshError, SourceMesh, prepare
 from ..geometry.mesh_io import USD_SUFFIXES, read_mesh, to_scene, transform_matrix
 from ..scene_keys import (ARRAY, NUMBER, Invalid, Key, Table, accepts, any_real, choice, describe, int_text,
-                         per_element, real, text, vector)
+                          per_element, real, text, vector)
 
 _positive = per_element(real(0.0, lo_open=True))
 _point = per_element(vector(3, any_real))  # an error names the element's own key

@@ -38,8 +38,8 @@ from pathlib import Path
 from typing import Any, Callable
 
 from ...errors import SceneError
-from ...input.scene import (Scene, _describe, _Invalid, _Table, choice, integer, load_scene, parse_scene, read_toml_file, real,
-                     text)
+from ...input.scene import (Scene, _describe, _Invalid, _Table, choice, integer, load_scene, parse_scene,
+                            read_toml_file, real, text)
 from ...writer_registry import output_suffixes
 
 DEFAULT_FORMAT = "usdc"
