@@ -89,7 +89,10 @@ def device_arrays(sim) -> dict[int, wp.array]:
         return [a for a in vars(obj).values() if isinstance(a, wp.array)]
 
     found = arrays_of(sim.model) + arrays_of(sim.model.colliders) + list(sim.state.arrays().values())
-    found += [a for level in sim.model.levels for a in arrays_of(level)]
+    for data in sim.model.constraints.values():  # each constraint kind's build, and what its lists hold (levels)
+        found += arrays_of(data)
+        found += [a for part in vars(data).values() if isinstance(part, list) for item in part
+                  if hasattr(item, "__dict__") for a in arrays_of(item)]
     found += list(sim.solver._scratch.values())
     return {a.ptr: a for a in found}
 

@@ -55,7 +55,7 @@ def one_pass(sim: Simulator) -> None:
     # arrays' addresses there, an illegal memory access that breaks every later CUDA test of the session.
     with wp.ScopedDevice(sim.device):
         wp.copy(state.particle_q_inertial, state.particle_q)
-        for level in m.levels:
+        for level in m.constraints["multilevel"].levels:
             for first, count in level.colour_ranges:
                 wp.launch(limit_coarse_colour, count,
                           inputs=[state.particle_q, m.inv_mass, level.ends, level.limit, first])
@@ -115,16 +115,17 @@ def test_the_pass_runs_once_per_substep_before_the_sweeps(launches):
     sim = Simulator(parse_scene(hanging(17, substeps=1, iterations=2, multilevel=True, multilevel_sweeps=2),
                                 file="<ml>"), "cpu", use_graph=False, threads=1)
     issued = launches.of(sim.step)
-    per_level = [2 * len(level.colour_ranges) * ["limit_coarse_colour"] + ["prolongate"] for level in sim.model.levels]
+    levels = sim.model.constraints["multilevel"].levels
+    per_level = [2 * len(level.colour_ranges) * ["limit_coarse_colour"] + ["prolongate"] for level in levels]
     expected = ["verlet_start", "verlet_step"] + [name for level in per_level for name in level]
     expected += 2 * ["relax_colour"] * len(sim.model.colour_ranges)
     assert issued == expected
-    assert len(sim.model.levels) == 4  # 17 -> 9 -> 5 -> 3 -> 2 particles a side
+    assert len(sim.model.constraints["multilevel"].levels) == 4  # 17 -> 9 -> 5 -> 3 -> 2 particles a side
 
 
 def test_no_multilevel_no_levels_and_no_launches(launches):
     sim = Simulator(parse_scene(hanging(17, substeps=1), file="<ml>"), "cpu", use_graph=False, threads=1)
-    assert sim.model.levels == []
+    assert "multilevel" not in sim.model.constraints
     assert not {"limit_coarse_colour", "prolongate"} & set(launches.of(sim.step))
 
 

@@ -23,6 +23,7 @@ Everything here is host-side numpy, built once per model; kernels/multilevel.py 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -174,6 +175,35 @@ def merge_levels(per_cloth: list[list[Level]]) -> list[Level]:
     return merged
 
 
+@dataclass(frozen=True)
+class DeviceLevel:
+    """One level of the multilevel hierarchy on the device (of a :class:`Level`)."""
+
+    ends: Any  # (Mc,) vec2i wp.array
+    limit: Any  # (Mc,) float32, m
+    colour_ranges: tuple[tuple[int, int], ...]
+    child: Any  # (C,) int32
+    parents: Any  # (C,) vec4i
+    weights: Any  # (C,) vec4 float32
+
+
+class MultilevelData:
+    """The hierarchy of every grid cloth on the device: ``levels``, one :class:`DeviceLevel` per level, coarsest
+    first (each cloth's levels merged, so one launch per colour serves every cloth)."""
+
+    def __init__(self, model, device):
+        import warp as wp
+
+        per_cloth = [grid_hierarchy(s.topology.rows, s.topology.cols, s.topology.positions, s.first)
+                     for s in model.cloths]
+        self.levels = [DeviceLevel(
+            ends=wp.array(level.ends, dtype=wp.vec2i, device=device),
+            limit=wp.array(level.limit, dtype=float, device=device), colour_ranges=level.colour_ranges,
+            child=wp.array(level.child, dtype=int, device=device),
+            parents=wp.array(level.parents, dtype=wp.vec4i, device=device),
+            weights=wp.array(level.weights, dtype=wp.vec4, device=device)) for level in merge_levels(per_cloth)]
+
+
 class Multilevel(ConstraintSet):
     """The multilevel pass (the hierarchy above, kernels/multilevel.py): once per substep, before the
     sweeps, coarsest level first: ``multilevel_sweeps`` sweeps of a level's unilateral coarse sticks, then its
@@ -189,13 +219,16 @@ class Multilevel(ConstraintSet):
         # ends and limit per coarse stick; child, four parents and four weights per child
         return req.coarse_sticks * (VEC2I + FLOAT) + req.coarse_children * (INT + 4 * INT + 4 * FLOAT)
 
+    def build(self, model, scene, device):
+        return MultilevelData(model, device)
+
     def bind(self, model, state, solver) -> BoundStage:
         from warp_verlet.kernels.multilevel import limit_coarse_colour, prolongate
 
         x, x_inertial, inv_mass = state.particle_q, state.particle_q_inertial, model.inv_mass
         sweeps = solver.settings.multilevel_sweeps
         tasks = []
-        for level in model.levels:
+        for level in model.constraints[self.name].levels:
             colours = [recorded(limit_coarse_colour, n, [x, inv_mass, level.ends, level.limit, f])
                        for f, n in level.colour_ranges]
             tasks += colours * sweeps

@@ -23,7 +23,6 @@ from ..colliders import ColliderModel
 from ..geometry.colouring import Colouring, check_partition, graph_colouring, grid_colouring
 from ..errors import ArgumentError
 from ..constraints import kinds as constraint_kinds
-from ..constraints.multilevel import grid_hierarchy, merge_levels
 from ..constraints.tethers import TetherTable, build_tethers
 from ..input.scene import Scene
 from .stages import MAX_UNIFORM_MASS_PINS, Requirements
@@ -51,18 +50,6 @@ class ClothSlot:
     @property
     def particles(self) -> slice:
         return slice(self.first, self.first + self.count)
-
-
-@dataclass(frozen=True)
-class DeviceLevel:
-    """One level of the multilevel hierarchy on the device (see warp_verlet/constraints/multilevel.Level)."""
-
-    ends: wp.array  # (Mc,) vec2i
-    limit: wp.array  # (Mc,) float32, m
-    colour_ranges: tuple[tuple[int, int], ...]
-    child: wp.array  # (C,) int32
-    parents: wp.array  # (C,) vec4i
-    weights: wp.array  # (C,) vec4 float32
 
 
 def stick_form(sticks: str, colouring: str, device) -> str:
@@ -235,8 +222,7 @@ class Model:
     tear): ``tear_ends`` and ``tear_length`` (E,), one entry per stick (coloured) or per stick end (Jacobi).
     Tethers (only when a cloth uses them; T tethered particles, K pins each): ``tether_particle`` (T,) int32,
     ``tether_pin`` (T, K) int32 (-1: none) and ``tether_length`` (T, K) float32 m, the rest-pose lengths a
-    State's copy starts from when a cloth can tear. Multilevel (only when the scene asks): ``levels``, one
-    DeviceLevel per level, coarsest first. Other constraint kinds (warp_verlet/constraints/): ``constraints``,
+    State's copy starts from when a cloth can tear. Other constraint kinds (warp_verlet/constraints/): ``constraints``,
     kind name -> the device data its ``build`` made, documented in its module.
     """
 
@@ -327,7 +313,6 @@ class Model:
         if self.tears:
             self._build_tearing(tear_length, owner, device, csr_stick, csr_ends)
         self.colliders = ColliderModel(scene, device)
-        self.levels = self._build_levels(scene, device) if scene.simulation.multilevel else []
         self.tether_table: TetherTable | None = build_tethers(self.cloths, scene.cloths, scene.tethers_per_particle)
         if req.grid_pins:  # computed in every sweep from the grid: the table stays on the host
             self.grid_tethers = GridTethersDevice(self.cloths[0], scene.cloths[0], scene.tethers_per_particle, device)
@@ -351,15 +336,6 @@ class Model:
         for name, value in vars(part).items():
             if isinstance(value, wp.array):
                 setattr(self, f"{prefix}_{name}", value)
-
-    def _build_levels(self, scene: Scene, device) -> list[DeviceLevel]:
-        per_cloth = [grid_hierarchy(s.topology.rows, s.topology.cols, s.topology.positions, s.first) for s in self.cloths]
-        return [DeviceLevel(
-            ends=wp.array(level.ends, dtype=wp.vec2i, device=device),
-            limit=wp.array(level.limit, dtype=float, device=device), colour_ranges=level.colour_ranges,
-            child=wp.array(level.child, dtype=int, device=device),
-            parents=wp.array(level.parents, dtype=wp.vec4i, device=device),
-            weights=wp.array(level.weights, dtype=wp.vec4, device=device)) for level in merge_levels(per_cloth)]
 
     def __setattr__(self, name, value):
         if getattr(self, "_frozen", False):
