@@ -52,7 +52,7 @@ SELF_COLLISION = Key(
         "collide with each other. Costs a hash grid rebuilt every substep and a pass per sweep.")
 COLLISION_THICKNESS = Key(
     "collision_thickness", real(0.0, None, lo_open=True), None, type="number", unit="m",
-    default_text="absent: 0.8 × the rest spacing", allowed="0 < x ≤ the rest spacing",
+    default_text="absent: 0.8 × the rest spacing", allowed="> 0, at most the rest spacing",
     doc="The contact distance of `self_collision` (each particle a sphere of this diameter; a pair of two cloths "
         "uses the mean of theirs). The rest spacing is a grid's `size / (n - 1)`, the smaller of its two axes, or "
         "a mesh's median edge. Keep a particle's move per substep under half of it, or a fast layer can pass "
