@@ -10,11 +10,13 @@ that excludes the topological neighbours (structural sticks at one spacing apart
 thickness reaches them) without a table, so that a cloth at rest is not in contact with itself.
 
 Each substep (``run``) rebuilds a ``wp.HashGrid`` of every particle with cells of ``QUERY_REACH`` × the largest
-thickness: rebuilt every substep because at the shipped speeds a particle moves up to about a thickness per
-substep, so a grid kept for longer would miss new pairs. Each sweep then (``phases``) gathers, per particle, the
-pushes of all its pairs from the same old positions into a scratch buffer (their average: Jacobi, as the Jacobi
-sticks do in kernels/relax.py) and copies the buffer back in a second launch: no atomics on positions, so the
-result is bit-for-bit repeatable on every device. Friction is not modelled.
+thickness and lists each particle's candidate pairs, those within ``QUERY_REACH`` × their thickness (at most
+``MAX_CANDIDATES``): rebuilt every substep because at the shipped speeds a particle moves up to about a thickness
+per substep, so a list kept for longer would miss new pairs. Each sweep then (``phases``) gathers, per particle,
+the pushes of its candidates closer than the thickness, from the same old positions, into a scratch buffer
+(their average: Jacobi, as the Jacobi sticks do in kernels/relax.py) and copies the buffer back in a second
+launch: no atomics on positions, so the result is bit-for-bit repeatable on every device. Friction is not
+modelled.
 
 A thickness is at most the cloth's rest spacing (a grid's ``size / (n - 1)``, the smaller of its two axes; a
 mesh's median edge): above it, the rest neighbours that never collide (within ``REST_EXCLUSION`` × the
@@ -38,8 +40,13 @@ DEFAULT_FRACTION = 0.8
 REST_EXCLUSION = 1.5
 """Pairs of one cloth closer than this × their thickness in the rest pose never collide."""
 QUERY_REACH = 1.25
-"""The hash grid's cell and query radius as a multiple of the largest thickness: the grid is built once per
-substep and queried in each of its sweeps, so the margin covers what the sweeps move a particle after the build."""
+"""Candidates are the pairs within this × their thickness at the start of a substep (and the hash grid's cell and
+query radius this × the largest thickness): they are found once per substep and checked in each of its sweeps,
+so the margin covers what the sweeps move a pair together after the search."""
+MAX_CANDIDATES = 12
+"""Candidate pairs kept per particle and substep, the first found in the grid's order (a fixed order, so which
+ones is repeatable). Particles at least a thickness apart fit about 12 around one within 1.25 × the thickness
+(a dense packing); a particle between two layers of a fold has 2 to 8."""
 THIN_AXIS_CELLS = 8
 """Cells along an axis where the cloths are flat at rest: room for the layers of a fold or a pile."""
 CELLS_PER_PARTICLE = 8
@@ -117,7 +124,8 @@ def _rest_box(spec) -> tuple[np.ndarray, np.ndarray]:
 class ContactData:
     """The contact's device data, per particle of the scene: ``thickness`` (N,) float32 m (0: its cloth does not
     collide), ``rest`` (N,) vec3 float32 m (rest position) and ``cloth`` (N,) int32 (its cloth's index); and for
-    the hash grid, ``cell`` (m, its cell and query radius) and ``dims``."""
+    the hash grid, ``cell`` (m, its cell and query radius) and ``dims``. The candidates, rewritten each substep,
+    are the solver's scratch."""
 
     def __init__(self, model, scene, device):
         import warp as wp
@@ -183,8 +191,9 @@ class SelfContact(ConstraintSet):
         return bool(req.count(self.name))
 
     def device_bytes(self, req) -> int:
-        # per particle: thickness, rest position, cloth (Model) and a scratch position (solver); the hash grid
-        return (req.particles * (FLOAT + VEC3 + INT + req.position_bytes)
+        # per particle: thickness, rest position, cloth (Model); a scratch position, the candidates and their
+        # count (solver); the hash grid
+        return (req.particles * (FLOAT + VEC3 + INT + req.position_bytes + (MAX_CANDIDATES + 1) * INT)
                 + hash_grid_bytes(req.particles, req.count(self.name)[1]))
 
     def build(self, model, scene, device):
@@ -193,25 +202,31 @@ class SelfContact(ConstraintSet):
     def bind(self, model, state, solver) -> BoundStage:
         import warp as wp
 
-        from warp_verlet.kernels.self_contact import contact_gather
+        from warp_verlet.kernels.self_contact import contact_candidates, contact_gather
 
         data, x, n = model.constraints[self.name], state.particle_q, model.particle_count
         real = model.position_scalar
         scratch = solver.scratch("contact_positions", n, model.position_dtype)
+        candidate = solver.scratch("contact_candidates", n * MAX_CANDIDATES, int)
+        candidate_count = solver.scratch("contact_candidate_count", n, int)
         grid = wp.HashGrid(*data.dims, device=model.device, dtype=real)
         grid.reserve(n)
         cell = data.cell
+        find = recorded(contact_candidates, n, [wp.uint64(grid.id), x, data.thickness, data.rest, data.cloth,
+                                                REST_EXCLUSION, QUERY_REACH, real(cell), MAX_CANDIDATES],
+                        [candidate, candidate_count])
 
-        def rebuild(state, dt: float) -> None:
+        def search(state, dt: float) -> None:
             grid.build(x, cell)
+            find.run()
 
         def gather(f, count):
-            return recorded(contact_gather, count, [wp.uint64(grid.id), x, model.inv_mass, data.thickness, data.rest, data.cloth,
-                                                    REST_EXCLUSION, real(cell), f, scratch])
+            return recorded(contact_gather, count, [x, model.inv_mass, data.thickness, candidate, candidate_count,
+                                                    MAX_CANDIDATES, f, scratch])
 
         def copy_back(f, count):
             return PhaseTask("copy", lambda: wp.copy(x, scratch, dest_offset=f, src_offset=f, count=count))
 
-        # ``rebuild`` holds the grid, which the recorded gathers read by its id only.
-        return BoundStage(rebuild, [split_tasks(gather, 0, n, solver.threads),
-                                    split_tasks(copy_back, 0, n, solver.threads)])
+        # ``search`` holds the grid, which the recorded launch reads by its id only.
+        return BoundStage(search, [split_tasks(gather, 0, n, solver.threads),
+                                   split_tasks(copy_back, 0, n, solver.threads)])
