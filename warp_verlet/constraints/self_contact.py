@@ -104,9 +104,10 @@ def hash_grid_dims(lo: np.ndarray, hi: np.ndarray, cell: float, particles: int) 
 
 
 def hash_grid_bytes(particles: int, cells: int) -> int:
-    """Bytes Warp's hash grid allocates natively (outside any wp.array): a cell and a point index per point,
-    doubled for its radix sort's buffers, and a start and an end per cell."""
-    return particles * 4 * INT + cells * 2 * INT
+    """Bytes Warp's hash grid allocates natively (outside any wp.array; warp/native/hashgrid.cpp and .cu, Warp
+    1.19): a cell and a point index per point, each for 1.5 × the points (its reserve's slack) and doubled for
+    its radix sort's second buffer, and a start and an end per cell. A CUDA sort's temporary space is not in it."""
+    return particles * 6 * INT + cells * 2 * INT
 
 
 def _colliding(scene) -> list:
