@@ -23,14 +23,17 @@ def _kinds() -> tuple:
     from .angle_limit import AngleHinges, AngleJoints
     from .multilevel import Multilevel
     from .rigid_patches import RigidPatches
+    from .self_contact import SelfContact
     from .sticks import GridSticks, Sticks
     from .tethers import GridTethers, Tethers
 
     # The multilevel pass first (it measures moves from the Verlet prediction), then the long-range tethers, so
     # that every sweep starts from particles within reach of their pins, then the sticks, then the angle limits
-    # (on lengths the sticks have just set), and the rigid patches last, so that a sweep ends with each rigid.
+    # (on lengths the sticks have just set), then the contacts (after the sticks, so that a sweep's last word on
+    # a pair is to keep it apart, the sticks' pull being what brings layers together), and the rigid patches
+    # last, so that a sweep ends with each rigid.
     return (Multilevel(), Tethers(), GridTethers(), Sticks(), GridSticks(), AngleJoints(), AngleHinges(),
-            RigidPatches())
+            SelfContact(), RigidPatches())
 
 
 CONSTRAINT_KINDS: tuple = _kinds()

@@ -1,0 +1,102 @@
+"""Self-collision and cloth–cloth contact (warp_verlet/constraints/self_contact.py): candidate pairs once a
+substep, one Jacobi gather per sweep.
+
+Once a substep, each particle of a colliding cloth lists its candidate pairs from the hash grid (rebuilt just
+before): the particles within ``reach`` × the pair's thickness (the mean of the two particles'), except those
+closer than ``rest_exclusion`` × the thickness in the rest pose of one cloth. In each sweep, for every candidate
+closer than the thickness, it takes its share of the push that separates the pair to the thickness: (h - d)
+along the separation, times w_i / (w_i + w_j), and writes the average of its pushes to ``x_out``; the caller
+copies ``x_out`` back. Every thread reads the same old positions and no thread writes another's particle, and the
+grid's order is fixed, so the sum order is fixed and the result repeatable on every device.
+"""
+
+from typing import Any
+
+import warp as wp
+
+from .positions import for_positions
+
+
+@wp.func
+def pair_thickness(i: int, j: int, thickness: wp.array(dtype=float), rest: wp.array(dtype=wp.vec3),
+                   cloth: wp.array(dtype=int), rest_exclusion: float):
+    """The thickness of pair (i, j), or 0 where it never collides (either particle's cloth does not collide, or
+    they are rest neighbours of one cloth)."""
+    hj = thickness[j]
+    if j == i or hj == 0.0:
+        return 0.0
+    h = 0.5 * (thickness[i] + hj)
+    if cloth[j] == cloth[i]:
+        if wp.length(rest[i] - rest[j]) < rest_exclusion * h:
+            return 0.0  # as close as this at rest: they never collide
+    return h
+
+
+@wp.kernel
+def contact_candidates(
+    grid: wp.uint64,
+    x: wp.array(dtype=Any),
+    thickness: wp.array(dtype=float),
+    rest: wp.array(dtype=wp.vec3),
+    cloth: wp.array(dtype=int),
+    rest_exclusion: float,
+    reach: float,
+    query_radius: Any,
+    max_candidates: int,
+    candidate: wp.array(dtype=int),
+    candidate_count: wp.array(dtype=int),
+):
+    """Once a substep: each colliding particle's pairs within ``reach`` x their thickness, in the grid's order,
+    the first ``max_candidates`` of them."""
+    i = wp.tid()
+    count = int(0)
+    if thickness[i] > 0.0:
+        xi = x[i]
+        query = wp.hash_grid_query(grid, xi, query_radius)
+        j = int(0)
+        while wp.hash_grid_query_next(query, j):
+            h = pair_thickness(i, j, thickness, rest, cloth, rest_exclusion)
+            if h > 0.0 and count < max_candidates:
+                if wp.length(xi - x[j]) < type(query_radius)(reach * h):
+                    candidate[i * max_candidates + count] = j
+                    count += 1
+    candidate_count[i] = count
+
+
+@wp.kernel
+def contact_gather(
+    x_in: wp.array(dtype=Any),
+    inv_mass: wp.array(dtype=float),
+    thickness: wp.array(dtype=float),
+    candidate: wp.array(dtype=int),
+    candidate_count: wp.array(dtype=int),
+    max_candidates: int,
+    first: int,
+    x_out: wp.array(dtype=Any),
+):
+    """Each sweep: a particle's share of the push of every candidate pair closer than its thickness, averaged."""
+    i = first + wp.tid()
+    xi = x_in[i]
+    wi = inv_mass[i]
+    found = candidate_count[i]
+    if wi == 0.0 or found == 0:
+        x_out[i] = xi
+        return
+    total = type(xi)(0.0)
+    count = int(0)
+    for k in range(found):
+        j = candidate[i * max_candidates + k]
+        d = xi - x_in[j]
+        dist = wp.length(d)
+        gap = type(dist)(0.5 * (thickness[i] + thickness[j])) - dist
+        if gap > type(dist)(0.0) and dist > type(dist)(0.0):  # closer than the thickness, with a direction
+            share = wi / (wi + inv_mass[j])
+            total += d * (gap / dist * type(dist)(share))
+            count += 1
+    if count > 0:
+        xi = xi + total / type(total[0])(float(count))
+    x_out[i] = xi
+
+
+for_positions(contact_candidates, arrays=("x",), scalars=("query_radius",))
+for_positions(contact_gather, arrays=("x_in", "x_out"))

@@ -1,0 +1,233 @@
+"""Self-collision and cloth–cloth contact: ``self_collision = true`` on a cloth gives each of its particles a
+``collision_thickness``, and no two such particles (of the same cloth or of any two cloths that both ask for it)
+come closer than the thickness, unless they were that close in the rest pose.
+
+Particles are spheres of diameter ``collision_thickness`` (Macklin, Müller, Chentanez and Kim 2014, "Unified
+Particle Physics for Real-Time Applications"; Müller's self-collision demo): a pair closer than its thickness
+(the mean of its two particles') is pushed apart along its separation, each particle by its share of the
+inverse mass. Pairs of one cloth whose REST distance is under ``REST_EXCLUSION`` × the thickness never collide:
+that excludes the topological neighbours (structural sticks at one spacing apart, and diagonals where the
+thickness reaches them) without a table, so that a cloth at rest is not in contact with itself.
+
+Each substep (``run``) rebuilds a ``wp.HashGrid`` of every particle with cells of ``QUERY_REACH`` × the largest
+thickness and lists each particle's candidate pairs, those within ``QUERY_REACH`` × their thickness (at most
+``MAX_CANDIDATES``): rebuilt every substep because at the shipped speeds a particle moves up to about a thickness
+per substep, so a list kept for longer would miss new pairs. Each sweep then (``phases``) gathers, per particle,
+the pushes of its candidates closer than the thickness, from the same old positions, into a scratch buffer
+(their average: Jacobi, as the Jacobi sticks do in kernels/relax.py) and copies the buffer back in a second
+launch: no atomics on positions, so the result is bit-for-bit repeatable on every device. Friction is not
+modelled.
+
+A thickness is at most the cloth's rest spacing (a grid's ``size / (n - 1)``, the smaller of its two axes; a
+mesh's median edge): above it, the rest neighbours that never collide (within ``REST_EXCLUSION`` × the
+thickness) reach past the nearest ring of particles, so a tight fold could pass through itself there. The
+default, ``DEFAULT_FRACTION`` × the spacing, stays above half a grid square's diagonal (0.71 × the spacing), so
+that a particle cannot slip between the four particles of a square of another layer.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .kind import ConstraintSet
+from ..launches import FLOAT, INT, VEC3, BoundStage, PhaseTask, recorded, split_tasks
+from ..scene_keys import Key, boolean, real
+
+DEFAULT_FRACTION = 0.8
+"""The default thickness as a fraction of the cloth's rest spacing."""
+REST_EXCLUSION = 1.5
+"""Pairs of one cloth closer than this × their thickness in the rest pose never collide."""
+QUERY_REACH = 1.25
+"""Candidates are the pairs within this × their thickness at the start of a substep (and the hash grid's cell and
+query radius this × the largest thickness): they are found once per substep and checked in each of its sweeps,
+so the margin covers what the sweeps move a pair together after the search."""
+MAX_CANDIDATES = 12
+"""Candidate pairs kept per particle and substep, the first found in the grid's order (a fixed order, so which
+ones is repeatable). Particles at least a thickness apart fit about 12 around one within 1.25 × the thickness
+(a dense packing); a particle between two layers of a fold has 2 to 8."""
+THIN_AXIS_CELLS = 8
+"""Cells along an axis where the cloths are flat at rest: room for the layers of a fold or a pile."""
+CELLS_PER_PARTICLE = 8
+"""The hash grid's cells at most, per particle (above 4096 cells): its cell table costs 8 bytes a cell."""
+
+SELF_COLLISION = Key(
+    "self_collision", boolean, False, type="boolean", default_text="`false`",
+    doc="Particle contact: no two particles of the cloth come closer than `collision_thickness`, unless they were "
+        "that close at rest (within 1.5 × the thickness: the nearest neighbours). Cloths that all ask for it also "
+        "collide with each other. Costs a hash grid rebuilt every substep and a pass per sweep.")
+COLLISION_THICKNESS = Key(
+    "collision_thickness", real(0.0, None, lo_open=True), None, type="number", unit="m",
+    default_text="absent: 0.8 × the rest spacing", allowed="> 0, at most the rest spacing",
+    doc="The contact distance of `self_collision` (each particle a sphere of this diameter; a pair of two cloths "
+        "uses the mean of theirs). The rest spacing is a grid's `size / (n - 1)`, the smaller of its two axes, or "
+        "a mesh's median edge. Keep a particle's move per substep under half of it, or a fast layer can pass "
+        "through another between two substeps. Only with `self_collision = true`.")
+
+
+def rest_spacing(spec) -> float | None:
+    """The cloth's rest spacing in metres: a grid's ``size / (n - 1)`` over the axes with two particles or more
+    (the smaller), a mesh's median edge; None for a single particle."""
+    if spec.mesh is not None:
+        mesh = spec.mesh.mesh
+        if len(mesh.faces) == 0:
+            return None
+        pairs, _ = mesh.faces.sides()
+        edges = np.unique(np.sort(pairs, axis=1), axis=0)
+        edges = edges[edges[:, 0] != edges[:, 1]]
+        if not len(edges):
+            return None
+        points = mesh.particle_points
+        return float(np.median(np.linalg.norm(points[edges[:, 0]] - points[edges[:, 1]], axis=1)))
+    steps = [size / (n - 1) for n, size in zip(spec.resolution, spec.size) if n > 1]
+    return min(steps) if steps else None
+
+
+def thickness_of(spec) -> float | None:
+    """The cloth's resolved collision thickness (m), or None where it does not collide."""
+    return spec.options.get(COLLISION_THICKNESS.name) if spec.options.get(SELF_COLLISION.name) else None
+
+
+def hash_grid_dims(lo: np.ndarray, hi: np.ndarray, cell: float, particles: int) -> tuple[int, int, int]:
+    """Cells per axis of the hash grid over the colliding cloths' rest box [lo, hi]: the box in cells (a cell
+    per point of a sheet, so that a flat cloth's cells do not wrap onto each other), THIN_AXIS_CELLS on an axis
+    the cloths are flat along, halved on the largest axis while above CELLS_PER_PARTICLE per particle. Only the
+    speed depends on it: a position outside the box wraps onto a cell inside, and the query checks distances."""
+    dims = [max(1, math.ceil(float(e) / cell)) for e in np.asarray(hi) - np.asarray(lo)]
+    dims = [max(d, THIN_AXIS_CELLS) for d in dims]
+    budget = max(CELLS_PER_PARTICLE * particles, 4096)
+    while math.prod(dims) > budget:
+        largest = int(np.argmax(dims))
+        dims[largest] = math.ceil(dims[largest] / 2)
+    return tuple(dims)
+
+
+def hash_grid_bytes(particles: int, cells: int) -> int:
+    """Bytes Warp's hash grid allocates natively (outside any wp.array; warp/native/hashgrid.cpp and .cu, Warp
+    1.19): a cell and a point index per point, each for 1.5 × the points (its reserve's slack) and doubled for
+    its radix sort's second buffer, and a start and an end per cell. A CUDA sort's temporary space is not in it."""
+    return particles * 6 * INT + cells * 2 * INT
+
+
+def _colliding(scene) -> list:
+    return [c for c in scene.cloths if c.options.get(SELF_COLLISION.name)]
+
+
+def _rest_box(spec) -> tuple[np.ndarray, np.ndarray]:
+    """A cloth's rest bounding box, from its grid's size or its mesh's points (without building it)."""
+    from ..geometry.topology import grid_positions
+
+    points = spec.mesh.mesh.particle_points if spec.mesh is not None else grid_positions(spec)
+    return points.min(axis=0), points.max(axis=0)
+
+
+class ContactData:
+    """The contact's device data, per particle of the scene: ``thickness`` (N,) float32 m (0: its cloth does not
+    collide), ``rest`` (N,) vec3 float32 m (rest position) and ``cloth`` (N,) int32 (its cloth's index); and for
+    the hash grid, ``cell`` (m, its cell and query radius) and ``dims``. The candidates, rewritten each substep,
+    are the solver's scratch."""
+
+    def __init__(self, model, scene, device):
+        import warp as wp
+
+        n = model.particle_count
+        thickness = np.zeros(n, np.float32)
+        cloth = np.zeros(n, np.int32)
+        for k, (slot, spec) in enumerate(zip(model.cloths, scene.cloths)):
+            cloth[slot.particles] = k
+            h = thickness_of(spec)
+            if h is not None:
+                thickness[slot.particles] = h
+        self.cell = QUERY_REACH * float(thickness.max())
+        self.dims = scene_grid_dims(scene)
+        self.thickness = wp.array(thickness, dtype=float, device=device)
+        self.rest = wp.array(model.rest_positions.astype(np.float32), dtype=wp.vec3, device=device)
+        self.cloth = wp.array(cloth, dtype=int, device=device)
+
+
+def scene_grid_dims(scene) -> tuple[int, int, int]:
+    """The hash grid's cells per axis for ``scene`` (from its counts and rest boxes, before anything is built)."""
+    cloths = _colliding(scene)
+    boxes = [_rest_box(c) for c in cloths]
+    lo = np.min([b[0] for b in boxes], axis=0)
+    hi = np.max([b[1] for b in boxes], axis=0)
+    cell = QUERY_REACH * max(thickness_of(c) for c in cloths)
+    return hash_grid_dims(lo, hi, cell, scene.particle_count)
+
+
+class SelfContact(ConstraintSet):
+    """Particle–particle contact of the cloths with ``self_collision`` (kernels/self_contact.py): a hash grid
+    rebuilt each substep, then in each sweep a Jacobi gather of the pushes and a copy back."""
+
+    name = "self contact"
+    cloth_keys = (SELF_COLLISION, COLLISION_THICKNESS)
+
+    def check_cloth(self, spec, table):
+        given = spec.options.get(COLLISION_THICKNESS.name)
+        if not spec.options.get(SELF_COLLISION.name):
+            if given is not None:
+                raise table.error(COLLISION_THICKNESS.name,
+                                  "a collision thickness needs self_collision = true on the same cloth")
+            return None
+        spacing = rest_spacing(spec)
+        if spacing is None:
+            raise table.error(SELF_COLLISION.name, "self-collision needs a cloth of two particles or more")
+        if given is None:
+            return {COLLISION_THICKNESS.name: DEFAULT_FRACTION * spacing}
+        if given > spacing:
+            raise table.error(COLLISION_THICKNESS.name,
+                              f"expected at most the cloth's rest spacing, {spacing:.6g} m, got {given:g} m: a "
+                              f"thicker cloth's rest neighbours that never collide (within {REST_EXCLUSION} × the "
+                              "thickness at rest) reach past the nearest particles, so a tight fold could pass "
+                              "through itself")
+        return None
+
+    def count(self, scene):
+        """(the particles that collide, the hash grid's cells), or 0."""
+        colliding = sum(c.particle_count for c in _colliding(scene))
+        return (colliding, math.prod(scene_grid_dims(scene))) if colliding else 0
+
+    def needed(self, req) -> bool:
+        return bool(req.count(self.name))
+
+    def device_bytes(self, req) -> int:
+        # per particle: thickness, rest position, cloth (Model); a scratch position, the candidates and their
+        # count (solver); the hash grid
+        return (req.particles * (FLOAT + VEC3 + INT + req.position_bytes + (MAX_CANDIDATES + 1) * INT)
+                + hash_grid_bytes(req.particles, req.count(self.name)[1]))
+
+    def build(self, model, scene, device):
+        return ContactData(model, scene, device)
+
+    def bind(self, model, state, solver) -> BoundStage:
+        import warp as wp
+
+        from warp_verlet.kernels.self_contact import contact_candidates, contact_gather
+
+        data, x, n = model.constraints[self.name], state.particle_q, model.particle_count
+        real = model.position_scalar
+        scratch = solver.scratch("contact_positions", n, model.position_dtype)
+        candidate = solver.scratch("contact_candidates", n * MAX_CANDIDATES, int)
+        candidate_count = solver.scratch("contact_candidate_count", n, int)
+        grid = wp.HashGrid(*data.dims, device=model.device, dtype=real)
+        grid.reserve(n)
+        cell = data.cell
+        find = recorded(contact_candidates, n, [wp.uint64(grid.id), x, data.thickness, data.rest, data.cloth,
+                                                REST_EXCLUSION, QUERY_REACH, real(cell), MAX_CANDIDATES],
+                        [candidate, candidate_count])
+
+        def search(state, dt: float) -> None:
+            grid.build(x, cell)
+            find.run()
+
+        def gather(f, count):
+            return recorded(contact_gather, count, [x, model.inv_mass, data.thickness, candidate, candidate_count,
+                                                    MAX_CANDIDATES, f, scratch])
+
+        def copy_back(f, count):
+            return PhaseTask("copy", lambda: wp.copy(x, scratch, dest_offset=f, src_offset=f, count=count))
+
+        # ``search`` holds the grid, which the recorded launch reads by its id only.
+        return BoundStage(search, [split_tasks(gather, 0, n, solver.threads),
+                                   split_tasks(copy_back, 0, n, solver.threads)])
