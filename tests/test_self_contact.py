@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import warp as wp
 
 from conftest import make_scene
 from warp_verlet.constraints.self_contact import DEFAULT_FRACTION, REST_EXCLUSION
@@ -206,3 +207,26 @@ def test_a_mesh_cloths_default_is_its_median_edge(tmp_path):
     data = {"cloth": [{"mesh": "strip.obj", "self_collision": True}]}
     scene = parse_scene(data, str(tmp_path / "s.toml"), tmp_path / "s.toml")
     assert scene.cloths[0].options["collision_thickness"] == pytest.approx(DEFAULT_FRACTION * 0.05, rel=1e-6)
+
+
+@pytest.mark.cuda
+@pytest.mark.skipif(not wp.is_cuda_available(), reason="no CUDA device")
+def test_a_large_folded_cloth_holds_on_cuda_where_the_frame_is_not_captured():
+    # A captured CUDA frame replayed Warp's hash-grid build stale past a small cloth (256^2: the layers passed
+    # through each other), so a scene with self-collision steps its CUDA frames launch by launch; the CPU's
+    # capture replays it correctly.
+    import bench_package  # noqa: F401  (makes the repository's bench/ importable as the package "bench")
+    from bench import self_contact as sc
+
+    n = 256
+    sim = Simulator(sc.folded_scene(n, True, 20, 32, 8), "cuda")
+    assert not sim._use_graph
+    thickness = sc.DEFAULT_FRACTION * sc.SIZE / (n - 1)
+    sim.state.set_positions(sc.folded(sim.model.rest_positions, n, thickness))
+    meter = sc.GapMeter(sim, thickness)
+    worst = 0.0
+    for _ in range(20):
+        sim.step_frame()
+        worst = max(worst, meter.penetration())
+    assert worst < 0.2  # without self-collision: 1.0 (two particles at one point)
+    assert Simulator(sc.folded_scene(64, True, 2, 8, 8), "cpu")._use_graph

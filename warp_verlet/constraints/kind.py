@@ -56,6 +56,10 @@ class ConstraintKind(Protocol):
     def on_tear(self, model, state, torn: "np.ndarray") -> None:
         """React to the torn set changing (``torn``: per stick in ``model.host_sticks`` order)."""
 
+    def capturable(self, device) -> bool:
+        """Whether its launches replay correctly from a captured frame on ``device`` (a Warp device); a frame
+        with a kind that does not is stepped launch by launch."""
+
 
 class ConstraintSet:
     """Defaults for a kind that owns no keys, has nothing to check, keeps its data in the Model's core arrays
@@ -78,3 +82,6 @@ class ConstraintSet:
 
     def on_tear(self, model, state, torn) -> None:
         return None
+
+    def capturable(self, device) -> bool:
+        return True

@@ -163,6 +163,12 @@ class SelfContact(ConstraintSet):
     name = "self contact"
     cloth_keys = (SELF_COLLISION, COLLISION_THICKNESS)
 
+    def capturable(self, device) -> bool:
+        # Warp's HashGrid.build replayed from a CUDA graph left the grid stale past a small cloth: on an H100 a
+        # folded 256^2 cloth's layers passed through each other with the frame captured, and held without
+        # (bench/results/self_contact.md). The CPU capture replays it correctly (tests/test_self_contact.py).
+        return device.is_cpu
+
     def check_cloth(self, spec, table):
         given = spec.options.get(COLLISION_THICKNESS.name)
         if not spec.options.get(SELF_COLLISION.name):

@@ -204,7 +204,8 @@ class Simulator:
         # A frame's substeps are captured once and replayed: a CUDA graph, or on the CPU Warp's own capture
         # (replayed in C++, bit-identical, and faster: bench/results/code_choices.md). Threaded relaxation needs
         # its launches issued from Python, so it is not captured.
-        self._use_graph = use_graph and self.threads == 1
+        self._use_graph = use_graph and self.threads == 1 and all(
+            kind.capturable(self.device) for kind in constraint_kinds() if kind.needed(req))
         if self.dt < self.min_dt:
             raise WarpVerletError(self.solver.too_small(self.dt, scene_dt=True))
 
