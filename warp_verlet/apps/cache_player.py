@@ -15,6 +15,7 @@ import numpy as np
 
 from ..output.cache_reader import FrameGeometry, PreviewError, open_cache, read_frame
 from .display_mesh import DisplayMesh, rope_segments
+from ..colliders.mesh import draw_mesh
 from ..colliders.plane import draw_plane
 from ..colliders.sphere import draw_sphere
 from .web_view import (CLOTH_COLOURS, DEFAULT_PORT, LOCALHOST, ROPE_COLOUR, ROPE_THICKNESS_M, ClothDrawing,
@@ -54,6 +55,8 @@ class CachePlayer:
                         for i, (centre, radius) in enumerate(first.spheres)]
         for i, corners in enumerate(first.planes):
             draw_plane(self.server, f"plane{i}", corners)
+        for i, (points, triangles) in enumerate(first.meshes):  # still: drawn once
+            draw_mesh(self.server, f"mesh{i}", points, triangles)
         everything = np.concatenate([g for frame in (first, last) for g in
                                      [c.points for c in frame.cloth_frames] + list(frame.ropes)
                                      + [c[None] for c, _ in frame.spheres]])
