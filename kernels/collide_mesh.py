@@ -25,8 +25,8 @@ def collide_meshes(
     thickness: wp.array(dtype=float),
     friction: wp.array(dtype=float),
 ):
-    """Keeps each free particle ``thickness`` outside every mesh, along the outward direction from its closest
-    point (the face's normal when it lies on the surface)."""
+    """Keeps each free particle ``thickness`` outside every mesh: along the face's normal where its closest point
+    lies inside a face, else along the outward direction from that point."""
     i = wp.tid()
     if inv_mass[i] == 0.0:
         return
@@ -36,13 +36,18 @@ def collide_meshes(
         if query.result:
             closest = x.dtype(wp.mesh_eval_position(meshes[m], query.face, query.u, query.v))
             d = xi - closest
+            n = x.dtype(wp.mesh_eval_face_normal(meshes[m], query.face))
+            height = wp.dot(d, n)  # signed distance, when the closest point lies inside the face
+            in_face = query.u > 0.0 and query.v > 0.0 and query.u + query.v < 1.0
             distance = wp.length(d)
-            sign = type(distance)(query.sign)
-            depth = type(distance)(thickness[m]) - sign * distance
+            # Off the face (at an edge or a corner), the way out is along d. So close to the surface that d is
+            # float32 rounding, the face's normal is the better guess.
+            rounding = type(distance)(1.0e-6) * (type(distance)(1.0) + wp.length(closest))
+            if not in_face and distance > rounding:
+                height = type(distance)(query.sign) * distance
+                n = d / height  # outward: away from the surface outside, towards it inside
+            depth = type(distance)(thickness[m]) - height
             if depth > type(depth)(0.0):
-                n = x.dtype(wp.mesh_eval_face_normal(meshes[m], query.face))
-                if distance > type(distance)(1.0e-9):
-                    n = d * (sign / distance)  # outward: away from the surface outside, towards it inside
                 xi = project_out(i, xi, n, depth, friction[m], x_inertial, delta)
     x[i] = xi
 

@@ -79,10 +79,12 @@ def test_kind_keys_are_distinct_from_the_shared_ones():
 
 
 def test_the_registry_is_the_clamp_order():
-    # Spheres before planes: the plane's clamp runs last, so that a sphere resting on the ground cannot push
-    # cloth through the ground.
-    assert [k.type for k in colliders.COLLIDER_KINDS] == ["sphere", "plane"]
-    assert colliders.COLLIDER_KINDS == (SPHERE, PLANE)
+    # Spheres and meshes before planes: the plane's clamp runs last, so that a sphere or a table standing on the
+    # ground cannot push cloth through the ground.
+    from warp_verlet.colliders.mesh import MESH
+
+    assert [k.type for k in colliders.COLLIDER_KINDS] == ["sphere", "mesh", "plane"]
+    assert colliders.COLLIDER_KINDS == (SPHERE, MESH, PLANE)
 
 
 def test_the_scene_reads_each_collider_through_its_kind():
