@@ -93,7 +93,7 @@ def test_the_scene_reads_each_collider_through_its_kind():
     plane, sphere = scene.colliders
     assert isinstance(plane, PlaneCollider) and plane.name == "plane0" and plane.normal == (0.0, 1.0, 0.0)
     assert isinstance(sphere, SphereCollider) and sphere.name == "sphere1" and sphere.keyframes == ((0.0, (0, 0, 0)),)
-    with pytest.raises(SceneError, match=r"<test>.*collider\[0\]\.type.*expected one of 'plane', 'sphere', got"):
+    with pytest.raises(SceneError, match=r"<test>.*collider\[0\]\.type.*expected one of 'mesh', 'plane', 'sphere', got"):
         parse_scene({"cloth": [{"resolution": [2, 2], "size": [1.0, 1.0]}], "collider": [{"type": "cube"}]},
                     file="<test>")
 
@@ -303,5 +303,5 @@ def test_a_kind_registered_in_a_test_is_written_to_the_cache_and_read_back(monke
 
 
 def test_without_the_kind_registered_its_type_is_refused():
-    with pytest.raises(SceneError, match=r"collider\[0\]\.type.*expected one of 'plane', 'sphere', got str 'level'"):
+    with pytest.raises(SceneError, match=r"collider\[0\]\.type.*expected one of 'mesh', 'plane', 'sphere', got str 'level'"):
         falling_scene({"type": "level", "level": 0.0})
