@@ -341,3 +341,40 @@ def test_the_memory_estimate_counts_the_bvh_warp_allocates_on_cuda():
     declared = MESH.device_bytes(MESH.counts((spec,)))
     assert abs(used - declared) <= 0.01 * declared + 8192, (used, declared)
     del built
+
+
+# ------------------------------------------------------------------------------------------- the pages
+
+
+def test_live_draws_the_mesh_saves_it_and_view_draws_it_back(tmp_path):
+    pytest.importorskip("viser", reason="the browser views need viser: pip install 'warp-verlet[live]'")
+    from browser import free_port
+    from pxr import Usd, UsdGeom
+
+    from warp_verlet.apps.cache_player import CachePlayer
+    from warp_verlet.apps.live_app import LiveApp
+    from warp_verlet.apps.live_session import LiveSession
+
+    write_table(tmp_path / "table.obj")
+    scene = scene_of(tmp_path, [{"type": "mesh", "mesh": "table.obj", "name": "table", "thickness": THICKNESS}],
+                     cloth={"origin": [-0.45, 0.6, -0.45]})
+    app = LiveApp(LiveSession(scene, "cpu"), port=free_port(), record_path=tmp_path / "live.usdc")
+    try:
+        drawing = app._collider_drawings["mesh"]
+        assert len(drawing.items) == 1 and drawing.update is None  # drawn once: it never moves
+        np.testing.assert_array_equal(drawing.items[0].vertices, scene.colliders[0].points.astype(np.float32))
+        for _ in range(3):
+            app.session.tick(1 / 60)
+        app.session.save(tmp_path / "saved.usdc")
+    finally:
+        app.server.stop()
+        app.session.close()
+    stage = Usd.Stage.Open(str(tmp_path / "saved.usdc"))
+    prim = stage.GetPrimAtPath("/World/Colliders/table")
+    assert prim.IsA(UsdGeom.Mesh) and len(UsdGeom.Mesh(prim).GetFaceVertexCountsAttr().Get()) == 60
+    player = CachePlayer(tmp_path / "saved.usdc", port=free_port())
+    try:
+        handle = player.server.scene._handle_from_node_name["/colliders/mesh0"]
+        assert len(handle.faces) == 60
+    finally:
+        player.server.stop()
