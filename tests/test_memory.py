@@ -99,8 +99,10 @@ CASES = {
     "angle-limit-float64": ({"precision": "float64"}, {"pins": ["top-edge"], "max_bend_angle": 30.0}),
     "rigid-patches": ({}, {"pins": ["top-left"], "rigid_patches": [[[0, 0], [0, 1], [1, 0], [1, 1]],
                                                                    [[5, 5], [5, 6], [6, 5]]]}),
-    # a triangle mesh (its points and indices, its wp.Mesh id, reach, thickness, friction) and a BVH of its own
+    # triangle meshes (points and indices, a wp.Mesh id, reach, thickness, friction, a translation in the Model
+    # and the State, and a BVH of its own); a moving one adds its keyframes, a clock and per-mesh key starts
     "mesh": ({}, {}, [BALL, TABLE, dict(TABLE, translate=[0.0, -3.0, 0.0]), GROUND]),
+    "moving-mesh": ({}, {}, [SWEEP, TABLE, dict(TABLE, translate=[[0.0, 0.0, -3.0, 0.0], [1.0, 1.0, -3.0, 0.0]])]),
 }
 
 

@@ -137,7 +137,8 @@ def test_the_kernel_pushes_out_along_the_outward_direction(tmp_path):
 
     c = sim.model.colliders
     wp.launch(collide_meshes, 4, inputs=[sim.state.particle_q, sim.state.particle_q_inertial, sim.state.particle_dq,
-                                         sim.model.inv_mass, c.mesh_ids, c.mesh_reach, c.mesh_thickness,
+                                         sim.model.inv_mass, c.mesh_ids, sim.state.mesh_offsets, c.mesh_reach,
+                                         c.mesh_thickness,
                                          c.mesh_friction], device="cpu")
     expected = np.array([[0.05, 0.11, 0.0], [0.31, 0.0, 0.01], [0.0, 0.11, -0.1], [0.0, -0.3, 0.0]])
     np.testing.assert_allclose(sim.positions(), expected, atol=TOL)
@@ -169,6 +170,56 @@ def test_a_scene_without_a_mesh_launches_and_allocates_nothing_of_it(tmp_path, l
     assert before[-1] == "collide_planes"
     # The meshes clamp once a substep, before the ground; nothing else changes.
     assert launches.of(with_mesh.step) == before[:-1] + ["collide_meshes", "collide_planes"]
+
+
+def test_a_moving_mesh_pushes_through_a_curtain_and_leaves_no_particle_inside(tmp_path, device, launches):
+    # A 20 cm box crosses a hanging curtain along +Z at 1 m/s (2 mm a substep, a fifth of the thickness).
+    write_box(tmp_path / "box.obj", half=(0.1, 0.1, 0.1))
+    path = [[0.0, 0.0, -0.1, -0.4], [0.8, 0.0, -0.1, 0.4]]
+    scene = scene_of(tmp_path, [{"type": "mesh", "mesh": "box.obj", "translate": path, "thickness": THICKNESS}],
+                     cloth={"resolution": [12, 12], "size": [0.6, 0.6], "origin": [-0.3, 0.3, 0.0],
+                            "orientation": "vertical", "pins": ["top-edge"]}, fps=60, frames=60)
+    spec = scene.colliders[0]
+    assert spec.moving and spec.offset_at(0.4) == (0.0, -0.1, 0.0)
+    sim = Simulator(scene, device, use_graph=False)
+    dt = sim.settings.dt
+    worst, pushed = np.inf, 0.0
+    for k in range(1, 8 * 50 + 1):
+        if k == 2:
+            issued = launches.of(sim.step)
+            assert issued[-3:] == ["advance_clock", "place_meshes", "collide_meshes"]  # placed, then clamped
+        else:
+            sim.step()
+        q = sim.positions().astype(np.float64)
+        worst = min(worst, box_sdf(q, np.asarray(spec.offset_at(k * dt)), 0.1).min())
+        pushed = max(pushed, q[:, 2].max())
+    assert worst >= THICKNESS - TOL
+    assert pushed > 0.3  # the box carried the curtain's middle along
+
+
+def test_a_moving_mesh_is_time_sampled_in_the_cache(tmp_path):
+    from pxr import Usd, UsdGeom
+
+    from warp_verlet.apps.runner import run_scene
+    from warp_verlet.output.cache_reader import open_cache, read_frame
+
+    write_box(tmp_path / "box.obj", half=(0.1, 0.1, 0.1))
+    scene = scene_of(tmp_path, [{"type": "mesh", "mesh": "box.obj", "name": "lift", "translate": [[0.0, 0.0, -1.0, 0.0],
+                                                                                                   [0.1, 0.0, -0.5, 0.0]]},
+                                {"type": "mesh", "mesh": "box.obj", "name": "still", "translate": [2.0, 0.0, 0.0]}],
+                     fps=30, frames=6)
+    run_scene(scene, tmp_path / "out.usdc", device="cpu")
+    stage = Usd.Stage.Open(str(tmp_path / "out.usdc"))
+    lift = UsdGeom.Xformable(stage.GetPrimAtPath("/World/Colliders/lift"))
+    op = lift.GetOrderedXformOps()[0]
+    assert op.GetOpName() == "xformOp:translate" and op.GetNumTimeSamples() == 7  # frames 0 to 6
+    still = UsdGeom.Xformable(stage.GetPrimAtPath("/World/Colliders/still")).GetOrderedXformOps()[0]
+    assert still.GetNumTimeSamples() == 0 and tuple(still.Get()) == (2.0, 0.0, 0.0)
+    cache = open_cache(tmp_path / "out.usdc")
+    for frame, height in [(0, -1.0), (1, -1.0 + 0.5 / 3), (6, -0.5)]:
+        (lifted, _), (kept, _) = read_frame(cache, frame).meshes
+        np.testing.assert_allclose(lifted, scene.colliders[0].points + [0.0, height, 0.0], atol=1e-6)
+        np.testing.assert_allclose(kept, scene.colliders[1].points + [2.0, 0.0, 0.0], atol=1e-6)
 
 
 # ------------------------------------------------------------------------------------------- bad input
@@ -235,8 +286,8 @@ def test_a_missing_prim_is_refused_and_a_usd_prim_is_read(tmp_path):
     collider = scene_of(tmp_path, [{"type": "mesh", "mesh": "set.usda", "prim": "/Set/Box",
                                     "translate": [0.0, 1.0, 0.0]}]).colliders[0]
     assert isinstance(collider, MeshCollider) and collider.name == "mesh0"
-    np.testing.assert_allclose(collider.points.min(axis=0), [-0.01, 0.99, -0.01])
-    np.testing.assert_allclose(collider.points.max(axis=0), [0.01, 1.01, 0.01])
+    np.testing.assert_allclose(collider.points_at(0.0).min(axis=0), [-0.01, 0.99, -0.01])
+    np.testing.assert_allclose(collider.points_at(0.0).max(axis=0), [0.01, 1.01, 0.01])
 
 
 def test_a_mesh_wound_inward_is_turned_outward_and_duplicates_are_welded(tmp_path):

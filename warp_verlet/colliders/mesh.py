@@ -1,5 +1,10 @@
-"""Triangle-mesh colliders: a closed mesh read from any file trimesh reads or from a USD prim, still, with a BVH
-(``wp.Mesh``) that each particle queries (kernels/collide_mesh.py).
+"""Triangle-mesh colliders: a closed mesh read from any file trimesh reads or from a USD prim, still or moved by
+keyframed translations, with a BVH (``wp.Mesh``) that each particle queries (kernels/collide_mesh.py).
+
+The BVH is built once, over the mesh scaled and rotated; its translation lives in the State (as a sphere's
+centre does) and each particle is queried at its position less that translation, so a moving mesh needs no
+refit. Like a moving sphere, it pushes the cloth out and its friction acts on the cloth's own velocity, not the
+velocity relative to the mesh.
 
 Inside is told from outside by the normals at the closest point (``wp.mesh_query_point_sign_normal``): one
 closest-point query per particle gives the push-out direction and the sign together, with no extra rays (the
@@ -16,7 +21,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..scene_keys import ARRAY, NUMBER, Invalid, Key, accepts, any_real, per_element, real, text, vector
-from .kind import FLOAT, INT, VEC3, ColliderLaunches, InsideReport, LiveDrawing
+from .kind import FLOAT, FLOAT64, INT, VEC3, ColliderLaunches, InsideReport, LiveDrawing
 
 MESH_ID = 8  # bytes of a wp.Mesh id (uint64) on the device
 # What Warp allocates for one wp.Mesh of T triangles besides the points and indices it is given (warp/native
@@ -30,21 +35,37 @@ DESCRIPTOR_BYTES = 1024
 
 @dataclass(frozen=True, eq=False)
 class MeshCollider:
-    """A still, closed triangle mesh in the scene's frame: ``points`` (V, 3) float64 m, welded; ``triangles``
-    (T, 3) int32, each closed part wound counter-clockwise seen from outside. ``source`` names the file (and the
+    """A closed triangle mesh: ``points`` (V, 3) float64 m, welded, scaled and rotated into the scene's axes;
+    ``triangles`` (T, 3) int32, each closed part wound counter-clockwise seen from outside; moved by
+    ``keyframes`` ((time s, (x, y, z)), ...), linearly, held at the ends. ``source`` names the file (and the
     prim) in messages."""
 
     name: str
     source: str
     points: Any
     triangles: Any
+    keyframes: tuple[tuple[float, tuple[float, float, float]], ...] = ((0.0, (0.0, 0.0, 0.0)),)
     thickness: float = 0.0
     friction: float = 0.0
     purpose: str = "guide"  # USD purpose of its prim in a cache
 
     @property
     def moving(self) -> bool:
-        return False
+        return len({offset for _, offset in self.keyframes}) > 1
+
+    def offset_at(self, time: float) -> tuple[float, float, float]:
+        """Its translation at ``time`` s."""
+        import numpy as np
+
+        times = [t for t, _ in self.keyframes]
+        offsets = np.asarray([o for _, o in self.keyframes], np.float64)
+        return tuple(float(np.interp(time, times, offsets[:, k])) for k in range(3))
+
+    def points_at(self, time: float):
+        """(V, 3) float64: its points in the scene at ``time`` s."""
+        import numpy as np
+
+        return self.points + np.asarray(self.offset_at(time))
 
     @property
     def reach(self) -> float:
@@ -69,6 +90,16 @@ def _scale(value: Any, key: str) -> tuple[float, float, float]:
     return (s, s, s)
 
 
+@accepts(ARRAY)
+def _translate(value: Any, key: str) -> tuple[tuple[float, tuple[float, float, float]], ...]:
+    """[x, y, z] (a still mesh), or keyframes [[t, x, y, z], ...] as a sphere's path: ((t, (x, y, z)), ...)."""
+    if isinstance(value, list) and value and all(isinstance(item, list) for item in value):
+        from .sphere import read_path
+
+        return read_path(value, key)
+    return ((0.0, vector(3, any_real)(value, key)),)
+
+
 FILE = Key("mesh", text, type="string",
            allowed="a file trimesh reads (`.obj`, `.ply`, `.stl`, `.off`, `.glb`, …) or a USD file (`.usd`, `.usda`, "
                    "`.usdc`, `.usdz`)",
@@ -76,8 +107,12 @@ FILE = Key("mesh", text, type="string",
                "between two triangles wound the same way); its points are welded where they coincide exactly.")
 PRIM = Key("prim", text, None, "string", default_text="required for USD, refused otherwise",
            allowed='an absolute prim path, e.g. `"/Set/Table"`', doc="The Mesh prim to read.")
-TRANSLATE = Key("translate", vector(3, any_real), (0.0, 0.0, 0.0), "[x, y, z] numbers", "m", allowed="finite",
-                doc="Moves the mesh, after `rotate`.")
+TRANSLATE = Key("translate", _translate, ((0.0, (0.0, 0.0, 0.0)),), "[x, y, z] numbers, or array of [t, x, y, z]",
+                "m; s, m", default_text="`[0.0, 0.0, 0.0]`",
+                allowed="finite; keyframes: at least one, times strictly increasing",
+                doc="Moves the mesh, after `rotate`: by `[x, y, z]`, or along keyframes `[[t, x, y, z], ...]`, linear "
+                    "between them and held at the first before it and at the last after it, as a sphere's `path`. A "
+                    "moving mesh gets a time-sampled `xformOp:translate` in the cache.")
 ROTATE = Key("rotate", vector(3, any_real), (0.0, 0.0, 0.0), "[x, y, z] numbers", "degrees", allowed="finite",
              doc="Rotations about the fixed X, then Y, then Z axes, after `scale`.")
 SCALE = Key("scale", _scale, (1.0, 1.0, 1.0), "number or [x, y, z]", default_text="`1.0`", allowed="> 0",
@@ -100,7 +135,8 @@ class MeshKind:
 
         relative = FILE.take(table)
         prim = PRIM.take(table)
-        matrix = transform_matrix(TRANSLATE.take(table), ROTATE.take(table), SCALE.take(table))
+        keyframes = TRANSLATE.take(table)
+        matrix = transform_matrix((0.0, 0.0, 0.0), ROTATE.take(table), SCALE.take(table))
         table.finish()  # no unknown key: the file is read only once every key is known to be good
         path = Path(relative)
         if not path.is_absolute():
@@ -110,13 +146,24 @@ class MeshKind:
             points, triangles = closed_triangles(source.description, source.points, source.faces)
         except MeshError as exc:
             raise table.error("mesh", str(exc)) from None
-        return MeshCollider(source=source.description, points=points, triangles=triangles, **shared)
+        return MeshCollider(source=source.description, points=points, triangles=triangles, keyframes=keyframes,
+                            **shared)
 
     def check_numbers(self, spec: MeshCollider, file: str, key: str) -> None:
+        import numpy as np
+
         from ..errors import SceneError
         from ..scene_keys import FLOAT32_MAX, float32_fits
 
         # The points were checked against float32's range when read (mesh_io.to_scene).
+        limit = f"float32 holds magnitudes up to {FLOAT32_MAX:.3g}"
+        for k, (_, offset) in enumerate(spec.keyframes):
+            far = np.abs(spec.points).max() + np.abs(np.asarray(offset))
+            for axis, v in enumerate(offset):
+                if not float32_fits(v) or not float32_fits(far[axis]):
+                    where = f"{key}.translate[{k}][{axis + 1}]" if len(spec.keyframes) > 1 else f"{key}.translate[{axis}]"
+                    raise SceneError(file, where, f"expected a number that float32 can hold ({limit}) with the mesh "
+                                     f"moved by it, got {v:g}")
         if not float32_fits(spec.reach):
             raise SceneError(file, f"{key}.thickness", f"thickness + half the mesh's thinnest side = {spec.reach:g} m, "
                              f"which float32 cannot hold (float32 holds magnitudes up to {FLOAT32_MAX:.3g})")
@@ -125,10 +172,11 @@ class MeshKind:
         import numpy as np
 
         inside = np.zeros(len(points), bool)
-        lo = spec.points.min(axis=0) - spec.thickness
-        hi = spec.points.max(axis=0) + spec.thickness
+        placed = spec.points_at(0.0)
+        lo = placed.min(axis=0) - spec.thickness
+        hi = placed.max(axis=0) + spec.thickness
         near = np.flatnonzero(np.all((points >= lo) & (points <= hi), axis=1))  # only these can be inside
-        corners = spec.points[spec.triangles]
+        corners = placed[spec.triangles]
         chunk = max(1, 2_000_000 // max(len(corners), 1))
         for start in range(0, len(near), chunk):
             index = near[start:start + chunk]
@@ -138,21 +186,26 @@ class MeshKind:
                 found |= distances_to_triangles(corners, p) < spec.thickness
             inside[index] = found
         side = "inside" if spec.thickness == 0 else f"inside or within thickness = {spec.thickness:.4g} m of"
-        return InsideReport(inside, f"{side} mesh '{spec.name}'",
+        return InsideReport(inside, f"{side} mesh '{spec.name}' (at time 0)",
                             "move the cloth's origin, or the mesh's translate, so that they start apart")
 
     # ------------------------------------------------------------------ simulation core
-    def counts(self, specs: tuple[MeshCollider, ...]) -> tuple[int, int, int]:
-        """(meshes, their points, their triangles)."""
-        return len(specs), sum(len(s.points) for s in specs), sum(len(s.triangles) for s in specs)
+    def counts(self, specs: tuple[MeshCollider, ...]) -> tuple[int, int, int, int]:
+        """(meshes, their points, their triangles, their keyframes when one moves, else 0)."""
+        moving = any(s.moving for s in specs)
+        return (len(specs), sum(len(s.points) for s in specs), sum(len(s.triangles) for s in specs),
+                sum(len(s.keyframes) for s in specs) if moving else 0)
 
-    def device_bytes(self, counts: tuple[int, int, int]) -> int:
-        meshes, points, triangles = counts
+    def device_bytes(self, counts: tuple[int, int, int, int]) -> int:
+        meshes, points, triangles, keys = counts
         given = points * VEC3 + 3 * triangles * INT  # the points and indices the meshes are built from
-        per_mesh = meshes * (MESH_ID + 3 * FLOAT)  # ids, reach, thickness, friction
+        # ids, reach, thickness, friction, the start translation; the State's translation
+        per_mesh = meshes * (MESH_ID + 3 * FLOAT + 2 * VEC3)
         bvh = triangles * TRIANGLE_BVH_BYTES + (2 * triangles - meshes) * NODE_BYTES
         bvh += meshes * (INT + DESCRIPTOR_BYTES)
-        return given + per_mesh + bvh
+        # key starts (one more than the meshes), keyframe times and translations, the State's clock
+        moving = ((meshes + 1) * INT + keys * (FLOAT + VEC3) + FLOAT64) if keys else 0
+        return given + per_mesh + bvh + moving
 
     def build(self, specs: tuple[MeshCollider, ...], device) -> dict[str, Any]:
         import numpy as np
@@ -166,8 +219,10 @@ class MeshKind:
         bvhs = tuple(wp.Mesh(points=points[point_start[k]:point_start[k + 1]],
                              indices=indices[index_start[k]:index_start[k + 1]])
                      for k in range(len(specs)))
-        return {
+        moving = any(s.moving for s in specs)
+        out = {
             "meshes": specs,
+            "meshes_move": moving,
             "mesh_bvhs": bvhs,  # kept alive: the kernel reaches them by id
             "mesh_points": points,
             "mesh_indices": indices,
@@ -175,29 +230,59 @@ class MeshKind:
             "mesh_reach": wp.array([s.reach for s in specs], dtype=float),
             "mesh_thickness": wp.array([s.thickness for s in specs], dtype=float),
             "mesh_friction": wp.array([s.friction for s in specs], dtype=float),
+            "mesh_start": wp.array([s.keyframes[0][1] for s in specs], dtype=wp.vec3),
         }
+        if moving:
+            # A still mesh (one translation, however many keyframes) keeps one key: place_meshes leaves it be.
+            keys = [s.keyframes if s.moving else s.keyframes[:1] for s in specs]
+            out["mesh_key_start"] = wp.array(np.r_[0, np.cumsum([len(k) for k in keys])].astype(np.int32), dtype=int)
+            out["mesh_key_times"] = wp.array([t for k in keys for t, _ in k], dtype=float)
+            out["mesh_key_offsets"] = wp.array([o for k in keys for _, o in k], dtype=wp.vec3)
+        return out
 
     def state_arrays(self, colliders) -> dict[str, Any]:
-        return {}  # a still mesh never moves
+        import warp as wp
+
+        meshes = getattr(colliders, "meshes", ())
+        moving = getattr(colliders, "meshes_move", False)
+        return {"mesh_clock": wp.zeros(1, dtype=wp.float64) if moving else None,
+                "mesh_offsets": wp.clone(colliders.mesh_start) if meshes else None}
 
     def bind(self, model, state) -> ColliderLaunches:
-        from ..kernels.collide_mesh import collide_meshes
+        import warp as wp
+
+        from ..kernels.collide_mesh import collide_meshes, place_meshes
+        from ..kernels.collide_sphere import advance_clock
         from ..launches import recorded
 
         c = model.colliders
+        before = ()
+        if c.meshes_move:
+            clock = state.mesh_clock
+            place = recorded(place_meshes, len(c.meshes), [clock, c.mesh_key_start, c.mesh_key_times,
+                                                           c.mesh_key_offsets], [state.mesh_offsets])
+
+            def advance(dt: float) -> None:
+                wp.launch(advance_clock, 1, inputs=[clock, wp.float64(dt)])
+                place.run()
+
+            before = (advance,)
         clamp = recorded(collide_meshes, model.particle_count,
                          [state.particle_q, state.particle_q_inertial, state.particle_dq, model.inv_mass,
-                          c.mesh_ids, c.mesh_reach, c.mesh_thickness, c.mesh_friction])
-        return ColliderLaunches((), (clamp,))
+                          c.mesh_ids, state.mesh_offsets, c.mesh_reach, c.mesh_thickness, c.mesh_friction])
+        return ColliderLaunches(before, (clamp,))
 
     # ------------------------------------------------------------------ output
     def samples(self, colliders, state, always_moving: bool = False):
+        """Translations of the moving meshes, in scene order (a live session drags no mesh: the same then)."""
         import numpy as np
 
-        return np.zeros((0, 3), np.float32)
+        if not colliders.meshes_move:
+            return np.zeros((0, 3), np.float32)
+        return state.mesh_offsets.numpy()[[s.moving for s in colliders.meshes]]
 
     def cached(self, spec: MeshCollider, always_moving: bool = False) -> "CachedMesh":
-        return CachedMesh(spec.name, spec.points, spec.triangles, spec.purpose)
+        return CachedMesh(spec.name, spec.points, spec.triangles, spec.keyframes[0][1], spec.moving, spec.purpose)
 
     def owns_prim(self, prim, under_colliders: bool) -> bool:
         """A Mesh under /World/Colliders other than a plane's single quad."""
@@ -225,23 +310,36 @@ class MeshKind:
         return {"meshes": (world, triangles)}
 
     def add_to_live(self, app, specs: tuple[MeshCollider, ...]) -> LiveDrawing:
-        """The meshes as the cache draws them; they never move."""
-        return LiveDrawing([draw_mesh(app.server, m.name, m.points, m.triangles) for m in specs],
-                           [p for m in specs for p in (m.points.min(axis=0), m.points.max(axis=0))])
+        """The meshes as the cache draws them, at their translations; the per-frame update follows the moving
+        ones (None when none moves)."""
+        import numpy as np
+
+        state = app.session.sim.state
+        offsets = state.mesh_offsets.numpy()
+        drawn = [draw_mesh(app.server, m.name, m.points, m.triangles, offsets[i]) for i, m in enumerate(specs)]
+        frame = [p + offsets[i] for i, m in enumerate(specs) for p in (m.points.min(axis=0), m.points.max(axis=0))]
+        if not any(m.moving for m in specs):
+            return LiveDrawing(drawn, frame)
+
+        def update() -> None:
+            for handle, offset in zip(drawn, app.session.sim.state.mesh_offsets.numpy()):
+                if not np.allclose(handle.position, offset):
+                    handle.position = tuple(float(v) for v in offset)
+
+        return LiveDrawing(drawn, frame, update)
 
 
 @dataclass(frozen=True, eq=False)
 class CachedMesh:
-    """A mesh collider in the cache: its triangles, written once."""
+    """A mesh collider in the cache: its triangles, written once, and its translation (sampled per frame when
+    it moves)."""
 
     name: str
     points: Any
     triangles: Any
+    offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    moving: bool = False
     purpose: str = "guide"
-
-    @property
-    def moving(self) -> bool:
-        return False
 
     @property
     def cache_bytes(self) -> int:
@@ -249,7 +347,8 @@ class CachedMesh:
         return 512 + 12 * len(self.points) + 16 * len(self.triangles)
 
     def define(self, stage, path):
-        """A Mesh prim of triangles, wound counter-clockwise seen from outside; nothing to sample per frame."""
+        """A Mesh prim of triangles, wound counter-clockwise seen from outside, with a translate: sampled per
+        frame when it moves (the op returned), else set once."""
         import numpy as np
         from pxr import UsdGeom, Vt
 
@@ -262,6 +361,10 @@ class CachedMesh:
         mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
         mesh.CreateOrientationAttr(UsdGeom.Tokens.rightHanded)
         mesh.CreatePurposeAttr(self.purpose)
+        op = mesh.AddTranslateOp()
+        if self.moving:
+            return op  # sampled per frame in write_frame
+        op.Set(tuple(float(v) for v in self.offset))
         return None
 
 
@@ -271,12 +374,13 @@ MESH = MeshKind()
 LIVE_COLOUR = (178, 184, 194)  # sRGB, on the live and view pages, as a sphere's
 
 
-def draw_mesh(server, name: str, points, triangles):
-    """A mesh collider on a viser page (live and view): its triangles."""
+def draw_mesh(server, name: str, points, triangles, position=(0.0, 0.0, 0.0)):
+    """A mesh collider on a viser page (live and view): its triangles, moved to ``position``."""
     import numpy as np
 
     return server.scene.add_mesh_simple(f"/colliders/{name}", np.asarray(points, np.float32),
-                                        np.asarray(triangles, np.uint32), color=LIVE_COLOUR, side="double")
+                                        np.asarray(triangles, np.uint32), color=LIVE_COLOUR, side="double",
+                                        position=tuple(float(v) for v in position))
 
 
 # --------------------------------------------------------------------------------------------- geometry
