@@ -79,6 +79,24 @@ def test_a_cloth_dropped_on_a_box_is_never_inside_it_after_a_substep(tmp_path, d
     assert np.abs(box_sdf(q.astype(np.float64), 0.0, HALF).min() - THICKNESS) < 1e-4  # and rests on it
 
 
+def test_float64_positions_are_kept_out_as_float32_ones(tmp_path):
+    # The query runs in float32 and the push-out in the positions' precision: a float64 run rests the cloth at
+    # the same distance, to float32's rounding.
+    write_box(tmp_path / "box.obj")
+    collider = [{"type": "mesh", "mesh": "box.obj", "thickness": THICKNESS}]
+    ends = []
+    for precision in ("float32", "float64"):
+        sim = Simulator(scene_of(tmp_path, collider, precision=precision), "cpu", use_graph=False)
+        assert sim.precision == precision
+        worst = np.inf
+        for _ in range(8 * 20):
+            sim.step()
+            worst = min(worst, box_sdf(sim.positions().astype(np.float64), 0.0, HALF).min())
+        assert worst >= THICKNESS - TOL
+        ends.append(sim.positions().astype(np.float64))
+    np.testing.assert_allclose(ends[0], ends[1], atol=1e-4)
+
+
 def test_a_cloth_dropped_on_a_table_with_legs_never_enters_it(tmp_path):
     write_table(tmp_path / "table.obj")
     scene = scene_of(tmp_path, [{"type": "mesh", "mesh": "table.obj", "thickness": THICKNESS}],
