@@ -222,8 +222,8 @@ def test_a_moving_mesh_is_time_sampled_in_the_cache(tmp_path):
     from warp_verlet.output.cache_reader import open_cache, read_frame
 
     write_box(tmp_path / "box.obj", half=(0.1, 0.1, 0.1))
-    scene = scene_of(tmp_path, [{"type": "mesh", "mesh": "box.obj", "name": "lift", "translate": [[0.0, 0.0, -1.0, 0.0],
-                                                                                                   [0.1, 0.0, -0.5, 0.0]]},
+    lift = [[0.0, 0.0, -1.0, 0.0], [0.1, 0.0, -0.5, 0.0]]
+    scene = scene_of(tmp_path, [{"type": "mesh", "mesh": "box.obj", "name": "lift", "translate": lift},
                                 {"type": "mesh", "mesh": "box.obj", "name": "still", "translate": [2.0, 0.0, 0.0]}],
                      fps=30, frames=6)
     run_scene(scene, tmp_path / "out.usdc", device="cpu")
@@ -306,6 +306,16 @@ def test_a_missing_prim_is_refused_and_a_usd_prim_is_read(tmp_path):
     assert isinstance(collider, MeshCollider) and collider.name == "mesh0"
     np.testing.assert_allclose(collider.points_at(0.0).min(axis=0), [-0.01, 0.99, -0.01])
     np.testing.assert_allclose(collider.points_at(0.0).max(axis=0), [0.01, 1.01, 0.01])
+
+
+def test_a_translation_beyond_float32_is_refused(tmp_path):
+    write_box(tmp_path / "box.obj")
+    err = error_of(tmp_path, {"mesh": "box.obj", "translate": [0.0, 1e39, 0.0]})
+    assert err.key == "collider[0].translate[1]" and "float32" in err.problem
+    err = error_of(tmp_path, {"mesh": "box.obj", "translate": [[0.0, 0.0, 0.0, 0.0], [1.0, 0.0, 0.0, -1e39]]})
+    assert err.key == "collider[0].translate[1][3]" and "float32" in err.problem
+    err = error_of(tmp_path, {"mesh": "box.obj", "translate": [[1.0, 0.0, 0.0, 0.0], [0.5, 0.0, 0.0, 1.0]]})
+    assert err.key == "collider[0].translate[1][0]" and "keyframe times must increase" in err.problem
 
 
 def test_a_mesh_wound_inward_is_turned_outward_and_duplicates_are_welded(tmp_path):

@@ -20,7 +20,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from ..scene_keys import ARRAY, NUMBER, Invalid, Key, accepts, any_real, per_element, real, text, vector
+from ..scene_keys import ARRAY, NUMBER, Key, accepts, any_real, per_element, real, text, vector
 from .kind import FLOAT, FLOAT64, INT, VEC3, ColliderLaunches, InsideReport, LiveDrawing
 
 MESH_ID = 8  # bytes of a wp.Mesh id (uint64) on the device
@@ -161,7 +161,8 @@ class MeshKind:
             far = np.abs(spec.points).max() + np.abs(np.asarray(offset))
             for axis, v in enumerate(offset):
                 if not float32_fits(v) or not float32_fits(far[axis]):
-                    where = f"{key}.translate[{k}][{axis + 1}]" if len(spec.keyframes) > 1 else f"{key}.translate[{axis}]"
+                    moving = len(spec.keyframes) > 1
+                    where = f"{key}.translate[{k}][{axis + 1}]" if moving else f"{key}.translate[{axis}]"
                     raise SceneError(file, where, f"expected a number that float32 can hold ({limit}) with the mesh "
                                      f"moved by it, got {v:g}")
         if not float32_fits(spec.reach):
