@@ -462,3 +462,26 @@ def test_live_draws_the_mesh_saves_it_and_view_draws_it_back(tmp_path):
         assert len(handle.faces) == 60
     finally:
         player.server.stop()
+
+
+@pytest.mark.parametrize("suffix", [".usdc", ".usda"])
+def test_the_cache_size_estimate_covers_the_mesh_prim(tmp_path, suffix):
+    # The free-space check counts a mesh's points and triangles: what a 12,288-triangle mesh adds to a cache is
+    # within its estimate, and more than a third of it (measured: about a half in crate files, two thirds in text).
+    from warp_verlet.apps.runner import run_scene
+    from warp_verlet.output.output_file import estimate_cache
+
+    box = trimesh.creation.box()
+    for _ in range(5):
+        box = box.subdivide()
+    box.export(str(tmp_path / "fine.obj"))
+    sizes = []
+    for colliders in ([{"type": "mesh", "mesh": "fine.obj", "translate": [0.0, -3.0, 0.0]}], []):
+        scene = scene_of(tmp_path, colliders, frames=1)
+        run_scene(scene, tmp_path / f"out{len(colliders)}{suffix}", device="cpu")
+        sizes.append((tmp_path / f"out{len(colliders)}{suffix}").stat().st_size)
+    added = sizes[0] - sizes[1]
+    cached = MESH.cached(scene_of(tmp_path, [{"type": "mesh", "mesh": "fine.obj"}]).colliders[0])
+    text = suffix == ".usda"
+    estimated = estimate_cache((), [cached], text).static_bytes - estimate_cache((), [], text).static_bytes
+    assert added <= estimated < 3 * added, (added, estimated)

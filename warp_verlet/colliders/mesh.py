@@ -342,10 +342,10 @@ class CachedMesh:
     moving: bool = False
     purpose: str = "guide"
 
-    @property
-    def cache_bytes(self) -> int:
-        """About what its prim takes in a cache (points and indices as floats and ints, and the prim itself)."""
-        return 512 + 12 * len(self.points) + 16 * len(self.triangles)
+    def cache_bytes(self, float_bytes: int, int_bytes: int) -> int:
+        """At most what its prim takes in a cache whose numbers take these bytes (output_file.estimate_cache):
+        its points, a count and three indices per triangle, and the prim itself."""
+        return 512 + 3 * float_bytes * len(self.points) + 4 * int_bytes * len(self.triangles)
 
     def define(self, stage, path):
         """A Mesh prim of triangles, wound counter-clockwise seen from outside, with a translate: sampled per
