@@ -464,6 +464,29 @@ def test_live_draws_the_mesh_saves_it_and_view_draws_it_back(tmp_path):
         player.server.stop()
 
 
+def test_live_moves_a_moving_mesh_with_its_translation(tmp_path):
+    pytest.importorskip("viser", reason="the browser views need viser: pip install 'warp-verlet[live]'")
+    from browser import free_port
+
+    from warp_verlet.apps.live_app import LiveApp
+    from warp_verlet.apps.live_session import LiveSession
+
+    write_box(tmp_path / "box.obj", half=(0.1, 0.1, 0.1))
+    path = [[0.0, 0.0, -1.0, 0.0], [0.1, 0.0, -0.5, 0.0]]
+    scene = scene_of(tmp_path, [{"type": "mesh", "mesh": "box.obj", "translate": path}])
+    app = LiveApp(LiveSession(scene, "cpu"), port=free_port(), record_path=tmp_path / "live.usdc")
+    try:
+        handle = app._collider_drawings["mesh"].items[0]
+        np.testing.assert_allclose(handle.position, (0.0, -1.0, 0.0))
+        for _ in range(12):  # 0.2 s: past the last keyframe
+            app.session.tick(1 / 60)
+        app.draw(0.0)
+        np.testing.assert_allclose(handle.position, (0.0, -0.5, 0.0), atol=1e-6)
+    finally:
+        app.server.stop()
+        app.session.close()
+
+
 @pytest.mark.parametrize("suffix", [".usdc", ".usda"])
 def test_the_cache_size_estimate_covers_the_mesh_prim(tmp_path, suffix):
     # The free-space check counts a mesh's points and triangles: what a 12,288-triangle mesh adds to a cache is
