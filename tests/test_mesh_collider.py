@@ -238,6 +238,19 @@ def test_a_moving_mesh_is_time_sampled_in_the_cache(tmp_path):
         (lifted, _), (kept, _) = read_frame(cache, frame).meshes
         np.testing.assert_allclose(lifted, scene.colliders[0].points + [0.0, height, 0.0], atol=1e-6)
         np.testing.assert_allclose(kept, scene.colliders[1].points + [2.0, 0.0, 0.0], atol=1e-6)
+    try:
+        from browser import free_port
+
+        from warp_verlet.apps.cache_player import CachePlayer
+    except ImportError:  # the browser views need viser
+        return
+    player = CachePlayer(tmp_path / "out.usdc", port=free_port())
+    try:
+        player.show(6)  # view draws the moved mesh again, the still one as it was
+        np.testing.assert_allclose(player.meshes[0].vertices, scene.colliders[0].points + [0.0, -0.5, 0.0], atol=1e-6)
+        np.testing.assert_allclose(player.meshes[1].vertices, scene.colliders[1].points + [2.0, 0.0, 0.0], atol=1e-6)
+    finally:
+        player.server.stop()
 
 
 # ------------------------------------------------------------------------------------------- bad input
