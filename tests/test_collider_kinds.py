@@ -79,10 +79,12 @@ def test_kind_keys_are_distinct_from_the_shared_ones():
 
 
 def test_the_registry_is_the_clamp_order():
-    # Spheres before planes: the plane's clamp runs last, so that a sphere resting on the ground cannot push
-    # cloth through the ground.
-    assert [k.type for k in colliders.COLLIDER_KINDS] == ["sphere", "plane"]
-    assert colliders.COLLIDER_KINDS == (SPHERE, PLANE)
+    # Spheres and meshes before planes: the plane's clamp runs last, so that a sphere or a table standing on the
+    # ground cannot push cloth through the ground.
+    from warp_verlet.colliders.mesh import MESH
+
+    assert [k.type for k in colliders.COLLIDER_KINDS] == ["sphere", "mesh", "plane"]
+    assert colliders.COLLIDER_KINDS == (SPHERE, MESH, PLANE)
 
 
 def test_the_scene_reads_each_collider_through_its_kind():
@@ -91,7 +93,7 @@ def test_the_scene_reads_each_collider_through_its_kind():
     plane, sphere = scene.colliders
     assert isinstance(plane, PlaneCollider) and plane.name == "plane0" and plane.normal == (0.0, 1.0, 0.0)
     assert isinstance(sphere, SphereCollider) and sphere.name == "sphere1" and sphere.keyframes == ((0.0, (0, 0, 0)),)
-    with pytest.raises(SceneError, match=r"<test>.*collider\[0\]\.type.*expected one of 'plane', 'sphere', got"):
+    with pytest.raises(SceneError, match=r"<test>.*collider\[0\]\.type.*expected one of 'mesh', 'plane', 'sphere', got"):
         parse_scene({"cloth": [{"resolution": [2, 2], "size": [1.0, 1.0]}], "collider": [{"type": "cube"}]},
                     file="<test>")
 
@@ -301,5 +303,5 @@ def test_a_kind_registered_in_a_test_is_written_to_the_cache_and_read_back(monke
 
 
 def test_without_the_kind_registered_its_type_is_refused():
-    with pytest.raises(SceneError, match=r"collider\[0\]\.type.*expected one of 'plane', 'sphere', got str 'level'"):
+    with pytest.raises(SceneError, match=r"collider\[0\]\.type.*expected one of 'mesh', 'plane', 'sphere', got str 'level'"):
         falling_scene({"type": "level", "level": 0.0})

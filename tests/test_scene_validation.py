@@ -623,7 +623,7 @@ def test_fuzz_only_scene_errors(tmp_path, doc):
 
 # ---------------------------------------------------------------------------------------------- colliders
 @pytest.mark.parametrize("collider, key, expected", [
-    ('type = "cube"', "collider[0].type", "expected one of 'plane', 'sphere'"),
+    ('type = "cube"', "collider[0].type", "expected one of 'mesh', 'plane', 'sphere'"),
     ('type = "sphere"\ncentre = [0.0, 0.0, 0.0]', "collider[0].radius", "required"),
     ('type = "sphere"\nradius = 0.0', "collider[0].radius", "(0.0, inf)"),
     ('type = "sphere"\nradius = 1.0\ncentre = [0.0, 0.0, 0.0]\npath = [[0.0, 0.0, 0.0, 0.0]]', "collider[0].path", "not both"),

@@ -14,7 +14,8 @@ SCENES = Path(__file__).resolve().parent.parent / "scenes"
 RMS, MAX = 0.01, 0.10
 
 CASES = [
-    "hanging_cloth", "wind_sheet", "ball_through_net", "cloth_on_sphere", "sphere_sweep", "rope", "tablecloth",
+    "hanging_cloth", "wind_sheet", "ball_through_net", "cloth_on_sphere", "cloth_on_table", "sphere_sweep", "rope",
+    "tablecloth",
     "curtain_override",
     pytest.param("flag_tear", marks=pytest.mark.xfail(strict=True, reason=(
         "tearing is a stretch threshold, so the flag tears only while the relaxation leaves its pole sticks "

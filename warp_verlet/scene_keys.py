@@ -20,6 +20,7 @@ import math
 import re
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Any, Callable, Iterator, Mapping
 
 from .errors import ArgumentError, SceneError
@@ -82,8 +83,9 @@ class Table:
     """One TOML table being read: remembers the file and the dotted key path for error messages, and
     which keys were consumed so that unknown keys are reported."""
 
-    def __init__(self, file: str, path: str, data: Any):
+    def __init__(self, file: str, path: str, data: Any, directory: Path | None = None):
         self.file, self.path = file, path
+        self.directory = directory  # what a file named in the table is relative to; None: the working directory
         if not isinstance(data, dict):
             raise SceneError(file, path, f"expected a table, got {describe(data)}")
         self.data = data

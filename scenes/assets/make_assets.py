@@ -6,6 +6,10 @@
 - ``curtain.usda``: a small set in centimetres, Z up, holding a pleated curtain as quads, with face-corner
   UVs, a material bound to it, a ``rings`` primvar marking the vertices hung on curtain rings, and a
   ``hem`` GeomSubset of the bottom row of faces. curtain_override.toml writes a layer over it.
+- ``table.obj``: a table with legs for a mesh collider, Y up: a top 1.2 m x 0.8 m, 4 cm thick, its upper face
+  0.75 m up, on four legs 5 cm square standing on the ground (y = 0) and reaching the top's underside. The top
+  and each leg are a closed box (8 points, 12 triangles, counter-clockwise seen from outside), so the whole
+  is closed. cloth_on_table.toml drops a cloth on it.
 """
 
 from __future__ import annotations
@@ -124,7 +128,35 @@ def write_curtain(path: Path, rows: int = 25, cols: int = 33) -> None:
     stage.GetRootLayer().Save()
 
 
+def box(lo, hi) -> tuple[np.ndarray, list[list[int]]]:
+    """The corners of the box [lo, hi] (index bit 0: x, bit 1: y, bit 2: z at its high end) and its 12
+    triangles, counter-clockwise seen from outside."""
+    lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
+    points = np.array([[(hi if k >> axis & 1 else lo)[axis] for axis in range(3)] for k in range(8)])
+    quads = [[0, 4, 6, 2], [1, 3, 7, 5],  # -x, +x
+             [0, 1, 5, 4], [2, 6, 7, 3],  # -y, +y
+             [0, 2, 3, 1], [4, 5, 7, 6]]  # -z, +z
+    return points, [t for a, b, c, d in quads for t in ([a, b, c], [a, c, d])]
+
+
+def write_table(path: Path, width: float = 1.2, depth: float = 0.8, height: float = 0.75, top: float = 0.04,
+                leg: float = 0.05, inset: float = 0.06) -> None:
+    boxes = [box((-width / 2, height - top, -depth / 2), (width / 2, height, depth / 2))]
+    for sx in (-1, 1):
+        for sz in (-1, 1):
+            x, z = sx * (width / 2 - inset), sz * (depth / 2 - inset)
+            boxes.append(box((x - leg / 2, 0.0, z - leg / 2), (x + leg / 2, height - top, z + leg / 2)))
+    lines = [f"# table.obj: written by scenes/assets/make_assets.py (top {width} m x {depth} m, {height} m up, "
+             "on four legs; each part a closed box)"]
+    for points, _ in boxes:
+        lines += [f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z in points]
+    for k, (_, faces) in enumerate(boxes):
+        lines += ["f " + " ".join(str(8 * k + i + 1) for i in face) for face in faces]
+    path.write_text("\n".join(lines) + "\n")
+
+
 if __name__ == "__main__":
     write_tablecloth(HERE / "tablecloth.obj")
     write_curtain(HERE / "curtain.usda")
-    print(f"wrote {HERE / 'tablecloth.obj'} and {HERE / 'curtain.usda'}")
+    write_table(HERE / "table.obj")
+    print(f"wrote {HERE / 'tablecloth.obj'}, {HERE / 'curtain.usda'} and {HERE / 'table.obj'}")

@@ -15,6 +15,7 @@ import numpy as np
 
 from ..output.cache_reader import FrameGeometry, PreviewError, open_cache, read_frame
 from .display_mesh import DisplayMesh, rope_segments
+from ..colliders.mesh import draw_mesh
 from ..colliders.plane import draw_plane
 from ..colliders.sphere import draw_sphere
 from .web_view import (CLOTH_COLOURS, DEFAULT_PORT, LOCALHOST, ROPE_COLOUR, ROPE_THICKNESS_M, ClothDrawing,
@@ -54,6 +55,9 @@ class CachePlayer:
                         for i, (centre, radius) in enumerate(first.spheres)]
         for i, corners in enumerate(first.planes):
             draw_plane(self.server, f"plane{i}", corners)
+        self.meshes = [draw_mesh(self.server, f"mesh{i}", points, triangles) for i, (points, triangles)
+                       in enumerate(first.meshes)]
+        self._mesh_points = [points for points, _ in first.meshes]  # as drawn: a moving mesh is drawn again
         everything = np.concatenate([g for frame in (first, last) for g in
                                      [c.points for c in frame.cloth_frames] + list(frame.ropes)
                                      + [c[None] for c, _ in frame.spheres]])
@@ -111,6 +115,10 @@ class CachePlayer:
             handle.points = rope_segments(rope)
         for handle, (centre, _) in zip(self.spheres, geometry.spheres):
             handle.position = tuple(float(v) for v in centre)
+        for k, (handle, (points, _)) in enumerate(zip(self.meshes, geometry.meshes)):
+            if len(points) == len(self._mesh_points[k]) and not np.array_equal(points, self._mesh_points[k]):
+                handle.vertices = points.astype(np.float32)
+                self._mesh_points[k] = points
 
     def run(self, seconds: float | None = None) -> None:
         """Serve until ``stop()``, Ctrl-C or ``seconds``; while playing, frames follow the cache's fps."""

@@ -217,6 +217,7 @@ class Panel:
     spheres: tuple[tuple[np.ndarray, float], ...]
     planes: tuple[np.ndarray, ...]  # (4, 3) corners, clipped to the framed content
     up_axis: str
+    meshes: tuple[TriangleMesh, ...] = ()  # triangle-mesh colliders
 
 
 def _box(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -250,30 +251,33 @@ def _bulk(mesh: TriangleMesh, up_axis: str) -> np.ndarray:
 
 def frame_panel(geometry: FrameGeometry, up_axis: str, width: int, height: int) -> Panel:
     """The panel of one frame: its cloths and ropes framed as large as the panel allows (the camera follows
-    them, however far they travelled), with the spheres near them; planes clipped to that content."""
+    them, however far they travelled), with the spheres and meshes near them; planes clipped to that content."""
     max_quads = max(width, height)  # about one grid cell per pixel: smooth hems, and no more work than that
     cloths = [cloth_mesh(c, max_quads) for c in geometry.cloth_frames]
     subject = [_bulk(m, up_axis) for m in cloths if len(m.triangles)]
     subject += [np.asarray(r, np.float64) for r in geometry.ropes if len(r)]
     spheres = list(geometry.spheres)
+    mesh_boxes = [np.stack(_box(p)) for p, t in geometry.meshes if len(t)]  # each mesh's (2, 3) bounding box
     if subject:
         points = np.concatenate(subject).astype(np.float64)
         lo, hi = _box(points)
         reach = NEARBY * max(float(np.linalg.norm(hi - lo)), 1e-6)
         near = [(c, r) for c, r in spheres if np.all(c + r >= lo - reach) and np.all(c - r <= hi + reach)]
-    elif spheres:  # every face torn away and no rope: show the colliders rather than nothing
-        points, near = np.zeros((0, 3)), spheres
+        near_boxes = [b for b in mesh_boxes if np.all(b[1] >= lo - reach) and np.all(b[0] <= hi + reach)]
+    elif spheres or mesh_boxes:  # every face torn away and no rope: show the colliders rather than nothing
+        points, near, near_boxes = np.zeros((0, 3)), spheres, mesh_boxes
     else:
-        points, near = np.zeros((1, 3)), []
-    framed = np.concatenate([points] + [np.stack([c - r, c + r]) for c, r in near])
+        points, near, near_boxes = np.zeros((1, 3)), [], []
+    framed = np.concatenate([points] + [np.stack([c - r, c + r]) for c, r in near] + near_boxes)
     lo, hi = _box(framed)
     pad = PLANE_PAD * max(float((hi - lo).max()), 1e-6)
     planes = [q for q in (clip_plane(p, lo - pad, hi + pad) for p in geometry.planes) if q is not None]
-    everything = np.concatenate([framed] + [np.stack([c - r, c + r]) for c, r in spheres] + planes)
+    everything = np.concatenate([framed] + [np.stack([c - r, c + r]) for c, r in spheres] + planes + mesh_boxes)
     camera = fit_camera(framed, everything, up_axis, width / height)
     rope_radius = ROPE_RADIUS_PX * 2 * camera.half_width / width
     ropes = [tube_mesh(r, rope_radius) for r in geometry.ropes]
-    return Panel(camera, tuple(cloths), tuple(ropes), tuple(spheres), tuple(planes), up_axis)
+    meshes = tuple(TriangleMesh(p.astype(np.float32), t.astype(np.uint32)) for p, t in geometry.meshes if len(t))
+    return Panel(camera, tuple(cloths), tuple(ropes), tuple(spheres), tuple(planes), up_axis, meshes)
 
 
 # ------------------------------------------------------------------------------------------- rendering
@@ -338,6 +342,8 @@ def render_panel(panel: Panel, width: int, height: int) -> np.ndarray:
     for i, (centre, radius) in enumerate(panel.spheres):
         scene[f"sphere{i}"] = {"type": "sphere", "center": [float(x) for x in centre], "radius": float(radius),
                                "bsdf": _diffuse(mi, SPHERE_COLOUR)}
+    for i, mesh in enumerate(panel.meshes):
+        scene[f"mesh{i}"] = _mesh(mi, f"mesh{i}", mesh, SPHERE_COLOUR, smooth=False)
     for i, quad in enumerate(panel.planes):
         plane = TriangleMesh(quad.astype(np.float32), np.array([[0, 1, 2], [0, 2, 3]], np.uint32))
         scene[f"plane{i}"] = _mesh(mi, f"plane{i}", plane, PLANE_COLOUR, smooth=False)

@@ -18,6 +18,7 @@ from ..errors import ArgumentError
 from ..scene_keys import STRING, Key, accepts, choice, prim_name
 from .kind import (COLLIDER_PURPOSES, FLOAT, FLOAT64, FRICTION, INT, PURPOSE, THICKNESS, VEC3,  # noqa: F401
                    ColliderKind, ColliderLaunches, FrameReader, InsideReport, LiveDrawing)  # the kinds' names, here too
+from .mesh import MESH
 from .plane import PLANE
 from .sphere import SPHERE
 
@@ -112,9 +113,9 @@ class ColliderModel:
         return np.concatenate(parts) if parts else np.zeros((0, 3), np.float32)
 
 
-COLLIDER_KINDS: tuple[ColliderKind, ...] = (SPHERE, PLANE)
-"""The registered kinds, in clamp order: spheres before planes, so that a sphere resting on the ground cannot
-push cloth through the ground (the plane's clamp comes last and wins)."""
+COLLIDER_KINDS: tuple[ColliderKind, ...] = (SPHERE, MESH, PLANE)
+"""The registered kinds, in clamp order: spheres and meshes before planes, so that a sphere or a mesh resting on
+the ground cannot push cloth through the ground (the plane's clamp comes last and wins)."""
 
 # The type's choices and the name's default are the registry's, in the docs' (alphabetical) order.
 TYPE = Key("type", _collider_type, type="string", allowed=", ".join(sorted(f'`"{k.type}"`' for k in COLLIDER_KINDS)),

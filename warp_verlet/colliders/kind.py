@@ -112,8 +112,8 @@ class ColliderKind(Protocol):
       under /World/Colliders). The plane owns every mesh there, so a kind that writes a mesh comes before it
       (its clamp then runs before the plane's too, as the ground's should run last).
     - ``read_prim(prim, reader)``: its geometry at ``reader.time`` (a :class:`FrameReader`) as drawing
-      primitives, name -> item: ``"spheres"`` (centre, radius) or ``"planes"`` ((4, 3) corners, which the
-      drawing clips to the content); the preview (preview_render.py) and the viewer (cache_player.py) draw
+      primitives, name -> item: ``"spheres"`` (centre, radius), ``"planes"`` ((4, 3) corners, which the
+      drawing clips to the content) or ``"meshes"`` ((V, 3) points, (T, 3) triangles); the preview (preview_render.py) and the viewer (cache_player.py) draw
       those primitives.
     - ``add_to_live(app, specs)``: draw this kind's colliders on the live page (live_app.py): a
       :class:`LiveDrawing`.

@@ -575,7 +575,7 @@ def parse_scene(data: dict, file: str = "<scene>", scene_path: Path | None = Non
     def colliders(value: Any, key: str) -> tuple:
         if not isinstance(value, list):
             raise _Invalid(f"expected [[collider]] tables, got {_describe(value)}")
-        return tuple(read_collider(_Table(file, f"collider[{i}]", c), i) for i, c in enumerate(value))
+        return tuple(read_collider(_Table(file, f"collider[{i}]", c, scene_path.parent), i) for i, c in enumerate(value))
 
     cloth_specs = top.take("cloth", cloths)
     collider_specs = top.take("collider", colliders, ())

@@ -64,6 +64,7 @@ class FrameGeometry:
     spheres: tuple[tuple[np.ndarray, float], ...]  # (centre, radius)
     planes: tuple[np.ndarray, ...]  # (4, 3) corners as authored (drawing clips them to the cloth's box)
     cloth_frames: tuple["ClothFrame", ...] = ()  # each cloth's points and torn faces, undecimated
+    meshes: tuple[tuple[np.ndarray, np.ndarray], ...] = ()  # (points (V, 3), triangles (T, 3)) of each mesh
 
 
 def grid_shape(faces: Faces | np.ndarray, point_count: int) -> tuple[int, int] | None:
@@ -260,14 +261,14 @@ def read_frame(cache: PointCache, frame: int) -> FrameGeometry:
         points = _to_world(curves, time, _finite(cache.path, curves, points, frame))
         counts = curves.GetCurveVertexCountsAttr().Get(time) or [len(points)]
         ropes += np.split(points, np.cumsum(counts)[:-1])
-    drawn: dict[str, list] = {"spheres": [], "planes": []}  # the drawing primitives the kinds' prims become
+    drawn: dict[str, list] = {"spheres": [], "planes": [], "meshes": []}  # the kinds' prims as drawing primitives
     reader = _FrameReader(cache.path, frame, time, where)
     for kind, prim in cache.colliders:
         for primitive, item in kind.read_prim(prim, reader).items():
             drawn[primitive].append(item)
     return FrameGeometry(frame=frame, seconds=frame / cache.fps, ropes=tuple(ropes),
                          spheres=tuple(drawn["spheres"]), planes=tuple(drawn["planes"]),
-                         cloth_frames=tuple(cloth_frames))
+                         cloth_frames=tuple(cloth_frames), meshes=tuple(drawn["meshes"]))
 
 
 @dataclass(frozen=True)

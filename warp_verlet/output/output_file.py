@@ -111,7 +111,8 @@ def estimate_cache(shapes: Sequence, colliders: Sequence = (), text: bool = Fals
         frame += 3 * f * n + 6 * f + 32  # points, extent, the sample's time and offsets
         sampled += 2
     for collider in colliders:
-        static += 512
+        size = getattr(collider, "cache_bytes", None)  # a kind whose prim grows with its geometry says how much
+        static += size(f, i) if size is not None else 512
         if getattr(collider, "moving", False):
             frame += 3 * f + 32
             sampled += 1
