@@ -5,7 +5,10 @@
   planar projection. tablecloth.toml drops it on a round table.
 - ``curtain.usda``: a small set in centimetres, Z up, holding a pleated curtain as quads, with face-corner
   UVs, a material bound to it, a ``rings`` primvar marking the vertices hung on curtain rings, and a
-  ``hem`` GeomSubset of the bottom row of faces. curtain_override.toml writes a layer over it.
+  ``hem`` GeomSubset of the bottom row of faces, and the window's frame behind it (+Y): one closed Mesh, a
+  rectangular ring of quads 8 cm deep around the opening, its head behind the rail, its sill behind the hem and
+  its jambs behind the curtain's sides. curtain_override.toml writes a layer over the curtain; curtain_frame.toml
+  also keeps the curtain out of the frame, a mesh collider read from the same file.
 - ``table.obj``: a table with legs for a mesh collider, Y up: a top 1.2 m x 0.8 m, 4 cm thick, its upper face
   0.75 m up, on four legs 5 cm square standing on the ground (y = 0) and reaching the top's underside. The top
   and each leg are a closed box (8 points, 12 triangles, counter-clockwise seen from outside), so the whole
@@ -125,7 +128,33 @@ def write_curtain(path: Path, rows: int = 25, cols: int = 33) -> None:
     floor.CreateFaceVertexCountsAttr([4])
     floor.CreateFaceVertexIndicesAttr([0, 1, 2, 3])
     floor.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+    frame_points, frame_quads = window_frame()
+    frame = UsdGeom.Mesh.Define(stage, "/Set/Window/Frame")  # after the others, so that they are written as before
+    frame.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(frame_points.astype(np.float32)))
+    frame.CreateExtentAttr(UsdGeom.PointBased.ComputeExtent(Vt.Vec3fArray.FromNumpy(frame_points.astype(np.float32))))
+    frame.CreateFaceVertexCountsAttr(Vt.IntArray([4] * len(frame_quads)))
+    frame.CreateFaceVertexIndicesAttr(Vt.IntArray([int(i) for quad in frame_quads for i in quad]))
+    frame.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
     stage.GetRootLayer().Save()
+
+
+def window_frame(outer=((-10.0, -130.0), (170.0, 10.0)), inner=((12.0, -112.0), (148.0, -8.0)),
+                 front: float = 6.0, back: float = 14.0) -> tuple[np.ndarray, list[list[int]]]:
+    """A closed rectangular ring in the window's frame (cm, Z up, the curtain's rail at z = 0 running along X
+    from 0 to 160, its pleats within 3 cm of y = 0): the rectangle ``outer`` less ``inner`` ((x, z) low and high
+    corners) between y = ``front`` and y = ``back``. Its 16 points (outer front, outer back, inner front, inner
+    back, 4 each) and 16 quads, counter-clockwise seen from outside."""
+    rings = [[(x0, z0), (x1, z0), (x1, z1), (x0, z1)] for (x0, z0), (x1, z1) in (outer, inner)]
+    points = [(x, y, z) for ring in rings for y in (front, back) for x, z in ring]
+    outer_front, outer_back, inner_front, inner_back = (list(range(4 * k, 4 * k + 4)) for k in range(4))
+    quads = []
+    for k in range(4):
+        j = (k + 1) % 4
+        quads += [[outer_front[k], outer_front[j], inner_front[j], inner_front[k]],  # the face towards the curtain
+                  [outer_back[k], inner_back[k], inner_back[j], outer_back[j]],      # the face away from it
+                  [outer_front[k], outer_back[k], outer_back[j], outer_front[j]],    # the outside walls
+                  [inner_front[k], inner_front[j], inner_back[j], inner_back[k]]]    # the opening's walls
+    return np.asarray(points), quads
 
 
 def box(lo, hi) -> tuple[np.ndarray, list[list[int]]]:

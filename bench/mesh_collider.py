@@ -1,0 +1,215 @@
+"""A triangle-mesh collider's cost and how well it holds: a cloth dropped on a closed mesh (an icosphere), against
+the same cloth dropped on an analytic sphere of the same radius (the cheapest collider) and with no collider.
+
+    python -m bench.mesh_collider [--sizes 64 128] [--subdivisions 5 6] [--frames 60] [--substeps 8]
+                                  [--iterations 8] [--device cpu] [--out bench/results]
+    python -m bench.mesh_collider --device cuda --sizes 256 1024 --substeps 32
+
+--out writes mesh_collider.md and mesh_collider.csv there; bench/results/mesh_collider.md keeps a reading of the
+measured run above its table, to carry over when the run is repeated.
+
+The cloth: n x n particles, a 1 m square of 0.3 kg, structural + shear + bend sticks (bend compliance 1 m/N),
+laid horizontal 0.1 m above a sphere of radius 0.3 m at the origin, released at rest: it lands at about
+1.4 m/s and drapes over it. The collider: a trimesh icosphere of radius 0.3 m (subdivision 5: 20,480 triangles;
+6: 81,920), or a sphere collider of radius 0.3 m, or none; thickness half the cloth's spacing (0.5 / (n - 1) m),
+friction 0.5. 60 fps, --substeps substeps and --iterations sweeps, damping 0.5 /s. On the CPU, one thread
+(``Simulator(..., threads=1)``).
+
+Columns: ms/frame (the median frame's wall time over --frames frames, frame 1 excluded as the warm-up; the
+median, since other work on a shared machine slows some frames); the same as a multiple of the run without a
+collider; clamp ms/frame, the mesh clamp's own time per frame (its kernel, recorded as the solver records it,
+replayed --substeps times on a copy of each frame's end state after timing the frame; the median frame, frame 1
+excluded) and its share of ms/frame; and the deepest
+penetration over the run, max(0, thickness - signed distance) in mm, taken at the end of every frame (after
+timing it) against the collider the row has: for a mesh row, against its own triangles by the kernel's own
+query (``wp.mesh_query_point_sign_normal``, negative inside); for the sphere row and the row without a
+collider, against the analytic sphere (|x| - 0.3 m), so that the last shows how far the cloth falls through.
+"""
+
+from __future__ import annotations
+
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import trimesh
+import warp as wp
+
+from warp_verlet.core.simulator import Simulator
+from warp_verlet.input.scene import parse_scene
+
+from .common import arg_parser, machine, quiet_warp, write_table
+
+STEM = "mesh_collider"
+SIZE, MASS, RADIUS, DROP = 1.0, 0.3, 0.3, 0.1  # m, kg, m, m above the sphere's top
+FRICTION = 0.5
+
+
+def icosphere(subdivisions: int):
+    """(points (V, 3), triangles (T, 3)) of the icosphere of radius RADIUS, counter-clockwise from outside."""
+    mesh = trimesh.creation.icosphere(subdivisions=subdivisions, radius=RADIUS)
+    return np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces, np.int32)
+
+
+def drop_scene(n: int, collider: str, subdivisions: int, folder: Path, frames: int, substeps: int,
+               iterations: int):
+    """The cloth over a sphere; ``collider`` is "mesh" (the icosphere, written to ``folder``), "sphere" or
+    "none"."""
+    thickness = 0.5 * SIZE / (n - 1)
+    cloth = {"name": "sheet", "resolution": [n, n], "size": [SIZE, SIZE], "origin": [-0.5, RADIUS + DROP, -0.5],
+             "orientation": "horizontal", "sticks": ["structural", "shear", "bend"], "compliance": {"bend": 1.0},
+             "mass": MASS}
+    colliders = []
+    if collider == "mesh":
+        path = folder / f"icosphere{subdivisions}.obj"
+        if not path.exists():
+            points, triangles = icosphere(subdivisions)
+            trimesh.Trimesh(points, triangles, process=False).export(str(path))
+        colliders = [{"type": "mesh", "name": "ball", "mesh": path.name, "thickness": thickness,
+                      "friction": FRICTION}]
+    elif collider == "sphere":
+        colliders = [{"type": "sphere", "name": "ball", "centre": [0.0, 0.0, 0.0], "radius": RADIUS,
+                      "thickness": thickness, "friction": FRICTION}]
+    scene_file = folder / "scene.toml"
+    scene = parse_scene({"simulation": {"fps": 60, "frames": frames, "substeps": substeps, "iterations": iterations,
+                                        "damping": 0.5}, "cloth": [cloth], "collider": colliders},
+                        file="<bench.mesh_collider>", scene_path=scene_file)
+    return scene, thickness
+
+
+@wp.kernel
+def deepest_below(mesh: wp.uint64, x: wp.array(dtype=wp.vec3), thickness: float, out: wp.array(dtype=float)):
+    """The largest thickness - signed distance to the mesh over the particles (atomic max: order-free)."""
+    i = wp.tid()
+    query = wp.mesh_query_point_sign_normal(mesh, x[i], 1.0e6)
+    if query.result:
+        distance = wp.length(x[i] - wp.mesh_eval_position(mesh, query.face, query.u, query.v))
+        wp.atomic_max(out, 0, thickness - query.sign * distance)
+
+
+class PenetrationMeter:
+    """The deepest penetration at a frame end: against the row's mesh on the simulator's device, else against
+    the analytic sphere."""
+
+    def __init__(self, sim: Simulator, thickness: float, mesh=None):
+        self.sim, self.thickness, device = sim, thickness, sim.device
+        self.mesh = None
+        if mesh is not None:
+            points, triangles = mesh
+            self.mesh = wp.Mesh(points=wp.array(points.astype(np.float32), dtype=wp.vec3, device=device),
+                                indices=wp.array(triangles.ravel(), dtype=wp.int32, device=device))
+            self.points = wp.empty(sim.model.particle_count, dtype=wp.vec3, device=device)
+            self.out = wp.empty(1, dtype=float, device=device)
+
+    def penetration(self) -> float:
+        q = self.sim.positions()
+        if self.mesh is None:
+            below = self.thickness - (np.linalg.norm(q.astype(np.float64), axis=1) - RADIUS)
+            return max(0.0, float(below.max()))
+        self.points.assign(q.astype(np.float32))
+        self.out.fill_(0.0)
+        wp.launch(deepest_below, len(self.points), inputs=[wp.uint64(self.mesh.id), self.points, self.thickness,
+                                                           self.out], device=self.sim.device)
+        return float(self.out.numpy()[0])
+
+
+class ClampTimer:
+    """The mesh clamp's own time per frame: its kernel recorded as the solver binds it, but against scratch copies
+    of the State's positions, so that timing it leaves the run alone. Each frame's end state is copied in (not
+    timed) and the clamp replayed ``substeps`` times on it."""
+
+    def __init__(self, sim: Simulator, substeps: int):
+        from warp_verlet.kernels.collide_mesh import collide_meshes
+
+        model, state, c = sim.model, sim.state, sim.model.colliders
+        self.sim, self.substeps = sim, substeps
+        self.pairs = [(wp.empty_like(a), a) for a in (state.particle_q, state.particle_q_inertial, state.particle_dq)]
+        q, inertial, dq = (scratch for scratch, _ in self.pairs)
+        self.launch = wp.launch(collide_meshes, model.particle_count,
+                                inputs=[q, inertial, dq, model.inv_mass, c.mesh_ids, state.mesh_offsets, c.mesh_reach,
+                                        c.mesh_thickness, c.mesh_friction], device=sim.device, record_cmd=True)
+
+    def frame_ms(self) -> float:
+        for scratch, source in self.pairs:
+            wp.copy(scratch, source)
+        wp.synchronize_device(self.sim.device)
+        begin = time.perf_counter()
+        for _ in range(self.substeps):
+            self.launch.launch()
+        wp.synchronize_device(self.sim.device)
+        return 1e3 * (time.perf_counter() - begin)
+
+
+def run(n: int, collider: str, subdivisions: int, folder: Path, frames: int, substeps: int, iterations: int,
+        device: str) -> dict:
+    scene, thickness = drop_scene(n, collider, subdivisions, folder, frames, substeps, iterations)
+    start = time.perf_counter()
+    sim = Simulator(scene, device, threads=1)
+    build = time.perf_counter() - start
+    mesh = icosphere(subdivisions) if collider == "mesh" else None
+    meter = PenetrationMeter(sim, thickness, mesh)
+    clamp = ClampTimer(sim, substeps) if collider == "mesh" else None
+    times, clamp_times, worst = [], [], 0.0
+    for _ in range(frames):
+        wp.synchronize_device(sim.device)
+        begin = time.perf_counter()
+        sim.step_frame()
+        wp.synchronize_device(sim.device)
+        times.append(time.perf_counter() - begin)
+        worst = max(worst, meter.penetration())
+        if clamp is not None:
+            clamp_times.append(clamp.frame_ms())
+    ms = 1e3 * statistics.median(times[1:])
+    row = {"n": n, "particles": n * n, "collider": collider, "triangles": len(mesh[1]) if mesh else "-",
+           "ms/frame": round(ms, 3), "clamp ms/frame": "-", "clamp share": "-",
+           "deepest mm": round(1e3 * worst, 3), "thickness mm": round(1e3 * thickness, 3),
+           "build s": round(build, 2)}
+    if clamp is not None:
+        clamp_ms = statistics.median(clamp_times[1:])
+        row["clamp ms/frame"] = round(clamp_ms, 3)
+        row["clamp share"] = f"{100 * clamp_ms / ms:.0f}%"
+    sim.close()
+    return row
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = arg_parser("bench.mesh_collider", __doc__)
+    parser.add_argument("--sizes", type=int, nargs="+", default=[64, 128], help="particles along each side")
+    parser.add_argument("--subdivisions", type=int, nargs="+", default=[5, 6],
+                        help="icosphere subdivisions of the mesh colliders (5: 20,480 triangles, 6: 81,920)")
+    parser.add_argument("--frames", type=int, default=60)
+    parser.add_argument("--substeps", type=int, default=8)
+    parser.add_argument("--iterations", type=int, default=8, help="sweeps per substep")
+    parser.add_argument("--device", default="cpu")
+    parser.add_argument("--out", type=Path, default=None, help="directory for mesh_collider.md and .csv")
+    args = parser.parse_args(argv)
+    if any(n < 4 for n in args.sizes) or args.frames < 2 or any(s < 0 or s > 7 for s in args.subdivisions):
+        parser.error("each size needs 4 particles a side or more, --frames at least 2, subdivisions 0 to 7")
+    quiet_warp()
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        for n in args.sizes:
+            cases = [("none", 0), ("sphere", 0)] + [("mesh", s) for s in args.subdivisions]
+            size_rows = [run(n, kind, s, folder, args.frames, args.substeps, args.iterations, args.device)
+                         for kind, s in cases]
+            for row in size_rows:
+                row["x none"] = round(row["ms/frame"] / size_rows[0]["ms/frame"], 2)
+            rows += size_rows
+    where = machine(args.device)
+    command = ["bench.mesh_collider", *(sys.argv[1:] if argv is None else argv)]
+    on = "one CPU thread" if wp.get_device(args.device).is_cpu else str(where)
+    title = (f"Mesh collider: a 1 m cloth dropped on a sphere of radius {RADIUS} m (an icosphere mesh, an analytic "
+             f"sphere, or none), {args.frames} frames at 60 fps, {args.substeps} substeps, {args.iterations} sweeps, "
+             f"{on}\n\n" + "\n".join(where.lines(command)))
+    write_table(rows, args.out, STEM, title,
+                ["n", "particles", "collider", "triangles", "ms/frame", "x none", "clamp ms/frame", "clamp share",
+                 "deepest mm", "thickness mm", "build s"])
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
