@@ -12,6 +12,7 @@ import math
 import numpy as np
 import pytest
 
+from warp_verlet.colliders import coulomb
 from warp_verlet.core.simulator import Simulator
 from warp_verlet.errors import SceneError
 from warp_verlet.input.scene import parse_scene
@@ -142,5 +143,6 @@ def test_the_old_per_substep_friction_key_is_refused_with_what_to_write():
 
 
 def test_static_coefficient_defaults_to_the_kinetic_one():
-    scene = parse_scene({"simulation": {}, "cloth": [SHEET], "collider": [ground(0.4)]}, file="<test>")
-    assert (scene.colliders[0].friction_coefficient, scene.colliders[0].static_friction_coefficient) == (0.4, 0.4)
+    scene = parse_scene({"simulation": {}, "cloth": [SHEET], "collider": [ground(0.4), dict(ground(0.4, 0.6), name="rough")]},
+                        file="<test>")
+    assert [coulomb(c) for c in scene.colliders] == [(0.4, 0.4), (0.4, 0.6)]

@@ -68,9 +68,7 @@ def read_collider(table, index: int) -> Any:
         raise table.error("friction", FRICTION_REPLACED)
     shared = {key.name: key.take(table) for key in SHARED_KEYS[1:]}
     kinetic, static = shared["friction_coefficient"], shared["static_friction_coefficient"]
-    if static is None:
-        shared["static_friction_coefficient"] = kinetic
-    elif static < kinetic:
+    if static is not None and static < kinetic:
         raise table.error("static_friction_coefficient", f"must be at least friction_coefficient ({kinetic:g}): a "
                           f"particle that slides is held at most as hard as one at rest; got {static:g}")
     if shared["name"] is None:
@@ -136,7 +134,7 @@ NAME = Key("name", prim_name, default=None, type="string",
 SHARED_KEYS = (TYPE, NAME, THICKNESS, FRICTION_COEFFICIENT, STATIC_FRICTION_COEFFICIENT, PURPOSE)
 
 FRICTION_REPLACED = (
-    "(the fraction of the tangential velocity removed per substep, so the same scene slid differently at other "
-    "substeps) is replaced by Coulomb friction that does not depend on the substeps: write friction_coefficient = "
+    "was the fraction of the tangential velocity removed per substep, so the same scene slid differently at other "
+    "substeps; it is replaced by Coulomb friction, which does not depend on them: write friction_coefficient = "
     "mu_k (sliding cloth on the surface decelerates at mu_k g; about 0.3 to 0.6 for cloth on wood or fabric) and, "
     "if it holds harder at rest, static_friction_coefficient = mu_s (cloth rests on a slope while tan(slope) < mu_s)")

@@ -160,14 +160,16 @@ THICKNESS = Key("thickness", real(0.0), 0.0, type="number", unit="m", allowed="�
                     "`size / (n - 1)`, a mesh's median edge).")
 FRICTION_COEFFICIENT = Key(
     "friction_coefficient", real(0.0), 0.0, type="number", allowed="≥ 0",
-    doc="Coulomb's kinetic friction coefficient μ_k: a particle sliding on the surface loses μ_k times the "
-        "distance it was pushed out, so on an incline it slides down at g (sin θ − μ_k cos θ), whatever the "
-        "substeps. `0` = frictionless; cloth on wood or fabric is about 0.3 … 0.6.")
+    doc="Coulomb's kinetic friction coefficient μ_k: a sliding particle's move along the surface in a substep is "
+        "shortened by μ_k times the distance the surface pushed it out, so on an incline it slides down at "
+        "g (sin θ − μ_k cos θ) and on level ground it stops from v after v² / (2 μ_k g), whatever the substeps. "
+        "`0` = frictionless; cloth on wood or fabric is about 0.3 … 0.6.")
 STATIC_FRICTION_COEFFICIENT = Key(
     "static_friction_coefficient", real(0.0), None, type="number", default_text="`friction_coefficient`",
-    allowed="≥ `friction_coefficient`",
-    doc="Coulomb's static friction coefficient μ_s: a particle whose slip over a substep is under μ_s times "
-        "the distance it was pushed out sticks, so cloth rests on an incline while tan θ < μ_s.")
+    allowed="≥ 0; at least `friction_coefficient`",
+    doc="Coulomb's static friction coefficient μ_s: a particle whose move along the surface in a substep is under "
+        "μ_s times the distance the surface pushed it out stays where it was, so cloth rests on an incline while "
+        "tan θ < μ_s.")
 PURPOSE = Key("purpose", choice(COLLIDER_PURPOSES), "guide", type="string", allowed='`"guide"`, `"default"`',
               doc="The USD `purpose` of its prim in a cache. `\"guide\"`: a helper, left out of renders (Blender, "
                   "Karma) and hidden in usdview until guides are shown (Display > Display Purposes > Guide); the "
