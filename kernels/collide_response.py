@@ -24,7 +24,6 @@ from typing import Any
 import warp as wp
 
 
-
 @wp.func
 def project_out(
     i: int,
