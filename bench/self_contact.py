@@ -48,7 +48,7 @@ def folded_scene(n: int, self_collision: bool, frames: int, substeps: int, itera
     cloth = {"name": "sheet", "resolution": [n, n], "size": [SIZE, SIZE], "origin": [-0.5, HEIGHT, -0.5],
              "orientation": "horizontal", "sticks": ["structural", "shear", "bend"], "compliance": {"bend": 1.0},
              "mass": MASS, "self_collision": self_collision}
-    ground = {"type": "plane", "point": [0.0, 0.0, 0.0], "normal": [0.0, 1.0, 0.0], "friction": 0.5}
+    ground = {"type": "plane", "point": [0.0, 0.0, 0.0], "normal": [0.0, 1.0, 0.0], "friction_coefficient": 0.5}
     return parse_scene({"simulation": {"fps": 60, "frames": frames, "substeps": substeps, "iterations": iterations,
                                        "damping": 0.5}, "cloth": [cloth], "collider": [ground]}, file="<bench>")
 

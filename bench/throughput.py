@@ -54,8 +54,8 @@ def bench_scene(n: int, substeps: int, iterations: int, colliders: bool, tear: f
     scene = hanging_cloth(n, substeps, iterations)
     if colliders:
         scene = replace(scene, colliders=(
-            SphereCollider("ball", 0.15, ((0.0, (0.0, 0.5, 0.1)),), thickness=0.005, friction=0.3),
-            PlaneCollider("ground", (0.0, 0.0, 0.0), (0.0, 1.0, 0.0), friction=0.5),
+            SphereCollider("ball", 0.15, ((0.0, (0.0, 0.5, 0.1)),), thickness=0.005, friction_coefficient=0.3),
+            PlaneCollider("ground", (0.0, 0.0, 0.0), (0.0, 1.0, 0.0), friction_coefficient=0.5),
         ))
     if tear is not None:
         scene = replace(scene, cloths=tuple(replace(c, tear_threshold=tear) for c in scene.cloths))

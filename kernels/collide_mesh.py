@@ -26,7 +26,7 @@ def collide_meshes(
     offsets: wp.array(dtype=wp.vec3),
     reach: wp.array(dtype=float),
     thickness: wp.array(dtype=float),
-    friction: wp.array(dtype=float),
+    friction: wp.array(dtype=wp.vec2),  # (mu_k, mu_s) per collider
 ):
     """Keeps each free particle ``thickness`` outside every mesh: along the face's normal where its closest point
     lies inside a face, else along the outward direction from that point."""

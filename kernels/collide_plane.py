@@ -17,7 +17,7 @@ def collide_planes(
     points: wp.array(dtype=wp.vec3),
     normals: wp.array(dtype=wp.vec3),
     thickness: wp.array(dtype=float),
-    friction: wp.array(dtype=float),
+    friction: wp.array(dtype=wp.vec2),  # (mu_k, mu_s) per collider
 ):
     """Collider data is float32; it is converted to the positions' precision (x.dtype) before any use."""
     i = wp.tid()

@@ -4,9 +4,15 @@ Clamping last, once per substep, means no stick correction can push a particle b
 the same substep (the pitfall of shifting particles through boundaries). Verlet turns the projection into a
 velocity change by itself: the move is part of x - x_prev.
 
-Friction scales the tangential part of the implicit velocity v = x - x_prev of a particle in contact by
-(1 - friction). In the summed-form state (integrate.py), x_prev = x_inertial - delta, so removing
-friction * v_t from v means subtracting it from delta.
+Friction is Coulomb's, at the position level (Macklin et al. 2014, "Unified Particle Physics", section 6): a
+particle pushed out by d_n in a substep has moved tangentially by s_t over that substep (from x_prev, the
+tangential part of x - x_prev after the push). When |s_t| < mu_s d_n it sticks, and s_t is taken off its
+position; otherwise it slides, and s_t is shortened by mu_k d_n. On a plane d_n is g cos(theta) dt^2 per
+substep and the step's speed change g sin(theta) dt^2, so the particle sticks when tan(theta) < mu_s and
+otherwise slides at g (sin(theta) - mu_k cos(theta)), whatever the substeps. Moving the position (not the
+implicit velocity) is what makes a stuck particle stay put: x_prev is kept, so Verlet's next step sees the
+removed displacement as removed velocity too. In the summed-form state (integrate.py), x_prev = x_inertial -
+delta.
 
 A collider's thickness is added to its surface: the cloth rests that far outside the render-visible
 surface, so the two never z-fight. Each kind's kernel (collide_sphere.py, collide_plane.py) finds the depth
@@ -17,8 +23,6 @@ from typing import Any
 
 import warp as wp
 
-from .positions import scaled
-
 
 @wp.func
 def project_out(
@@ -26,14 +30,19 @@ def project_out(
     xi: Any,
     normal: Any,
     depth: Any,
-    friction: float,
+    friction: wp.vec2,
     x_inertial: wp.array(dtype=Any),
     delta: wp.array(dtype=Any),
 ):
-    """Move xi out by depth along normal, apply friction to its implicit velocity, return the new position."""
+    """Move xi out by depth along normal, apply Coulomb friction (``friction`` = (mu_k, mu_s), mu_s >= mu_k) to
+    its tangential displacement over the substep, return the new position."""
     xi = xi + normal * depth
-    if friction > 0.0:
-        v = xi - (x_inertial[i] - delta[i])
-        tangential = v - normal * wp.dot(v, normal)
-        delta[i] = delta[i] - scaled(tangential, friction)
+    if friction[1] > 0.0:  # mu_s >= mu_k, so no static friction means no friction (and the frictionless bits)
+        step = xi - (x_inertial[i] - delta[i])
+        tangential = step - normal * wp.dot(step, normal)
+        slip = wp.length(tangential)
+        if slip < depth * type(depth)(friction[1]):
+            xi = xi - tangential
+        else:  # slip >= mu_s depth > 0
+            xi = xi - tangential * wp.min(depth * type(depth)(friction[0]) / slip, type(depth)(1.0))
     return xi

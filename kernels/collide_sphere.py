@@ -17,7 +17,7 @@ def collide_spheres(
     inv_mass: wp.array(dtype=float),
     centres: wp.array(dtype=wp.vec3),
     radii: wp.array(dtype=float),
-    friction: wp.array(dtype=float),
+    friction: wp.array(dtype=wp.vec2),  # (mu_k, mu_s) per collider
 ):
     """``radii`` already include each sphere's thickness."""
     i = wp.tid()

@@ -40,7 +40,7 @@ PATCHED = {"name": "banner", "resolution": [5, 5], "size": [0.6, 0.6], "origin":
            "rigid_patches": [[[4, 0], [4, 1], [4, 2], [4, 3], [4, 4]],
                              [{"min": [2.1, 1.1, -0.1], "max": [2.4, 1.4, 0.1]}]]}
 SPHERE = {"type": "sphere", "name": "ball", "radius": 0.2, "centre": [0.0, 0.9, 0.1], "thickness": 0.01,
-          "friction": 0.3}
+          "friction_coefficient": 0.3}
 MOVING = {"type": "sphere", "radius": 0.1, "path": [[0.0, 1.0, 0.5, 0.4], [0.1, 1.0, 0.5, -0.4]], "purpose": "default"}
 PLANE = {"type": "plane", "point": [0.0, 0.2, 0.0], "normal": [0.0, 1.0, 0.0], "thickness": 0.005}
 
@@ -214,7 +214,8 @@ class RingCollider:
     name: str
     inner: float
     thickness: float = 0.0
-    friction: float = 0.0
+    friction_coefficient: float = 0.0
+    static_friction_coefficient: float | None = None
     purpose: str = "guide"
 
 

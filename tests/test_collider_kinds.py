@@ -45,7 +45,7 @@ def test_every_registered_kind_implements_the_protocol(kind):
     assert isinstance(kind.type, str) and kind.type
     assert isinstance(kind.spec, type)
     assert kind_named(kind.type) is kind
-    for shared in ("name", "thickness", "friction", "purpose"):
+    for shared in ("name", "thickness", "friction_coefficient", "static_friction_coefficient", "purpose"):
         assert shared in kind.spec.__dataclass_fields__, f"{kind.type}'s spec lacks the shared key {shared}"
 
 
@@ -123,7 +123,8 @@ class LevelCollider:
     axis: int
     level: float
     thickness: float = 0.0
-    friction: float = 0.0
+    friction_coefficient: float = 0.0
+    static_friction_coefficient: float | None = None
     purpose: str = "guide"
 
 
@@ -233,9 +234,9 @@ def with_level(monkeypatch):
 
 
 def test_a_kind_registered_in_a_test_is_read_from_toml(with_level):
-    scene = falling_scene({"type": "level", "level": -0.25, "thickness": 0.01, "friction": 0.2})
+    scene = falling_scene({"type": "level", "level": -0.25, "thickness": 0.01, "friction_coefficient": 0.2})
     (spec,) = scene.colliders
-    assert spec == LevelCollider(name="level0", axis=1, level=-0.25, thickness=0.01, friction=0.2)
+    assert spec == LevelCollider(name="level0", axis=1, level=-0.25, thickness=0.01, friction_coefficient=0.2)
     with pytest.raises(SceneError, match=r"<test>.*collider\[0\]\.axis.*expected one of 'x', 'y', 'z'"):
         falling_scene({"type": "level", "level": 0.0, "axis": "w"})
     with pytest.raises(SceneError, match=r"<test>.*collider\[0\]\.radius.*unknown key"):

@@ -39,6 +39,11 @@ CASES = sorted(k for k in GOLDEN if not k.startswith("_"))
 # Colliders the shipped scenes have given a thickness since the recording (a clearance that keeps renders free
 # of z-fighting); the recording had none, so the comparison takes it off again.
 THICKENED_SINCE = {"ball_through_net": {"ground"}, "flag_tear": {"ground"}, "sphere_sweep": {"ball"}}
+# The recording's friction was a fraction of the tangential velocity removed per substep; Coulomb friction (its
+# coefficients, which the scenes now set) replaced it. Frictionless contact is the same code in both, so the
+# comparison runs frictionless, and a case whose recorded cloth touched a collider with friction compares
+# only the frames before that first touch.
+FRICTION_FROM_FRAME = {"cloth_on_sphere": 16}  # the sheet reaches the ball in frame 16
 
 
 def rigid_scene(case: str):
@@ -54,6 +59,8 @@ def rigid_scene(case: str):
     for collider in data.get("collider", []):
         if collider["name"] in THICKENED_SINCE.get(stem, ()):
             collider.pop("thickness")
+        collider.pop("friction_coefficient", None)
+        collider.pop("static_friction_coefficient", None)
     for cloth in data["cloth"]:
         cloth.pop("compliance", None)
         cloth["tethers"] = False  # a new constraint, which the old code did not have
@@ -68,11 +75,14 @@ def test_shipped_scene_with_rigid_sticks_is_unchanged(case):
     scene = rigid_scene(case)
     assert scene.simulation.dt == pytest.approx(record["dt"], rel=1e-15)
     sim = Simulator(scene, "cpu")
-    for frame in range(record["frames"]):
+    compared = FRICTION_FROM_FRAME.get(case, record["frames"] + 1) - 1
+    for frame in range(compared):
         sim.step_frame()
         if SAME_WARP:
             digest = hashlib.sha256(sim.positions().tobytes()).hexdigest()
             assert digest == record["sha256"][frame], f"{case}: frame {frame + 1} differs from before the split"
+    if compared < record["frames"]:
+        return  # the recording's own friction acted on what follows
     assert sim.torn_count() == record["torn"]
     if case in LAST.files:
         np.testing.assert_allclose(sim.positions(), LAST[case], rtol=0, atol=0 if SAME_WARP else 1e-4)

@@ -63,7 +63,7 @@ def simulator_bytes(sim: Simulator) -> int:
 # tearing, tethers (on by default for a pinned cloth that cannot tear; asked for on a tearing one), soft sticks
 # (a compliance per stick, a tension of scratch), and colliders (planes; a still sphere; a moving one, which adds
 # its keyframes, a clock and per-sphere key starts).
-GROUND = {"type": "plane", "point": [0.0, -1.0, 0.0], "friction": 0.3}
+GROUND = {"type": "plane", "point": [0.0, -1.0, 0.0], "friction_coefficient": 0.3}
 WALL = {"type": "plane", "point": [2.0, 0.0, 0.0], "normal": [-1.0, 0.0, 0.0], "thickness": 0.01}
 BALL = {"type": "sphere", "radius": 0.2, "centre": [0.3, -0.5, 0.2]}
 SWEEP = {"type": "sphere", "radius": 0.1, "path": [[0.0, 0.0, 0.0, 0.5], [0.5, 1.0, 0.0, 0.5], [1.0, 1.0, -1.0, 0.5]]}

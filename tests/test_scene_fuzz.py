@@ -124,9 +124,9 @@ def full_scene() -> dict:
                    "compliance": {"structural": 1e-4, "shear": 1e-3, "bend": 1e-2},
                    "pins": ["top-left", 3, [0, 2]], "tear_threshold": 1.5, "particle_masses": [[0, 1, 0.05]],
                    "tethers": True, "tether_scale": 2.0}],
-        "collider": [{"type": "plane", "name": "ground", "thickness": 0.01, "friction": 0.2, "normal": [0.0, 1.0, 0.0],
+        "collider": [{"type": "plane", "name": "ground", "thickness": 0.01, "friction_coefficient": 0.2, "normal": [0.0, 1.0, 0.0],
                       "point": [0.0, -1.0, 0.0], "display_size": 4.0, "purpose": "default"},
-                     {"type": "sphere", "name": "ball", "thickness": 0.0, "friction": 0.0, "radius": 0.2,
+                     {"type": "sphere", "name": "ball", "thickness": 0.0, "friction_coefficient": 0.0, "radius": 0.2,
                       "centre": [0.0, 0.5, 0.3], "purpose": "guide"}],
     }
 
@@ -146,7 +146,7 @@ def every_key_scene() -> dict:
                          "particle_masses": [[5, 0.01]], "mass_distribution": "even", "mass": 0.1,
                          "sticks": ["structural", "bend"], "compliance": {"bend": 0.5}, "tear_threshold": 3.0,
                          "tethers": False, "tether_scale": 4.0})
-    doc["collider"].append({"type": "sphere", "name": "swing", "thickness": 0.01, "friction": 0.1, "radius": 0.1,
+    doc["collider"].append({"type": "sphere", "name": "swing", "thickness": 0.01, "friction_coefficient": 0.1, "radius": 0.1,
                             "path": [[0.0, 0.0, 0.0, 0.0], [1.0, 0.0, 1.0, 0.0]], "purpose": "guide"})
     return doc
 
@@ -353,7 +353,7 @@ RANGES = {
     ("cloth", 0, "compliance", "shear"): (0.0, False, None, False, False),
     ("cloth", 0, "particle_masses", 0, 2): (0.0, True, None, False, False),
     ("collider", 0, "thickness"): (0.0, False, None, False, False),
-    ("collider", 0, "friction"): (0.0, False, 1.0, False, False),
+    ("collider", 0, "friction_coefficient"): (0.0, False, None, False, False),
     ("collider", 0, "display_size"): (0.0, True, None, False, False),
     ("collider", 0, "point", 1): (None, False, None, False, False),
     ("collider", 1, "radius"): (0.0, True, None, False, False),
@@ -555,7 +555,7 @@ def default_of(scene: Scene, path: tuple):
     collider = scene.colliders[path[1]]
     if path[2] == "centre":
         return collider.keyframes, ((0.0, (0.0, 0.0, 0.0)),)
-    defaults = {"name": f"{'plane' if path[1] == 0 else 'sphere'}{path[1]}", "thickness": 0.0, "friction": 0.0,
+    defaults = {"name": f"{'plane' if path[1] == 0 else 'sphere'}{path[1]}", "thickness": 0.0, "friction_coefficient": 0.0,
                 "normal": (0.0, 1.0, 0.0), "point": (0.0, 0.0, 0.0), "display_size": 10.0, "purpose": "guide"}
     return getattr(collider, path[2]), defaults[path[2]]
 
@@ -673,9 +673,9 @@ def valid_scenes(draw) -> dict:
         cloth["tether_scale"] = draw(st.floats(1.0, 100.0))
     collider = draw(st.one_of(
         st.fixed_dictionaries({"type": st.just("plane"), "point": vec3, "thickness": st.floats(0.0, 1.0),
-                               "friction": unit, "display_size": positive,
+                               "friction_coefficient": unit, "display_size": positive,
                                "normal": vec3.filter(lambda v: math.sqrt(sum(x * x for x in v)) > 1e-3)}),
-        st.fixed_dictionaries({"type": st.just("sphere"), "radius": positive, "centre": vec3, "friction": unit}),
+        st.fixed_dictionaries({"type": st.just("sphere"), "radius": positive, "centre": vec3, "friction_coefficient": unit}),
     ))
     return {
         "simulation": {"fps": draw(positive), "frames": draw(st.integers(1, 10**6)),

@@ -630,7 +630,10 @@ def test_fuzz_only_scene_errors(tmp_path, doc):
     ('type = "sphere"\nradius = 1.0\npath = [[0.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0]]', "collider[0].path[1][0]", "must increase"),
     ('type = "sphere"\nradius = 1.0\npath = [[0.0, 0.0, 0.0]]', "collider[0].path[0]", "array of 4"),
     ('type = "plane"\nnormal = [0.0, 0.0, 0.0]', "collider[0].normal", "non-zero"),
-    ('type = "plane"\nfriction = 1.5', "collider[0].friction", "[0.0, 1.0]"),
+    ('type = "plane"\nfriction = 0.5', "collider[0].friction", "write friction_coefficient"),
+    ('type = "plane"\nfriction_coefficient = -0.1', "collider[0].friction_coefficient", "[0.0, inf)"),
+    ('type = "plane"\nfriction_coefficient = 0.5\nstatic_friction_coefficient = 0.4',
+     "collider[0].static_friction_coefficient", "at least friction_coefficient"),
     ('type = "plane"\nthickness = -0.1', "collider[0].thickness", "[0.0, inf)"),
     ('type = "plane"\nbounce = 0.5', "collider[0].bounce", "unknown key"),
 ])

@@ -25,7 +25,7 @@ that layer by up to its share of the substep's approach: here the layer lands at
 N, SIZE, HEIGHT = 16, 0.5, 0.15  # particles per side, m, m above the ground
 SPACING = SIZE / (N - 1)
 THICKNESS = DEFAULT_FRACTION * SPACING
-GROUND = {"type": "plane", "point": [0.0, 0.0, 0.0], "normal": [0.0, 1.0, 0.0], "friction": 0.5}
+GROUND = {"type": "plane", "point": [0.0, 0.0, 0.0], "normal": [0.0, 1.0, 0.0], "friction_coefficient": 0.5}
 
 
 def sheet(name: str, y: float, **keys) -> dict:

@@ -15,7 +15,7 @@ from warp_verlet.core.state import State
 
 EPS32 = float(np.finfo(np.float32).eps)
 SWEEP = {"type": "sphere", "radius": 0.15, "path": [[0.0, 0.2, -0.3, 0.6], [0.6, 0.2, -0.6, -0.6]]}
-GROUND = {"type": "plane", "point": [0.0, -1.2, 0.0], "friction": 0.3}
+GROUND = {"type": "plane", "point": [0.0, -1.2, 0.0], "friction_coefficient": 0.3}
 
 
 def busy(solver: str = "coloured", tethers: bool = False):

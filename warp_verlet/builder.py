@@ -153,8 +153,8 @@ class SceneBuilder:
     # ------------------------------------------------------------------ [[collider]]
     def add_collider(self, type: str, **keys: Any) -> Any:
         """Add a collider of a registered kind (``type``: "sphere", "plane", ...) with its keys: the shared ones
-        (name, thickness, friction, purpose) and the kind's own (a sphere's radius, centre or path; a plane's
-        point and normal)."""
+        (name, thickness, friction_coefficient, static_friction_coefficient, purpose) and the kind's own (a
+        sphere's radius, centre or path; a plane's point and normal)."""
         return self._add_collider("add_collider", type, keys)
 
     def add_sphere(self, **keys: Any) -> Any:

@@ -16,7 +16,8 @@ from typing import Any
 
 from ..errors import ArgumentError
 from ..scene_keys import STRING, Key, accepts, choice, prim_name
-from .kind import (COLLIDER_PURPOSES, FLOAT, FLOAT64, FRICTION, INT, PURPOSE, THICKNESS, VEC3,  # noqa: F401
+from .kind import (COLLIDER_PURPOSES, FLOAT, FLOAT64, FRICTION_COEFFICIENT, INT, PURPOSE,  # noqa: F401
+                   STATIC_FRICTION_COEFFICIENT, THICKNESS, VEC3, coulomb,
                    ColliderKind, ColliderLaunches, FrameReader, InsideReport, LiveDrawing)  # the kinds' names, here too
 from .mesh import MESH
 from .plane import PLANE
@@ -63,7 +64,13 @@ def by_kind(colliders: tuple) -> list[tuple[ColliderKind, tuple]]:
 def read_collider(table, index: int) -> Any:
     """One ``[[collider]]`` table: the shared keys, then the kind's own, then no unknown key."""
     kind = kind_named(TYPE.take(table))
+    if "friction" in table.data:
+        raise table.error("friction", FRICTION_REPLACED)
     shared = {key.name: key.take(table) for key in SHARED_KEYS[1:]}
+    kinetic, static = shared["friction_coefficient"], shared["static_friction_coefficient"]
+    if static is not None and static < kinetic:
+        raise table.error("static_friction_coefficient", f"must be at least friction_coefficient ({kinetic:g}): a "
+                          f"particle that slides is held at most as hard as one at rest; got {static:g}")
     if shared["name"] is None:
         shared["name"] = f"{kind.type}{index}"
     spec = kind.read(table, shared)
@@ -124,4 +131,10 @@ NAME = Key("name", prim_name, default=None, type="string",
            default_text=" / ".join(sorted(f'`"{k.type}<i>"`' for k in COLLIDER_KINDS)),
            allowed="letters, digits, `_`; not starting with a digit; unique among colliders",
            doc="Its prim name in the cache: `/World/Colliders/<name>`.")
-SHARED_KEYS = (TYPE, NAME, THICKNESS, FRICTION, PURPOSE)
+SHARED_KEYS = (TYPE, NAME, THICKNESS, FRICTION_COEFFICIENT, STATIC_FRICTION_COEFFICIENT, PURPOSE)
+
+FRICTION_REPLACED = (
+    "was the fraction of the tangential velocity removed per substep, so the same scene slid differently at other "
+    "substeps; it is replaced by Coulomb friction, which does not depend on them: write friction_coefficient = "
+    "mu_k (sliding cloth on the surface decelerates at mu_k g; about 0.3 to 0.6 for cloth on wood or fabric) and, "
+    "if it holds harder at rest, static_friction_coefficient = mu_s (cloth rests on a slope while tan(slope) < mu_s)")

@@ -75,7 +75,8 @@ class ColliderKind(Protocol):
 
     - ``type``: the ``type`` string of its ``[[collider]]`` tables (``"sphere"``).
     - ``spec``: the frozen dataclass of one collider of this kind; it has at least ``name``, ``thickness``,
-      ``friction`` and ``purpose`` (the shared keys, :data:`SHARED_KEYS`).
+      ``friction_coefficient``, ``static_friction_coefficient`` (None: the same as ``friction_coefficient``) and
+      ``purpose`` (the shared keys, :data:`SHARED_KEYS`); :func:`coulomb` reads the two coefficients.
     - ``keys``: its own scene keys (:class:`~warp_verlet.scene_keys.Key`), after the shared ones: the loader
       takes them and the docs tables are written from them.
     - ``read(table, shared)``: the spec from its table; ``shared`` holds the shared keys' values by name. It
@@ -157,11 +158,28 @@ THICKNESS = Key("thickness", real(0.0), 0.0, type="number", unit="m", allowed="�
                     "collider. At `0` the cloth rests on the visible surface and z-fights with it in renders: "
                     "`validate` and `run` warn and suggest half the finest cloth's particle spacing (a grid's "
                     "`size / (n - 1)`, a mesh's median edge).")
-FRICTION = Key("friction", real(0.0, 1.0), 0.0, type="number", allowed="0 … 1",
-               doc="Fraction of the tangential implicit velocity (x − x_prev) removed each substep a particle is "
-                   "in contact. 0 = frictionless, 1 = sticks.")
+FRICTION_COEFFICIENT = Key(
+    "friction_coefficient", real(0.0), 0.0, type="number", allowed="≥ 0",
+    doc="Coulomb's kinetic friction coefficient μ_k: a sliding particle's move along the surface in a substep is "
+        "shortened by μ_k times the distance the surface pushed it out, so on an incline it slides down at "
+        "g (sin θ − μ_k cos θ) and on level ground it stops from v after v² / (2 μ_k g), whatever the substeps. "
+        "`0` = frictionless; cloth on wood or fabric is about 0.3 … 0.6.")
+STATIC_FRICTION_COEFFICIENT = Key(
+    "static_friction_coefficient", real(0.0), None, type="number", default_text="`friction_coefficient`",
+    allowed="≥ 0; at least `friction_coefficient`",
+    doc="Coulomb's static friction coefficient μ_s: a particle whose move along the surface in a substep is under "
+        "μ_s times the distance the surface pushed it out stays where it was, so cloth rests on an incline while "
+        "tan θ < μ_s.")
 PURPOSE = Key("purpose", choice(COLLIDER_PURPOSES), "guide", type="string", allowed='`"guide"`, `"default"`',
               doc="The USD `purpose` of its prim in a cache. `\"guide\"`: a helper, left out of renders (Blender, "
                   "Karma) and hidden in usdview until guides are shown (Display > Display Purposes > Guide); the "
                   "default, since a collider stands in for the user's own geometry. `\"default\"`: rendered with "
                   "the cloth.")
+
+
+def coulomb(spec: Any) -> tuple[float, float]:
+    """A collider's Coulomb coefficients (mu_k, mu_s), as the clamp kernels take them (a ``wp.vec2`` each); an
+    unset mu_s is mu_k."""
+    kinetic = spec.friction_coefficient
+    static = spec.static_friction_coefficient
+    return kinetic, kinetic if static is None else static

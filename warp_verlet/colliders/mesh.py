@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..scene_keys import ARRAY, NUMBER, Key, accepts, any_real, per_element, real, text, vector
-from .kind import FLOAT, FLOAT64, INT, VEC3, ColliderLaunches, InsideReport, LiveDrawing
+from .kind import FLOAT, FLOAT64, INT, VEC3, ColliderLaunches, InsideReport, LiveDrawing, coulomb
 
 MESH_ID = 8  # bytes of a wp.Mesh id (uint64) on the device
 # What Warp allocates for one wp.Mesh of T triangles besides the points and indices it is given (warp/native
@@ -46,7 +46,8 @@ class MeshCollider:
     triangles: Any
     keyframes: tuple[tuple[float, tuple[float, float, float]], ...] = ((0.0, (0.0, 0.0, 0.0)),)
     thickness: float = 0.0
-    friction: float = 0.0
+    friction_coefficient: float = 0.0  # Coulomb's mu_k
+    static_friction_coefficient: float | None = None  # mu_s; None: mu_k
     purpose: str = "guide"  # USD purpose of its prim in a cache
 
     @property
@@ -201,7 +202,7 @@ class MeshKind:
         meshes, points, triangles, keys = counts
         given = points * VEC3 + 3 * triangles * INT  # the points and indices the meshes are built from
         # ids, reach, thickness, friction, the start translation; the State's translation
-        per_mesh = meshes * (MESH_ID + 3 * FLOAT + 2 * VEC3)
+        per_mesh = meshes * (MESH_ID + 4 * FLOAT + 2 * VEC3)  # friction: (mu_k, mu_s)
         bvh = triangles * TRIANGLE_BVH_BYTES + (2 * triangles - meshes) * NODE_BYTES
         bvh += meshes * (INT + DESCRIPTOR_BYTES)
         # key starts (one more than the meshes), keyframe times and translations, the State's clock
@@ -230,7 +231,7 @@ class MeshKind:
             "mesh_ids": wp.array([m.id for m in bvhs], dtype=wp.uint64),
             "mesh_reach": wp.array([s.reach for s in specs], dtype=float),
             "mesh_thickness": wp.array([s.thickness for s in specs], dtype=float),
-            "mesh_friction": wp.array([s.friction for s in specs], dtype=float),
+            "mesh_friction": wp.array([coulomb(s) for s in specs], dtype=wp.vec2),
             "mesh_start": wp.array([s.keyframes[0][1] for s in specs], dtype=wp.vec3),
         }
         if moving:

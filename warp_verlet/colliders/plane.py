@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..scene_keys import Key, any_real, real, vector
-from .kind import FLOAT, VEC3, ColliderLaunches, InsideReport, LiveDrawing
+from .kind import FLOAT, VEC3, ColliderLaunches, InsideReport, LiveDrawing, coulomb
 
 
 @dataclass(frozen=True)
@@ -18,7 +18,8 @@ class PlaneCollider:
     point: tuple[float, float, float]
     normal: tuple[float, float, float]
     thickness: float = 0.0
-    friction: float = 0.0
+    friction_coefficient: float = 0.0  # Coulomb's mu_k
+    static_friction_coefficient: float | None = None  # mu_s; None: mu_k
     display_size: float = 10.0
     purpose: str = "guide"  # USD purpose of its prim in a cache
 
@@ -92,7 +93,7 @@ class PlaneKind:
 
     def device_bytes(self, counts: tuple[int]) -> int:
         (planes,) = counts
-        return planes * (2 * VEC3 + 2 * FLOAT)  # points, normals, thickness, friction
+        return planes * (2 * VEC3 + 3 * FLOAT)  # points, normals, thickness, friction (mu_k, mu_s)
 
     def build(self, specs: tuple[PlaneCollider, ...], device) -> dict[str, Any]:
         import warp as wp
@@ -102,7 +103,7 @@ class PlaneKind:
             "plane_points": wp.array([p.point for p in specs], dtype=wp.vec3),
             "plane_normals": wp.array([p.normal for p in specs], dtype=wp.vec3),
             "plane_thickness": wp.array([p.thickness for p in specs], dtype=float),
-            "plane_friction": wp.array([p.friction for p in specs], dtype=float),
+            "plane_friction": wp.array([coulomb(p) for p in specs], dtype=wp.vec2),
         }
 
     def state_arrays(self, colliders) -> dict[str, Any]:

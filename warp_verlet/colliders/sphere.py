@@ -6,7 +6,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..scene_keys import ARRAY, Invalid, Key, accepts, any_real, describe, per_element, real, vector
-from .kind import FLOAT, FLOAT64, INT, VEC3, ColliderLaunches, InsideReport, LiveDrawing
+from .kind import FLOAT, FLOAT64, INT, VEC3, ColliderLaunches, InsideReport, LiveDrawing, coulomb
 
 
 @dataclass(frozen=True)
@@ -17,7 +17,8 @@ class SphereCollider:
     radius: float
     keyframes: tuple[tuple[float, tuple[float, float, float]], ...]
     thickness: float = 0.0
-    friction: float = 0.0
+    friction_coefficient: float = 0.0  # Coulomb's mu_k
+    static_friction_coefficient: float | None = None  # mu_s; None: mu_k
     purpose: str = "guide"  # USD purpose of its prim in a cache
 
     @property
@@ -116,7 +117,7 @@ class SphereKind:
 
     def device_bytes(self, counts: tuple[int, int]) -> int:
         spheres, keys = counts
-        fixed = spheres * (VEC3 + 2 * FLOAT + VEC3)  # start centre, reach, friction; the State's centre
+        fixed = spheres * (VEC3 + 3 * FLOAT + VEC3)  # start centre, reach, friction (mu_k, mu_s); the State's centre
         # key starts (one more than the spheres), keyframe times and centres, the State's clock
         moving = ((spheres + 1) * INT + keys * (FLOAT + VEC3) + FLOAT64) if keys else 0
         return fixed + moving
@@ -131,7 +132,7 @@ class SphereKind:
             "spheres_move": moving,
             "sphere_start": wp.array([s.keyframes[0][1] for s in specs], dtype=wp.vec3),
             "sphere_reach": wp.array([s.radius + s.thickness for s in specs], dtype=float),
-            "sphere_friction": wp.array([s.friction for s in specs], dtype=float),
+            "sphere_friction": wp.array([coulomb(s) for s in specs], dtype=wp.vec2),
         }
         if moving:
             # A still sphere (one centre, however many keyframes) keeps one key: place_spheres leaves it be.
