@@ -12,7 +12,7 @@ The cloth: n x n particles, a 1 m square of 0.3 kg, structural + shear + bend st
 laid horizontal 0.1 m above a sphere of radius 0.3 m at the origin, released at rest: it lands at about
 1.4 m/s and drapes over it. The collider: a trimesh icosphere of radius 0.3 m (subdivision 5: 20,480 triangles;
 6: 81,920), or a sphere collider of radius 0.3 m, or none; thickness half the cloth's spacing (0.5 / (n - 1) m),
-friction 0.5. 60 fps, --substeps substeps and --iterations sweeps, damping 0.5 /s. On the CPU, one thread
+Coulomb friction 0.5. 60 fps, --substeps substeps and --iterations sweeps, damping 0.5 /s. On the CPU, one thread
 (``Simulator(..., threads=1)``).
 
 Columns: ms/frame (the median frame's wall time over --frames frames, frame 1 excluded as the warm-up; the
@@ -69,10 +69,10 @@ def drop_scene(n: int, collider: str, subdivisions: int, folder: Path, frames: i
             points, triangles = icosphere(subdivisions)
             trimesh.Trimesh(points, triangles, process=False).export(str(path))
         colliders = [{"type": "mesh", "name": "ball", "mesh": path.name, "thickness": thickness,
-                      "friction": FRICTION}]
+                      "friction_coefficient": FRICTION}]
     elif collider == "sphere":
         colliders = [{"type": "sphere", "name": "ball", "centre": [0.0, 0.0, 0.0], "radius": RADIUS,
-                      "thickness": thickness, "friction": FRICTION}]
+                      "thickness": thickness, "friction_coefficient": FRICTION}]
     scene_file = folder / "scene.toml"
     scene = parse_scene({"simulation": {"fps": 60, "frames": frames, "substeps": substeps, "iterations": iterations,
                                         "damping": 0.5}, "cloth": [cloth], "collider": colliders},
