@@ -336,3 +336,15 @@ FLOAT32_TINY = 1.1754943508222875e-38  # the smallest normal float32: below it p
 def float32_fits(x: float) -> bool:
     """Whether the device can hold ``x`` as a float32: finite and within its range."""
     return math.isfinite(x) and abs(x) <= FLOAT32_MAX
+
+
+_positive = per_element(real(0.0, lo_open=True))
+
+
+@accepts(NUMBER, ARRAY)
+def scale_factors(value: Any, key: str) -> tuple[float, float, float]:
+    """A scale: one positive number for all three axes, or [x, y, z] of them (a mesh cloth's, a mesh collider's)."""
+    if isinstance(value, list):
+        return vector(3, _positive)(value, key)
+    s = _positive(value, key)
+    return (s, s, s)

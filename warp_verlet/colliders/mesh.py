@@ -20,8 +20,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from ..scene_keys import ARRAY, NUMBER, Key, accepts, any_real, per_element, real, text, vector
-from .kind import FLOAT, FLOAT64, INT, VEC3, ColliderLaunches, InsideReport, LiveDrawing, coulomb
+from ..scene_keys import ARRAY, Key, accepts, any_real, scale_factors, text, vector
+from .kind import FLOAT, FLOAT64, INT, VEC3, ColliderLaunches, InsideReport, LiveDrawing, coulomb, keyframe_tables
 
 MESH_ID = 8  # bytes of a wp.Mesh id (uint64) on the device
 # What Warp allocates for one wp.Mesh of T triangles besides the points and indices it is given (warp/native
@@ -80,17 +80,6 @@ class MeshCollider:
         return self.thickness + 0.5 * thinnest
 
 
-_positive = per_element(real(0.0, lo_open=True))
-
-
-@accepts(NUMBER, ARRAY)
-def _scale(value: Any, key: str) -> tuple[float, float, float]:
-    if isinstance(value, list):
-        return vector(3, _positive)(value, key)
-    s = _positive(value, key)
-    return (s, s, s)
-
-
 @accepts(ARRAY)
 def _translate(value: Any, key: str) -> tuple[tuple[float, tuple[float, float, float]], ...]:
     """[x, y, z] (a still mesh), or keyframes [[t, x, y, z], ...] as a sphere's path: ((t, (x, y, z)), ...)."""
@@ -116,7 +105,7 @@ TRANSLATE = Key("translate", _translate, ((0.0, (0.0, 0.0, 0.0)),), "[x, y, z] n
                     "moving mesh gets a time-sampled `xformOp:translate` in the cache.")
 ROTATE = Key("rotate", vector(3, any_real), (0.0, 0.0, 0.0), "[x, y, z] numbers", "degrees", allowed="finite",
              doc="Rotations about the fixed X, then Y, then Z axes, after `scale`.")
-SCALE = Key("scale", _scale, (1.0, 1.0, 1.0), "number or [x, y, z]", default_text="`1.0`", allowed="> 0",
+SCALE = Key("scale", scale_factors, (1.0, 1.0, 1.0), "number or [x, y, z]", default_text="`1.0`", allowed="> 0",
             doc="Scales the mesh first.")
 
 
@@ -235,11 +224,10 @@ class MeshKind:
             "mesh_start": wp.array([s.keyframes[0][1] for s in specs], dtype=wp.vec3),
         }
         if moving:
-            # A still mesh (one translation, however many keyframes) keeps one key: place_meshes leaves it be.
-            keys = [s.keyframes if s.moving else s.keyframes[:1] for s in specs]
-            out["mesh_key_start"] = wp.array(np.r_[0, np.cumsum([len(k) for k in keys])].astype(np.int32), dtype=int)
-            out["mesh_key_times"] = wp.array([t for k in keys for t, _ in k], dtype=float)
-            out["mesh_key_offsets"] = wp.array([o for k in keys for _, o in k], dtype=wp.vec3)
+            start, times, offsets = keyframe_tables(specs)
+            out["mesh_key_start"] = wp.array(start, dtype=int)
+            out["mesh_key_times"] = wp.array(times, dtype=float)
+            out["mesh_key_offsets"] = wp.array(offsets, dtype=wp.vec3)
         return out
 
     def state_arrays(self, colliders) -> dict[str, Any]:

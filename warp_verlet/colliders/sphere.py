@@ -6,7 +6,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..scene_keys import ARRAY, Invalid, Key, accepts, any_real, describe, per_element, real, vector
-from .kind import FLOAT, FLOAT64, INT, VEC3, ColliderLaunches, InsideReport, LiveDrawing, coulomb
+from .kind import FLOAT, FLOAT64, INT, VEC3, ColliderLaunches, InsideReport, LiveDrawing, coulomb, keyframe_tables
 
 
 @dataclass(frozen=True)
@@ -123,7 +123,6 @@ class SphereKind:
         return fixed + moving
 
     def build(self, specs: tuple[SphereCollider, ...], device) -> dict[str, Any]:
-        import numpy as np
         import warp as wp
 
         moving = any(s.moving for s in specs)
@@ -135,11 +134,10 @@ class SphereKind:
             "sphere_friction": wp.array([coulomb(s) for s in specs], dtype=wp.vec2),
         }
         if moving:
-            # A still sphere (one centre, however many keyframes) keeps one key: place_spheres leaves it be.
-            keys = [s.keyframes if s.moving else s.keyframes[:1] for s in specs]
-            out["key_start"] = wp.array(np.r_[0, np.cumsum([len(k) for k in keys])].astype(np.int32), dtype=int)
-            out["key_times"] = wp.array([t for k in keys for t, _ in k], dtype=float)
-            out["key_centres"] = wp.array([c for k in keys for _, c in k], dtype=wp.vec3)
+            start, times, centres = keyframe_tables(specs)
+            out["key_start"] = wp.array(start, dtype=int)
+            out["key_times"] = wp.array(times, dtype=float)
+            out["key_centres"] = wp.array(centres, dtype=wp.vec3)
         return out
 
     def state_arrays(self, colliders) -> dict[str, Any]:

@@ -19,19 +19,11 @@ from typing import Any, Mapping
 from ..errors import SceneError
 from ..geometry.mesh_cloth import MASS_DISTRIBUTIONS, ClothMesh, MeshError, SourceMesh, prepare
 from ..geometry.mesh_io import USD_SUFFIXES, read_mesh, to_scene, transform_matrix
-from ..scene_keys import (ARRAY, NUMBER, Invalid, Key, Table, accepts, any_real, choice, describe, int_text,
-                          per_element, real, text, vector)
+from ..scene_keys import (ARRAY, Invalid, Key, Table, accepts, any_real, choice, describe, int_text,
+                          per_element, real, scale_factors, text, vector)
 
 _positive = per_element(real(0.0, lo_open=True))
 _point = per_element(vector(3, any_real))  # an error names the element's own key
-
-
-@accepts(NUMBER, ARRAY)
-def _scale(value: Any, key: str) -> tuple[float, float, float]:
-    if isinstance(value, list):
-        return vector(3, _positive)(value, key)
-    s = _positive(value, key)
-    return (s, s, s)
 
 
 @accepts(ARRAY)
@@ -89,7 +81,7 @@ MESH_KEYS: tuple[Key, ...] = (  # in the order they are read, and of their table
         doc="Moves the mesh, after `rotate`."),
     Key("rotate", vector(3, any_real), (0.0, 0.0, 0.0), "[x, y, z] numbers", "degrees", allowed="finite",
         doc="Rotations about the fixed X, then Y, then Z axes, after `scale`."),
-    Key("scale", _scale, (1.0, 1.0, 1.0), "number or [x, y, z]", default_text="`1.0`", allowed="> 0",
+    Key("scale", scale_factors, (1.0, 1.0, 1.0), "number or [x, y, z]", default_text="`1.0`", allowed="> 0",
         doc="Scales the mesh first."),
     Key("weld_distance", real(0.0), None, "number", "m", default_text="10⁻⁶ × the mesh's bounding-box diagonal",
         allowed="≥ 0 (0: exact duplicates only)",
