@@ -205,7 +205,7 @@ def test_preview_without_its_renderer_says_what_to_install(tmp_path):
     assert not (tmp_path / "x.png").exists()
 
 
-# ---------------------------------------------------------------------------------- clean errors (issue 13)
+# ---------------------------------------------------------------------------------- clean errors
 
 
 def test_threads_are_bounded_with_a_message_about_threads(scene_file, capsys):

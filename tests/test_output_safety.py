@@ -1,4 +1,4 @@
-"""Never lose a good cache (issue 13): atomic output, one writer per output, full disks, paths that are inputs,
+"""Never lose a good cache: atomic output, one writer per output, full disks, paths that are inputs,
 and what the command line says about each.
 
 A run writes NAME.partial.EXT and renames it over NAME.EXT only when it succeeds; these tests re-run into an

@@ -1,5 +1,5 @@
 """Every shipped scene, run to its last frame with its own settings, ends as cloth: under 1% RMS and 10% max
-structural stretch |D - L| / L (issue 17's defaults). big_grid_1024 is checked on a GPU only (bench/gpu_session.sh
+structural stretch |D - L| / L. big_grid_1024 is checked on a GPU only (bench/gpu_session.sh
 runs it); on this 2-core CI machine it would take an hour."""
 
 from pathlib import Path
@@ -20,7 +20,7 @@ CASES = [
     pytest.param("flag_tear", marks=pytest.mark.xfail(strict=True, reason=(
         "tearing is a stretch threshold, so the flag tears only while the relaxation leaves its pole sticks "
         "stretched: with the budget that makes it converge (32 x 2) it does not tear at all. It ends at 2.6% RMS, "
-        "37% max. A tension criterion is the fix (issue 17 closing note)"))),
+        "37% max. A tension criterion is the fix (docs/not_built.md)"))),
 ]
 
 
