@@ -72,3 +72,15 @@ def split(first: int, count: int, parts: int) -> list[tuple[int, int]]:
         pieces.append((start, size))
         start += size
     return pieces
+
+
+def copy_back_phase(x, scratch, count: int, threads: int) -> list[PhaseTask | None]:
+    """The phase that ends a Jacobi gather: ``scratch``'s first ``count`` positions copied over ``x``, cut into one
+    piece per thread. The tasks hold the arrays, not a solver: worker threads keep their tasks alive, and must not
+    keep a solver alive."""
+    import warp as wp
+
+    def copy_back(f, n):
+        return PhaseTask("copy", lambda: wp.copy(x, scratch, dest_offset=f, src_offset=f, count=n))
+
+    return split_tasks(copy_back, 0, count, threads)

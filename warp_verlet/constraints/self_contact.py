@@ -32,7 +32,7 @@ import math
 import numpy as np
 
 from .kind import ConstraintSet
-from ..launches import FLOAT, INT, VEC3, BoundStage, PhaseTask, recorded, split_tasks
+from ..launches import FLOAT, INT, VEC3, BoundStage, copy_back_phase, recorded, split_tasks
 from ..scene_keys import Key, boolean, real
 
 DEFAULT_FRACTION = 0.8
@@ -231,9 +231,6 @@ class SelfContact(ConstraintSet):
             return recorded(contact_gather, count, [x, model.inv_mass, data.thickness, candidate, candidate_count,
                                                     MAX_CANDIDATES, f, scratch])
 
-        def copy_back(f, count):
-            return PhaseTask("copy", lambda: wp.copy(x, scratch, dest_offset=f, src_offset=f, count=count))
-
         # ``search`` holds the grid, which the recorded launch reads by its id only.
         return BoundStage(search, [split_tasks(gather, 0, n, solver.threads),
-                                   split_tasks(copy_back, 0, n, solver.threads)])
+                                   copy_back_phase(x, scratch, n, solver.threads)])

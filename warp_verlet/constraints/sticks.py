@@ -8,7 +8,8 @@ tearing and the stretch metrics share); this module binds their sweeps.
 from __future__ import annotations
 
 from .kind import ConstraintSet
-from ..launches import FLOAT, FLOAT64, INT, VEC2I, BoundStage, PhaseTask, recorded, split_tasks, start_compliant_substep
+from ..launches import (FLOAT, FLOAT64, INT, VEC2I, BoundStage, copy_back_phase, recorded, split_tasks,
+                        start_compliant_substep)
 
 
 class Sticks(ConstraintSet):
@@ -28,8 +29,6 @@ class Sticks(ConstraintSet):
         return req.sticks * 2 * (INT + 2 * FLOAT) + req.particles * (req.position_bytes + INT)
 
     def bind(self, model, state, solver) -> BoundStage:
-        import warp as wp
-
         from warp_verlet.kernels.relax import relax_colour, relax_colour_compliant, relax_jacobi
 
         m, x, threads = model, state.particle_q, solver.threads
@@ -56,13 +55,8 @@ class Sticks(ConstraintSet):
             return recorded(relax_jacobi, n, [x, m.inv_mass, m.neighbour_start, m.neighbour, m.neighbour_rest,
                                               weight, f, scratch])
 
-        def copy_back(f, n):
-            # The task holds the arrays, not the solver: worker threads keep their tasks alive, and must not
-            # keep a solver alive.
-            return PhaseTask("copy", lambda: wp.copy(x, scratch, dest_offset=f, src_offset=f, count=n))
-
         return BoundStage(None, [split_tasks(gather, 0, m.particle_count, threads),
-                            split_tasks(copy_back, 0, m.particle_count, threads)])
+                            copy_back_phase(x, scratch, m.particle_count, threads)])
 
 
 
