@@ -12,7 +12,7 @@ from typing import Any
 
 import warp as wp
 
-from .collide_response import project_out
+from .collide_response import keyframed, project_out
 from .positions import for_positions
 
 
@@ -74,13 +74,4 @@ def place_meshes(
     last = key_start[m + 1] - 1
     if last == first:
         return
-    o = key_offsets[first]
-    if t >= key_times[last]:
-        o = key_offsets[last]
-    elif t > key_times[first]:
-        for k in range(first, last):
-            t0 = key_times[k]
-            t1 = key_times[k + 1]
-            if t >= t0 and t < t1:
-                o = wp.lerp(key_offsets[k], key_offsets[k + 1], (t - t0) / (t1 - t0))
-    offsets[m] = o
+    offsets[m] = keyframed(t, first, last, key_times, key_offsets)

@@ -46,3 +46,19 @@ def project_out(
         else:  # slip >= mu_s depth > 0
             xi = xi - tangential * wp.min(depth * type(depth)(friction[0]) / slip, type(depth)(1.0))
     return xi
+
+
+@wp.func
+def keyframed(t: float, first: int, last: int, key_times: wp.array(dtype=float), key_values: wp.array(dtype=wp.vec3)):
+    """A collider's keyframed vec3 at time ``t`` (its keys ``first`` .. ``last``): linear between keyframes, held
+    at the first before it and at the last after it."""
+    v = key_values[first]
+    if t >= key_times[last]:
+        v = key_values[last]
+    elif t > key_times[first]:
+        for k in range(first, last):
+            t0 = key_times[k]
+            t1 = key_times[k + 1]
+            if t >= t0 and t < t1:
+                v = wp.lerp(key_values[k], key_values[k + 1], (t - t0) / (t1 - t0))
+    return v

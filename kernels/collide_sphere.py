@@ -5,7 +5,7 @@ from typing import Any
 
 import warp as wp
 
-from .collide_response import project_out
+from .collide_response import keyframed, project_out
 from .positions import for_positions
 
 
@@ -64,13 +64,4 @@ def place_spheres(
     last = key_start[s + 1] - 1
     if last == first:
         return
-    c = key_centres[first]
-    if t >= key_times[last]:
-        c = key_centres[last]
-    elif t > key_times[first]:
-        for k in range(first, last):
-            t0 = key_times[k]
-            t1 = key_times[k + 1]
-            if t >= t0 and t < t1:
-                c = wp.lerp(key_centres[k], key_centres[k + 1], (t - t0) / (t1 - t0))
-    centres[s] = c
+    centres[s] = keyframed(t, first, last, key_times, key_centres)

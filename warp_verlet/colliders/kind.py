@@ -185,12 +185,14 @@ def coulomb(spec: Any) -> tuple[float, float]:
     return kinetic, kinetic if static is None else static
 
 
-def keyframe_tables(specs) -> tuple:
-    """Every collider's keyframes in one table, as the place_* kernels read them: (each collider's first key, (K + 1,)
-    int32; the times, s; the values), in ``specs`` order. A still collider (one value, however many keyframes)
-    keeps one key, which its place kernel leaves be."""
+def keyframe_arrays(specs) -> tuple:
+    """Every collider's keyframes in one table on the current device, as the place_* kernels read them: (each
+    collider's first key, (K + 1,) int; the times, s, float; the values, vec3), in ``specs`` order. A still collider
+    (one value, however many keyframes) keeps one key, which its place kernel leaves be."""
     import numpy as np
+    import warp as wp
 
     keys = [s.keyframes if s.moving else s.keyframes[:1] for s in specs]
     start = np.r_[0, np.cumsum([len(k) for k in keys])].astype(np.int32)
-    return start, [t for k in keys for t, _ in k], [v for k in keys for _, v in k]
+    return (wp.array(start, dtype=int), wp.array([t for k in keys for t, _ in k], dtype=float),
+            wp.array([v for k in keys for _, v in k], dtype=wp.vec3))

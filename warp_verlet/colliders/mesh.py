@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..scene_keys import ARRAY, Key, accepts, any_real, scale_factors, text, vector
-from .kind import FLOAT, FLOAT64, INT, VEC3, ColliderLaunches, InsideReport, LiveDrawing, coulomb, keyframe_tables
+from .kind import FLOAT, FLOAT64, INT, VEC3, ColliderLaunches, InsideReport, LiveDrawing, coulomb, keyframe_arrays
 
 MESH_ID = 8  # bytes of a wp.Mesh id (uint64) on the device
 # What Warp allocates for one wp.Mesh of T triangles besides the points and indices it is given (warp/native
@@ -224,10 +224,7 @@ class MeshKind:
             "mesh_start": wp.array([s.keyframes[0][1] for s in specs], dtype=wp.vec3),
         }
         if moving:
-            start, times, offsets = keyframe_tables(specs)
-            out["mesh_key_start"] = wp.array(start, dtype=int)
-            out["mesh_key_times"] = wp.array(times, dtype=float)
-            out["mesh_key_offsets"] = wp.array(offsets, dtype=wp.vec3)
+            out["mesh_key_start"], out["mesh_key_times"], out["mesh_key_offsets"] = keyframe_arrays(specs)
         return out
 
     def state_arrays(self, colliders) -> dict[str, Any]:

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..scene_keys import ARRAY, Invalid, Key, accepts, any_real, describe, per_element, real, vector
-from .kind import FLOAT, FLOAT64, INT, VEC3, ColliderLaunches, InsideReport, LiveDrawing, coulomb, keyframe_tables
+from .kind import FLOAT, FLOAT64, INT, VEC3, ColliderLaunches, InsideReport, LiveDrawing, coulomb, keyframe_arrays
 
 
 @dataclass(frozen=True)
@@ -134,10 +134,7 @@ class SphereKind:
             "sphere_friction": wp.array([coulomb(s) for s in specs], dtype=wp.vec2),
         }
         if moving:
-            start, times, centres = keyframe_tables(specs)
-            out["key_start"] = wp.array(start, dtype=int)
-            out["key_times"] = wp.array(times, dtype=float)
-            out["key_centres"] = wp.array(centres, dtype=wp.vec3)
+            out["key_start"], out["key_times"], out["key_centres"] = keyframe_arrays(specs)
         return out
 
     def state_arrays(self, colliders) -> dict[str, Any]:
