@@ -53,11 +53,12 @@ def folded_scene(n: int, self_collision: bool, frames: int, substeps: int, itera
                                        "damping": 0.5}, "cloth": [cloth], "collider": [ground]}, file="<bench>")
 
 
-def folded(rest: np.ndarray, n: int, thickness: float) -> np.ndarray:
-    """The rest sheet folded in half between its two middle columns, the right half over the left, a gap of 1.5
-    thicknesses, round a half circle."""
+def folded(rest: np.ndarray, spacing: float, thickness: float) -> np.ndarray:
+    """The rest sheet (a grid ``spacing`` m apart) folded in half between its two middle columns, the right half
+    laid over the left a gap of 1.5 thicknesses above it, round a half circle (the sticks keep about their
+    lengths)."""
     x = rest.astype(np.float64).copy()
-    crease = 0.5 * (x[:, 0].min() + x[:, 0].max()) - 0.5 * SIZE / (n - 1)
+    crease = 0.5 * (x[:, 0].min() + x[:, 0].max()) - 0.5 * spacing
     radius = 0.75 * thickness
     over = x[:, 0] > crease
     along = x[over, 0] - crease
@@ -108,7 +109,7 @@ def run(n: int, self_collision: bool, frames: int, substeps: int, iterations: in
     start = time.perf_counter()
     sim = Simulator(scene, device, threads=1)
     build = time.perf_counter() - start
-    sim.state.set_positions(folded(sim.model.rest_positions, n, thickness))
+    sim.state.set_positions(folded(sim.model.rest_positions, SIZE / (n - 1), thickness))
     meter = GapMeter(sim, thickness)
     times, worst = [], 0.0
     for _ in range(frames):

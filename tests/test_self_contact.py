@@ -9,6 +9,9 @@ import numpy as np
 import pytest
 import warp as wp
 
+import bench_package  # noqa: F401  (makes the repository's bench/ importable as the package "bench")
+from bench import self_contact as self_contact_bench
+
 from conftest import make_scene
 from warp_verlet.constraints.self_contact import DEFAULT_FRACTION, REST_EXCLUSION
 from warp_verlet.core.memory import estimate
@@ -41,17 +44,8 @@ def drop(cloths: list[dict], device: str = "cpu", colliders=(GROUND,), **sim) ->
 
 
 def folded(rest: np.ndarray) -> np.ndarray:
-    """The rest sheet folded in half between its two middle columns, the right half laid over the left a gap of
-    1.5 thicknesses above it, round a half circle (the sticks keep about their lengths)."""
-    x = rest.astype(np.float64).copy()
-    crease = 0.5 * (x[:, 0].min() + x[:, 0].max()) - 0.5 * SPACING
-    radius = 0.75 * THICKNESS
-    over = x[:, 0] > crease
-    along = x[over, 0] - crease
-    angle = np.minimum(along, np.pi * radius) / radius
-    x[over, 0] = crease + radius * np.sin(angle) - np.maximum(along - np.pi * radius, 0.0)
-    x[over, 1] += radius * (1.0 - np.cos(angle))
-    return x
+    """The test sheet folded in half over itself, as the benchmark folds its own (bench.self_contact.folded)."""
+    return self_contact_bench.folded(rest, SPACING, THICKNESS)
 
 
 def closest_non_neighbours(x: np.ndarray, rest: np.ndarray) -> float:
@@ -215,14 +209,13 @@ def test_a_large_folded_cloth_holds_on_cuda_where_the_frame_is_not_captured():
     # A captured CUDA frame replayed Warp's hash-grid build stale past a small cloth (256^2: the layers passed
     # through each other), so a scene with self-collision steps its CUDA frames launch by launch; the CPU's
     # capture replays it correctly.
-    import bench_package  # noqa: F401  (makes the repository's bench/ importable as the package "bench")
-    from bench import self_contact as sc
+    sc = self_contact_bench
 
     n = 256
     sim = Simulator(sc.folded_scene(n, True, 20, 32, 8), "cuda")
     assert not sim._use_graph
     thickness = sc.DEFAULT_FRACTION * sc.SIZE / (n - 1)
-    sim.state.set_positions(sc.folded(sim.model.rest_positions, n, thickness))
+    sim.state.set_positions(sc.folded(sim.model.rest_positions, sc.SIZE / (n - 1), thickness))
     meter = sc.GapMeter(sim, thickness)
     worst = 0.0
     for _ in range(20):
