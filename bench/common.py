@@ -99,6 +99,21 @@ def device_arrays(sim) -> dict[int, wp.array]:
 
 # ---------------------------------------------------------------- timing
 
+def timed_frames(sim, frames: int, after=None) -> list[float]:
+    """Seconds each of ``frames`` ``sim.step_frame()`` calls took, synchronised with its device, calling ``after()``
+    after each frame, outside the timing (a measurement of the frame just stepped)."""
+    out = []
+    for _ in range(frames):
+        wp.synchronize_device(sim.device)
+        begin = time.perf_counter()
+        sim.step_frame()
+        wp.synchronize_device(sim.device)
+        out.append(time.perf_counter() - begin)
+        if after is not None:
+            after()
+    return out
+
+
 def time_frames(stepper, frames: int, repeats: int, warm_up: int = 0) -> list[float]:
     """Seconds per frame of ``repeats`` batches of ``frames`` ``stepper.step_frame()`` calls, after ``warm_up``
     untimed frames; each batch is synchronised with the stepper's Warp device when it has one."""

@@ -41,7 +41,7 @@ import warp as wp
 from warp_verlet.core.simulator import Simulator
 from warp_verlet.input.scene import parse_scene
 
-from .common import arg_parser, machine, quiet_warp, write_table
+from .common import arg_parser, machine, quiet_warp, timed_frames, write_table
 
 STEM = "mesh_collider"
 SIZE, MASS, RADIUS, DROP = 1.0, 0.3, 0.3, 0.1  # m, kg, m, m above the sphere's top
@@ -152,16 +152,15 @@ def run(n: int, collider: str, subdivisions: int, folder: Path, frames: int, sub
     mesh = icosphere(subdivisions) if collider == "mesh" else None
     meter = PenetrationMeter(sim, thickness, mesh)
     clamp = ClampTimer(sim, substeps) if collider == "mesh" else None
-    times, clamp_times, worst = [], [], 0.0
-    for _ in range(frames):
-        wp.synchronize_device(sim.device)
-        begin = time.perf_counter()
-        sim.step_frame()
-        wp.synchronize_device(sim.device)
-        times.append(time.perf_counter() - begin)
-        worst = max(worst, meter.penetration())
+    readings, clamp_times = [], []
+
+    def measure() -> None:
+        readings.append(meter.penetration())
         if clamp is not None:
             clamp_times.append(clamp.frame_ms())
+
+    times = timed_frames(sim, frames, measure)
+    worst = max([0.0, *readings])
     ms = 1e3 * statistics.median(times[1:])
     row = {"n": n, "particles": n * n, "collider": collider, "triangles": len(mesh[1]) if mesh else "-",
            "ms/frame": round(ms, 3), "clamp ms/frame": "-", "clamp share": "-",

@@ -38,7 +38,7 @@ from warp_verlet.constraints.self_contact import DEFAULT_FRACTION, REST_EXCLUSIO
 from warp_verlet.core.simulator import Simulator
 from warp_verlet.input.scene import parse_scene
 
-from .common import arg_parser, machine, quiet_warp, write_table
+from .common import arg_parser, machine, quiet_warp, timed_frames, write_table
 
 STEM = "self_contact"
 SIZE, MASS, HEIGHT = 1.0, 0.3, 0.1  # m, kg, m above the ground
@@ -111,14 +111,9 @@ def run(n: int, self_collision: bool, frames: int, substeps: int, iterations: in
     build = time.perf_counter() - start
     sim.state.set_positions(folded(sim.model.rest_positions, SIZE / (n - 1), thickness))
     meter = GapMeter(sim, thickness)
-    times, worst = [], 0.0
-    for _ in range(frames):
-        wp.synchronize_device(sim.device)
-        begin = time.perf_counter()
-        sim.step_frame()
-        wp.synchronize_device(sim.device)
-        times.append(time.perf_counter() - begin)
-        worst = max(worst, meter.penetration())
+    readings = []
+    times = timed_frames(sim, frames, lambda: readings.append(meter.penetration()))
+    worst = max([0.0, *readings])
     return {"n": n, "self_collision": "on" if self_collision else "off", "particles": n * n,
             "ms/frame": round(1e3 * statistics.median(times[1:]), 3), "worst penetration": round(worst, 4),
             "build s": round(build, 2)}
