@@ -93,7 +93,9 @@ def device_arrays(sim) -> dict[int, wp.array]:
         found += arrays_of(data)
         found += [a for part in vars(data).values() if isinstance(part, list) for item in part
                   if hasattr(item, "__dict__") for a in arrays_of(item)]
-    found += list(sim.solver._scratch.values())
+    for held in sim.solver._scratch.values():  # scratch arrays, and a stage's working set (the global correction)
+        found += [held] if isinstance(held, wp.array) else arrays_of(held) + [
+            a for part in vars(held).values() if isinstance(part, list) for a in part if isinstance(a, wp.array)]
     return {a.ptr: a for a in found}
 
 

@@ -81,6 +81,8 @@ METHODS: dict[str, dict] = {
     "tethers": {"cloth": {"tethers": True}},
     "multilevel": {"simulation": {"multilevel": True}},      # refused by a tearing cloth (the net)
     "float64": {"simulation": {"precision": "float64"}},
+    "contact_sweeps": {"simulation": {"contact_projection": "every_sweep"}},  # the clamp also ends every sweep
+    **{f"global{n}": {"simulation": {"global_iterations": n}} for n in (10, 30, 100)},  # the global correction
 }
 """Method name -> scene overrides. Combine with "+" on the command line (``multilevel+tethers``)."""
 

@@ -107,13 +107,16 @@ CASES = {
     # and the State, and a BVH of its own); a moving one adds its keyframes, a clock and per-mesh key starts
     "mesh": ({}, {}, [BALL, TABLE, dict(TABLE, translate=[0.0, -3.0, 0.0]), GROUND]),
     "moving-mesh": ({}, {}, [SWEEP, TABLE, dict(TABLE, translate=[[0.0, 0.0, -3.0, 0.0], [1.0, 1.0, -3.0, 0.0]])]),
+    # the global correction: its own stick table and CSR, per-particle vectors and blocks, a position snapshot
+    "global": ({"global_iterations": 3}, {}, [BALL, GROUND]),
+    "global-float64-tear": ({"global_iterations": 3, "precision": "float64"}, {"tear_threshold": 1.5}, [SWEEP]),
 }
 
 
 # The cases above that allow implicit grid sticks (one grid cloth that cannot tear, the coloured solver), again
 # with them ("auto" keeps stick arrays on the CPU).
 IMPLICIT = ["coloured", "tethers", "compliance", "multilevel", "float64", "moving-sphere", "planes", "angle-limit",
-            "rigid-patches", "self-contact"]
+            "rigid-patches", "self-contact", "global"]
 
 
 @pytest.mark.parametrize("case", list(CASES) + [f"{c}/implicit" for c in IMPLICIT])

@@ -81,6 +81,13 @@ class VerletSolver:
             self._scratch[name] = wp.empty(count, dtype=dtype, device=self.model.device)
         return self._scratch[name]
 
+    def cached(self, name: str, make: Callable[[], object]) -> object:
+        """A stage's working set that no step carries over to the next (made once by ``make``), shared by every
+        state this solver steps, like :meth:`scratch`."""
+        if name not in self._scratch:
+            self._scratch[name] = make()
+        return self._scratch[name]
+
     def team(self, phases: list[list[PhaseTask | None]]) -> PhaseTeam | None:
         """A CPU thread team for the relaxation's phases, or None when it runs on one thread."""
         if self.threads <= 1 or not phases:

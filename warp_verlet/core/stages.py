@@ -53,6 +53,7 @@ class Requirements:
     grid_pins: int = 0  # implicit grid tethers: the cloth's pins (0: the tethers are arrays)
     weight_pins: int = 0  # implicit grid sticks of a cloth whose free particles weigh alike: its pins
     elements: tuple[tuple[str, object], ...] = ()  # (kind name, its count(scene)) of the kinds a scene uses
+    global_iterations: int = 0  # the global correction's conjugate-gradient iterations (0: no correction)
 
     def count(self, kind: str):
         """Constraint kind ``kind``'s ``count(scene)`` (0 when the scene does not use it)."""
@@ -90,6 +91,7 @@ class Requirements:
             tethered=scene.tethered_particles, tethers_per_particle=scene.tethers_per_particle,
             coarse_sticks=coarse[0], coarse_children=coarse[1],
             elements=tuple((kind.name, n) for kind in constraint_kinds() if (n := kind.count(scene))),
+            global_iterations=scene.simulation.global_iterations,
         )
         req = replace(req, **grid_counts(scene, sticks))
         return replace(req, precision=resolve(scene, relaxes=RELAX.needed(req)))
@@ -184,6 +186,31 @@ class Integrate:
         return BoundStage(run)
 
 
+class GlobalSolve:
+    """The global correction (warp_verlet/core/global_solve.py): Gauss-Newton steps on the sticks with contact
+    inside, between the prediction and the sweeps, when ``simulation.global_iterations`` > 0."""
+
+    name = "global"
+
+    def needed(self, req: Requirements) -> bool:
+        return req.global_iterations > 0 and req.sticks > 0 and req.free_particles
+
+    def device_bytes(self, req: Requirements) -> int:
+        from .global_solve import device_bytes
+
+        weights = 0 if req.tears else req.sticks * FLOAT  # a scene that tears lends the State's live weights
+        return (device_bytes(req.particles, req.sticks) - req.sticks * FLOAT + weights
+                + req.particles * (req.position_bytes - 3 * 8))
+
+    def bind(self, model, state, solver) -> BoundStage:
+        from .global_solve import GlobalCorrection
+
+        correction = solver.cached("global", lambda: GlobalCorrection(model, solver.settings))
+        launches = [kind.bind(model, state) for kind, _ in model.colliders.kinds]
+        place = [p for bound in launches for p in bound.before] if collider_placement(solver) == self.name else []
+        return correction.bind(model, state, place, [task for bound in launches for task in bound.clamps])
+
+
 class Relax:
     """``iterations`` sweeps; a sweep runs every constraint kind (warp_verlet/constraints/) that the scene needs, in
     table order (Gauss-Seidel across sets, and across colours inside a set). Before the sweeps, each set's
@@ -201,11 +228,20 @@ class Relax:
         sets = [c.bind(model, state, solver) for c in constraint_kinds() if c.needed(solver.req)]
         phases = [phase for bound in sets for phase in bound.phases]
         before = [bound.run for bound in sets if bound.run is not None]  # per-substep set-up (dt, zeroing)
+        collide_first = ()
+        if contact_every_sweep(solver):
+            # The clamps end every sweep, so the colliders are placed for this substep before the first one.
+            launches = [kind.bind(model, state) for kind, _ in model.colliders.kinds]
+            if collider_placement(solver) == self.name:
+                collide_first = [place for bound in launches for place in bound.before]
+            phases = phases + [[task] for bound in launches for task in bound.clamps]
         team = solver.team(phases)
         sweep = [task.run for phase in phases for task in phase if task is not None]
         iterations = solver.settings.iterations
 
         def run(state, dt: float) -> None:
+            for place in collide_first:
+                place(dt)
             for prepare in before:
                 prepare(state, dt)
             if team is not None:
@@ -216,6 +252,20 @@ class Relax:
                     task()
 
         return BoundStage(run, phases)
+
+
+def collider_placement(solver) -> str:
+    """The name of the first stage of a substep that clamps, which places the moving colliders for it."""
+    if GLOBAL.needed(solver.req) and solver.req.colliders:
+        return GLOBAL.name
+    return RELAX.name if contact_every_sweep(solver) else Collide.name
+
+
+def contact_every_sweep(solver) -> bool:
+    """Whether the collider clamp also ends every sweep (``contact_projection = "every_sweep"``, with colliders and
+    sweeps): the clamp after the sweeps then still runs, once more, as the substep's last word."""
+    return (solver.settings.contact_projection == "every_sweep" and bool(solver.req.colliders)
+            and RELAX.needed(solver.req))
 
 
 class Collide:
@@ -236,7 +286,9 @@ class Collide:
 
     def bind(self, model, state, solver) -> BoundStage:
         bound = [kind.bind(model, state) for kind, _ in model.colliders.kinds]
-        before = [prepare for launches in bound for prepare in launches.before]
+        # An earlier stage that clamps (the global correction, the sweeps) places the colliders for the substep.
+        before = ([prepare for launches in bound for prepare in launches.before]
+                  if collider_placement(solver) == self.name else [])
         clamps = [task for launches in bound for task in launches.clamps]
 
         def run(state, dt: float) -> None:
@@ -271,7 +323,8 @@ class Tear:
 
 
 RELAX = Relax()
-STAGES = (Integrate(), RELAX, Collide(), Tear())
+GLOBAL = GlobalSolve()
+STAGES = (Integrate(), GLOBAL, RELAX, Collide(), Tear())
 """The stages of a substep, in order."""
 
 

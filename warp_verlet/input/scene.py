@@ -48,6 +48,7 @@ if TYPE_CHECKING:  # the mesh modules (numpy) are imported only by a scene that 
 
 RELAXATIONS = ("coloured", "jacobi")
 PRECISIONS = ("auto", "float32", "float64")  # positions' float type; "auto" is resolved in precision.py
+CONTACT_PROJECTIONS = ("after_sweeps", "every_sweep")  # when the collider clamp runs in a substep
 ORIENTATIONS = ("vertical", "horizontal")
 STICK_FAMILIES = ("structural", "shear", "bend")
 UP_AXES = ("Y", "Z")
@@ -72,6 +73,9 @@ class SimulationSettings:
     relaxation: str = "coloured"
     multilevel: bool = False  # a coarse-to-fine pass over each grid's hierarchy before every substep's sweeps
     multilevel_sweeps: int = 1  # sweeps per coarse level per substep
+    contact_projection: str = "after_sweeps"  # or "every_sweep": the collider clamp also ends every sweep
+    global_iterations: int = 0  # conjugate-gradient iterations of the global correction per Gauss-Newton step (0: off)
+    global_newton: int = 1  # Gauss-Newton steps of the global correction per substep
     target_stretch: float | None = None  # RMS structural stretch (fraction) the substeps are chosen to stay under
     max_substeps: int = 1024  # the most substeps a target_stretch budget may choose
     max_dt_ratio: float = 2.0
@@ -219,6 +223,17 @@ SIMULATION_KEYS: tuple[Key, ...] = (
             "below). Not with `tear_threshold` or soft structural sticks."),
     Key("multilevel_sweeps", integer(1, 1000), 1, "integer", "sweeps", allowed="1 … 1000",
         doc="Sweeps of each coarse level per substep."),
+    Key("contact_projection", choice(CONTACT_PROJECTIONS), "after_sweeps", "string",
+        allowed='`"after_sweeps"`, `"every_sweep"`',
+        doc="When the colliders push the cloth out (see \"Contact inside the sweeps\" below): once, after the "
+            "substep's sweeps, or also at the end of every sweep, so that the next sweep relaxes the sticks next to "
+            "each contact from where the contact left them."),
+    Key("global_iterations", integer(0, 10_000), 0, "integer", "iterations", allowed="0 … 10 000",
+        doc="Conjugate-gradient iterations of the global correction per Gauss-Newton step (see \"Global "
+            "correction\" below); 0 leaves it out. It moves the whole cloth towards its stick lengths, with contact "
+            "inside, before each substep's sweeps."),
+    Key("global_newton", integer(1, 100), 1, "integer", "steps", allowed="1 … 100",
+        doc="Gauss-Newton steps of the global correction per substep (each re-reads the sticks' directions)."),
     Key("max_dt_ratio", real(1.0), 2.0, "number", allowed="≥ 1",
         doc="Upper limit on `dt / dt_prev` in the time-step-corrected Verlet update."),
     Key("max_frame_time", real(0.0, lo_open=True), 0.1, "number", "s", allowed="> 0",

@@ -1,0 +1,233 @@
+"""A global correction with contact inside it, prototyped on the host: how far can it take the drape?
+
+    python -m bench.global_step [--sizes 64 ...] [--budgets SxK ...] [--linear direct amg:N jacobi:N ...]
+        [--newton 1 2 ...] [--frames 90] [--out DIR]
+
+The drape of ``bench.convergence`` (1 m, 0.2 kg, structural + shear + bend sticks, dropped from 0.5 m onto a
+0.25 m sphere, ground at -0.5 m, read at 1.5 s) runs through the real simulator on the CPU (one relaxation
+thread), with one extra stage between the Verlet prediction and the sweeps: ``newton`` Gauss-Newton steps on
+
+    E(x) = 1/2 (x - x~)^T M/h^2 (x - x~) + 1/2 k sum_sticks (|x_i - x_j| - L)^2 + 1/2 kc sum_contacts min(0, phi(x))^2
+
+from the prediction x~, the sticks as stiff springs (k = STIFFNESS x m/h^2 of a particle: rigid to the step's
+resolution) and each contact a push-only normal penalty (kc = CONTACT x the particle's diagonal; a particle is
+in the active set when the prediction puts it inside a collider). Each step solves H dx = -grad E with the
+Gauss-Newton matrix H = M/h^2 + k J^T J + kc n n^T:
+
+- ``direct``: a sparse LU (SciPy), the exact step: what any preconditioned Krylov solve converges to;
+- ``amg:N``: N conjugate-gradient iterations preconditioned by a smoothed-aggregation AMG V-cycle (PyAMG),
+  the kind of operator hierarchy a device implementation would use;
+- ``jacobi:N``: N conjugate-gradient iterations preconditioned by the diagonal, the cheapest global step.
+
+After the step every collider clamps, then the coloured sweeps make the final projection and the substep's
+clamp runs, exactly as without the stage. Rows give the final RMS and max structural stretch, the lowest
+particle and the host time (a prototype's, not a device figure). ``none`` is the plain simulator.
+
+This is a host prototype to choose a device method: it is not part of the package (SciPy and PyAMG are bench
+dependencies only: ``pip install scipy pyamg``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+STIFFNESS = 1.0e4  # k h^2 / m: sticks 1e4 x stiffer than a particle's inertia over one substep
+CONTACT = 1.0e2  # contact penalty per unit of the particle's own diagonal
+
+
+def _need(module: str):
+    try:
+        return __import__(module)
+    except ImportError:
+        sys.exit(f"bench.global_step needs {module} (pip install scipy pyamg)")
+
+
+class GlobalStep:
+    """The stage: Gauss-Newton steps with the contact penalty, solved by ``linear``."""
+
+    def __init__(self, model, sphere: tuple[np.ndarray, float], ground_y: float, linear: str, newton: int):
+        _need("scipy")
+        import scipy.sparse as sp
+        import scipy.sparse.linalg as spla
+
+        self.sp, self.spla = sp, spla
+        self.ends = np.asarray(model.host_sticks, np.int64)
+        self.rest = np.asarray(model.host_rest, np.float64)
+        w = np.asarray(model.host_inv_mass, np.float64)
+        self.free = w > 0
+        self.mass = np.where(self.free, 1.0 / np.where(self.free, w, 1.0), 0.0)
+        self.n = len(w)
+        self.centre, self.radius = sphere
+        self.ground_y = ground_y
+        self.linear, self.newton = linear, newton
+        s = len(self.ends)
+        self.cg_iterations = 0
+        self.solves = 0
+        # J's sparsity: row s has -n at particle i's 3 columns and +n at j's
+        self._j_rows = np.repeat(np.arange(s), 6)
+        cols = np.concatenate([3 * self.ends[:, :1] + np.arange(3), 3 * self.ends[:, 1:] + np.arange(3)], axis=1)
+        self._j_cols = cols.ravel()
+
+    def contacts(self, x: np.ndarray):
+        """(index, normal, signed distance) of each particle inside a collider (sphere first, then ground)."""
+        d = x - self.centre
+        r = np.linalg.norm(d, axis=1)
+        inside = (r < self.radius) & self.free
+        idx = [np.nonzero(inside)[0]]
+        nrm = [d[inside] / r[inside, None]]
+        phi = [r[inside] - self.radius]
+        g = (x[:, 1] < self.ground_y) & self.free
+        idx.append(np.nonzero(g)[0])
+        nrm.append(np.tile([0.0, 1.0, 0.0], (int(g.sum()), 1)))
+        phi.append(x[g, 1] - self.ground_y)
+        return np.concatenate(idx), np.concatenate(nrm), np.concatenate(phi)
+
+    def clamp(self, x: np.ndarray) -> None:
+        d = x - self.centre
+        r = np.linalg.norm(d, axis=1)
+        inside = (r < self.radius) & self.free
+        x[inside] = self.centre + d[inside] * (self.radius / r[inside, None])
+        g = (x[:, 1] < self.ground_y) & self.free
+        x[g, 1] = self.ground_y
+
+    def __call__(self, x: np.ndarray, x_pred: np.ndarray, h: float) -> np.ndarray:
+        sp = self.sp
+        m_h2 = self.mass / (h * h)
+        k = STIFFNESS * float(m_h2[self.free].mean())
+        for _ in range(self.newton):
+            a, b = self.ends[:, 0], self.ends[:, 1]
+            d = x[b] - x[a]
+            length = np.linalg.norm(d, axis=1)
+            nrm = d / np.maximum(length, 1e-12)[:, None]
+            c = length - self.rest
+            # gradient
+            grad = (m_h2[:, None] * (x - x_pred))
+            f = (k * c)[:, None] * nrm
+            np.add.at(grad, a, -f)
+            np.add.at(grad, b, f)
+            jv = np.concatenate([-nrm, nrm], axis=1).ravel()
+            J = sp.csr_matrix((jv, (self._j_rows, self._j_cols)), shape=(len(self.ends), 3 * self.n))
+            H = (J.T @ J) * k + sp.diags(np.repeat(np.where(self.free, m_h2, 1.0), 3))
+            idx, cn, phi = self.contacts(x)
+            if len(idx):
+                diag = H.diagonal().reshape(-1, 3)[idx].max(axis=1)
+                kc = CONTACT * diag
+                grad[idx] += (kc * phi)[:, None] * cn
+                blocks = kc[:, None, None] * cn[:, :, None] * cn[:, None, :]
+                r = (3 * idx[:, None, None] + np.arange(3)[None, :, None]).repeat(3, axis=2)
+                cc = (3 * idx[:, None, None] + np.arange(3)[None, None, :]).repeat(3, axis=1)
+                H = H + sp.csr_matrix((blocks.ravel(), (r.ravel(), cc.ravel())), shape=H.shape)
+            grad[~self.free] = 0.0
+            fixed = np.repeat(~self.free, 3)
+            if fixed.any():  # pins: identity rows, zero right-hand side
+                keep = sp.diags((~fixed).astype(float))
+                H = keep @ H @ keep + sp.diags(fixed.astype(float))
+            rhs = -grad.ravel()
+            dx = self.solve(H.tocsr(), rhs)
+            x = x + dx.reshape(-1, 3)
+            self.clamp(x)
+        return x
+
+    def solve(self, H, rhs):
+        self.solves += 1
+        kind, _, count = self.linear.partition(":")
+        if kind == "direct":
+            return self.spla.spsolve(H.tocsc(), rhs)
+        iters = int(count or 20)
+        if kind == "amg":
+            pyamg = _need("pyamg")
+            ml = pyamg.smoothed_aggregation_solver(H, B=np.kron(np.ones((self.n, 1)), np.eye(3)), max_coarse=64)
+            M = ml.aspreconditioner(cycle="V")
+        elif kind == "jacobi":
+            M = self.sp.diags(1.0 / H.diagonal())
+        else:
+            raise ValueError(f"unknown linear solver {self.linear!r}")
+        dx, _ = self.spla.cg(H, rhs, M=M, maxiter=iters, rtol=1e-10)
+        self.cg_iterations += iters
+        return dx
+
+
+def run_drape(n: int, substeps: int, iterations: int, linear: str, newton: int, frames: int = 90,
+              contact_projection: str = "after_sweeps") -> dict:
+    import warp as wp
+
+    from bench.convergence import build_scene, merge, scene_tables
+    from warp_verlet.input.scene import parse_scene
+    from warp_verlet.core.simulator import Simulator
+
+    wp.config.quiet = True
+    tables = scene_tables("drape", n, "plain", substeps, iterations, frames)
+    tables = merge(tables, {"simulation": {"precision": "float64", "contact_projection": contact_projection}})
+    scene = parse_scene(tables, file=f"<drape {n}>")
+    sim = Simulator(scene, "cpu", threads=1)
+    step = None
+    if linear != "none":
+        step = GlobalStep(sim.model, (np.zeros(3), 0.25), -0.5, linear, newton)
+        solver = sim.solver
+        original = solver.bind
+
+        def bind(state):
+            stages = original(state)
+            out = []
+            for name, run in stages:
+                out.append((name, run))
+                if name == "integrate":
+                    def global_run(state, dt):
+                        x = state.particle_q.numpy().astype(np.float64)
+                        x_new = step(x.copy(), x, dt)
+                        state.particle_q.assign(x_new.astype(state.particle_q.numpy().dtype))
+                    out.append(("global", global_run))
+            return out
+
+        solver.bind = bind
+        sim._use_graph = False  # the host stage must run every substep, not be captured once
+    start = time.perf_counter()
+    for _ in range(frames):
+        sim.step_frame()
+    wall = time.perf_counter() - start
+    x = sim.positions()
+    s = sim.stretch(x)
+    sim.close()
+    return {"n": n, "budget": f"{substeps}x{iterations}", "linear": linear, "newton": newton if step else 0,
+            "contact": contact_projection, "rms": s.rms, "max": s.max, "lowest_y": float(x[:, 1].min()),
+            "top_y": float(x[:, 1].max()), "host_ms_per_frame": wall / frames * 1e3,
+            "cg_per_substep": (step.cg_iterations / max(step.solves, 1) * newton) if step else 0}
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--sizes", type=int, nargs="*", default=[64])
+    p.add_argument("--budgets", nargs="*", default=["16x2"])
+    p.add_argument("--linear", nargs="*", default=["none", "direct"])
+    p.add_argument("--newton", type=int, nargs="*", default=[1])
+    p.add_argument("--contact", nargs="*", default=["after_sweeps"])
+    p.add_argument("--frames", type=int, default=90)
+    p.add_argument("--out", type=Path, default=None)
+    args = p.parse_args(argv)
+    lines = ["| grid | S × K | contact | global step | Newton | RMS | max | lowest y (m) | top y (m) | host ms/frame |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
+    print("\n".join(lines), flush=True)
+    for n in args.sizes:
+        for budget in args.budgets:
+            s, k = (int(v) for v in budget.split("x"))
+            for contact in args.contact:
+                for linear in args.linear:
+                    for newton in (args.newton if linear != "none" else [0]):
+                        r = run_drape(n, s, k, linear, newton, args.frames, contact)
+                        line = (f"| {n}² | {s} × {k} | {contact} | {linear} | {r['newton']} | {r['rms']:.3%} | "
+                                f"{r['max']:.2%} | {r['lowest_y']:.3f} | {r['top_y']:.3f} | {r['host_ms_per_frame']:.0f} |")
+                        lines.append(line)
+                        print(line, flush=True)
+    if args.out:
+        args.out.mkdir(parents=True, exist_ok=True)
+        (args.out / "global_step.md").write_text("\n".join(lines) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
