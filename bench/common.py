@@ -94,8 +94,14 @@ def device_arrays(sim) -> dict[int, wp.array]:
         found += [a for part in vars(data).values() if isinstance(part, list) for item in part
                   if hasattr(item, "__dict__") for a in arrays_of(item)]
     for held in sim.solver._scratch.values():  # scratch arrays, and a stage's working set (the global correction)
-        found += [held] if isinstance(held, wp.array) else arrays_of(held) + [
-            a for part in vars(held).values() if isinstance(part, list) for a in part if isinstance(a, wp.array)]
+        if isinstance(held, wp.array):
+            found.append(held)
+            continue
+        found += arrays_of(held)
+        for part in (p for p in vars(held).values() if isinstance(p, list)):  # its sums, its levels' arrays
+            found += [a for a in part if isinstance(a, wp.array)]
+            found += [a for item in part if hasattr(item, "__dict__") and not isinstance(item, wp.array)
+                      for a in arrays_of(item)]
     return {a.ptr: a for a in found}
 
 

@@ -82,7 +82,10 @@ METHODS: dict[str, dict] = {
     "multilevel": {"simulation": {"multilevel": True}},      # refused by a tearing cloth (the net)
     "float64": {"simulation": {"precision": "float64"}},
     "contact_sweeps": {"simulation": {"contact_projection": "every_sweep"}},  # the clamp also ends every sweep
-    **{f"global{n}": {"simulation": {"global_iterations": n}} for n in (10, 30, 100)},  # the global correction
+    # the global correction: n conjugate-gradient iterations a substep, multigrid- or Jacobi-preconditioned
+    **{f"global{n}": {"simulation": {"global_iterations": n}} for n in (3, 5, 10, 30)},
+    **{f"global_jacobi{n}": {"simulation": {"global_iterations": n, "global_preconditioner": "jacobi"}}
+       for n in (10, 30, 100)},
 }
 """Method name -> scene overrides. Combine with "+" on the command line (``multilevel+tethers``)."""
 

@@ -31,10 +31,13 @@ def stick_directions(
     ends: wp.array(dtype=wp.vec2i),
     rest: wp.array(dtype=float),
     weight: wp.array(dtype=float),
+    rigid: float,
     direction: wp.array(dtype=wp.vec3),
     residual: wp.array(dtype=float),
+    stiffness: wp.array(dtype=float),
 ):
-    """Each stick's unit direction a -> b and its stretch |x_b - x_a| - L (0 for a torn stick, weight 0)."""
+    """Each stick's unit direction a -> b, its stretch |x_b - x_a| - L, and its spring's stiffness (N/m): ``rigid``,
+    or 0 for a torn stick. (Every stick is rigid here: the loader refuses the correction on soft sticks.)"""
     s = wp.tid()
     e = ends[s]
     d = x[e[1]] - x[e[0]]
@@ -42,9 +45,11 @@ def stick_directions(
     if weight[s] == 0.0 or length == type(length)(0.0):
         direction[s] = wp.vec3(0.0)
         residual[s] = 0.0
+        stiffness[s] = 0.0
         return
     direction[s] = wp.vec3(float(d[0] / length), float(d[1] / length), float(d[2] / length))
     residual[s] = float(length - type(length)(rest[s]))
+    stiffness[s] = rigid
 
 
 @wp.kernel
@@ -69,7 +74,7 @@ def assemble(
     x_inertial: wp.array(dtype=Any),
     inv_mass: wp.array(dtype=float),
     inv_h2: float,
-    stiffness: float,
+    stiffness: wp.array(dtype=float),
     contact_scale: float,
     offsets: wp.array(dtype=int),
     incident: wp.array(dtype=int),
@@ -78,19 +83,18 @@ def assemble(
     residual: wp.array(dtype=float),
     contact: wp.array(dtype=wp.vec3),
     rhs: wp.array(dtype=wp.vec3),
-    diagonal_inverse: wp.array(dtype=wp.mat33),
-    contact_stiffness: wp.array(dtype=float),
+    mass_h2: wp.array(dtype=float),
+    extra: wp.array(dtype=wp.mat33),
 ):
-    """Per particle: the right-hand side -grad E and the inverse of H's 3x3 diagonal block (the Jacobi
-    preconditioner), and the contact's stiffness. ``incident`` holds 2 s + end for each stick s at the particle
-    (end 0: the particle is a, end 1: b), in the CSR order of ``offsets``. A pinned particle gets zeros: it never
-    moves."""
+    """Per particle of the cloth: the right-hand side -grad E, its m / h^2 (0 for a pin, which never moves), and
+    its contact block kc n n^T. ``incident`` holds 2 s + end for each stick s at the particle (end 0: the
+    particle is a, end 1: b), in the CSR order of ``offsets``."""
     i = wp.tid()
     w = inv_mass[i]
     if w == 0.0:
         rhs[i] = wp.vec3(0.0)
-        diagonal_inverse[i] = wp.mat33(0.0)
-        contact_stiffness[i] = 0.0
+        mass_h2[i] = 0.0
+        extra[i] = wp.mat33(0.0)
         return
     m_h2 = inv_h2 / w
     lag = x[i] - x_inertial[i]
@@ -98,22 +102,20 @@ def assemble(
     n_c = contact[i]
     # A contact's push is not an error of inertia: only the lag along the surface is pulled back.
     g = g - n_c * wp.dot(g, n_c)
-    block = wp.identity(3, dtype=float) * m_h2
+    diagonal = m_h2
     for t in range(offsets[i], offsets[i + 1]):
         code = incident[t]
         s = code // 2
         n = direction[s]
+        k = stiffness[s]
         if code % 2 == 0:
-            g = g - n * (stiffness * residual[s])
+            g = g - n * (k * residual[s])
         else:
-            g = g + n * (stiffness * residual[s])
-        across = stiffness * sideways(rest[s], residual[s])
-        block = block + wp.outer(n, n) * (stiffness - across) + wp.identity(3, dtype=float) * across
-    kc = contact_scale * (block[0, 0] + block[1, 1] + block[2, 2]) * wp.dot(n_c, n_c)
-    block = block + wp.outer(n_c, n_c) * kc
+            g = g + n * (k * residual[s])
+        diagonal = diagonal + k * (1.0 + 2.0 * sideways(rest[s], residual[s])) / 3.0
     rhs[i] = -g
-    diagonal_inverse[i] = wp.inverse(block)
-    contact_stiffness[i] = kc
+    mass_h2[i] = m_h2
+    extra[i] = wp.outer(n_c, n_c) * (contact_scale * 3.0 * diagonal)
 
 
 @wp.func
@@ -129,24 +131,22 @@ def sideways(rest: float, residual: float):
 def operator_row(
     i: int,
     p: wp.array(dtype=wp.vec3),
-    inv_mass: wp.array(dtype=float),
-    inv_h2: float,
-    stiffness: float,
+    mass_h2: wp.array(dtype=float),
+    extra: wp.array(dtype=wp.mat33),
+    stiffness: wp.array(dtype=float),
     offsets: wp.array(dtype=int),
     incident: wp.array(dtype=int),
     ends: wp.array(dtype=wp.vec2i),
     rest: wp.array(dtype=float),
     direction: wp.array(dtype=wp.vec3),
     residual: wp.array(dtype=float),
-    contact: wp.array(dtype=wp.vec3),
-    contact_stiffness: wp.array(dtype=float),
 ):
-    """Row i of H p, gathered over the particle's sticks (0 for a pin)."""
-    w = inv_mass[i]
-    if w == 0.0:
+    """Row i of H p on one level, gathered over the node's sticks (0 for a pin)."""
+    m_h2 = mass_h2[i]
+    if m_h2 == 0.0:
         return wp.vec3(0.0)
     pi = p[i]
-    out = pi * (inv_h2 / w)
+    out = pi * m_h2 + extra[i] * pi
     for t in range(offsets[i], offsets[i + 1]):
         code = incident[t]
         s = code // 2
@@ -156,10 +156,150 @@ def operator_row(
             other = e[0]
         n = direction[s]
         d = pi - p[other]
-        across = stiffness * sideways(rest[s], residual[s])
-        out = out + n * ((stiffness - across) * wp.dot(n, d)) + d * across
-    n_c = contact[i]
-    return out + n_c * (contact_stiffness[i] * wp.dot(n_c, pi))
+        k = stiffness[s]
+        across = k * sideways(rest[s], residual[s])
+        out = out + n * ((k - across) * wp.dot(n, d)) + d * across
+    return out
+
+
+@wp.kernel
+def level_operator(
+    p: wp.array(dtype=wp.vec3),
+    mass_h2: wp.array(dtype=float),
+    extra: wp.array(dtype=wp.mat33),
+    stiffness: wp.array(dtype=float),
+    offsets: wp.array(dtype=int),
+    incident: wp.array(dtype=int),
+    ends: wp.array(dtype=wp.vec2i),
+    rest: wp.array(dtype=float),
+    direction: wp.array(dtype=wp.vec3),
+    residual: wp.array(dtype=float),
+    q: wp.array(dtype=wp.vec3),
+):
+    """q = H p on one level."""
+    i = wp.tid()
+    q[i] = operator_row(i, p, mass_h2, extra, stiffness, offsets, incident, ends, rest, direction, residual)
+
+
+@wp.kernel
+def level_diagonal(
+    mass_h2: wp.array(dtype=float),
+    extra: wp.array(dtype=wp.mat33),
+    stiffness: wp.array(dtype=float),
+    offsets: wp.array(dtype=int),
+    incident: wp.array(dtype=int),
+    rest: wp.array(dtype=float),
+    direction: wp.array(dtype=wp.vec3),
+    residual: wp.array(dtype=float),
+    diagonal_inverse: wp.array(dtype=wp.mat33),
+):
+    """The inverse of each node's 3 x 3 diagonal block of H (0 for a pin): the Jacobi smoother's."""
+    i = wp.tid()
+    m_h2 = mass_h2[i]
+    if m_h2 == 0.0:
+        diagonal_inverse[i] = wp.mat33(0.0)
+        return
+    block = wp.identity(3, dtype=float) * m_h2 + extra[i]
+    for t in range(offsets[i], offsets[i + 1]):
+        s = incident[t] // 2
+        n = direction[s]
+        k = stiffness[s]
+        across = k * sideways(rest[s], residual[s])
+        block = block + wp.outer(n, n) * (k - across) + wp.identity(3, dtype=float) * across
+    diagonal_inverse[i] = wp.inverse(block)
+
+
+@wp.kernel
+def restrict_level(
+    fine_mass_h2: wp.array(dtype=float),
+    fine_extra: wp.array(dtype=wp.mat33),
+    family_offsets: wp.array(dtype=int),
+    family: wp.array(dtype=int),
+    family_weight: wp.array(dtype=float),
+    fixed: wp.array(dtype=int),
+    mass_h2: wp.array(dtype=float),
+    extra: wp.array(dtype=wp.mat33),
+):
+    """A coarse node's mass and contact block: the sum over its fine family (itself, and the fine nodes it is a
+    parent of) weighted by the prolongation's weights, P^T M P lumped. A pinned node stays fixed."""
+    c = wp.tid()
+    if fixed[c] != 0:
+        mass_h2[c] = 0.0
+        extra[c] = wp.mat33(0.0)
+        return
+    m = float(0.0)
+    block = wp.mat33(0.0)
+    for t in range(family_offsets[c], family_offsets[c + 1]):
+        f = family[t]
+        w = family_weight[t]
+        m = m + fine_mass_h2[f] * w
+        block = block + fine_extra[f] * w
+    mass_h2[c] = m
+    extra[c] = block
+
+
+@wp.kernel
+def restrict_residual(
+    b: wp.array(dtype=wp.vec3),
+    q: wp.array(dtype=wp.vec3),
+    family_offsets: wp.array(dtype=int),
+    family: wp.array(dtype=int),
+    family_weight: wp.array(dtype=float),
+    mass_h2: wp.array(dtype=float),
+    coarse_b: wp.array(dtype=wp.vec3),
+):
+    """coarse b = P^T (b - H e) (0 at a pinned coarse node)."""
+    c = wp.tid()
+    out = wp.vec3(0.0)
+    if mass_h2[c] != 0.0:
+        for t in range(family_offsets[c], family_offsets[c + 1]):
+            f = family[t]
+            out = out + (b[f] - q[f]) * family_weight[t]
+    coarse_b[c] = out
+
+
+@wp.kernel
+def prolong_add(
+    coarse_e: wp.array(dtype=wp.vec3),
+    parents: wp.array(dtype=wp.vec4i),
+    weights: wp.array(dtype=wp.vec4),
+    mass_h2: wp.array(dtype=float),
+    e: wp.array(dtype=wp.vec3),
+):
+    """e += P coarse_e: each fine node by its four parents' bilinear weights (a node the coarse level keeps is
+    its own parent, weight 1). A pin is never moved."""
+    i = wp.tid()
+    if mass_h2[i] == 0.0:
+        return
+    ps = parents[i]
+    ws = weights[i]
+    out = e[i]
+    for k in range(4):
+        out = out + coarse_e[ps[k]] * ws[k]
+    e[i] = out
+
+
+@wp.kernel
+def smooth_start(b: wp.array(dtype=wp.vec3), diagonal_inverse: wp.array(dtype=wp.mat33), omega: float,
+                 e: wp.array(dtype=wp.vec3)):
+    """The first Jacobi sweep from e = 0: e = omega D^-1 b."""
+    i = wp.tid()
+    e[i] = (diagonal_inverse[i] * b[i]) * omega
+
+
+@wp.kernel
+def smooth(b: wp.array(dtype=wp.vec3), q: wp.array(dtype=wp.vec3), diagonal_inverse: wp.array(dtype=wp.mat33),
+           omega: float, e: wp.array(dtype=wp.vec3)):
+    """A damped Jacobi sweep, with q = H e: e += omega D^-1 (b - q)."""
+    i = wp.tid()
+    e[i] = e[i] + (diagonal_inverse[i] * (b[i] - q[i])) * omega
+
+
+@wp.kernel
+def dot_values(a: wp.array(dtype=wp.vec3), b: wp.array(dtype=wp.vec3), values: wp.array(dtype=wp.float64)):
+    """Each node's share of a.b, in float64, for the fixed-order sum."""
+    i = wp.tid()
+    values[i] = wp.float64(wp.dot(a[i], b[i]))
 
 
 # The conjugate-gradient scalars: r.z, p.Hp, the next r.z, and the step lengths alpha and beta.
@@ -167,91 +307,48 @@ RZ, PQ, RZ_NEW, ALPHA, BETA = 0, 1, 2, 3, 4
 
 
 @wp.kernel
-def cg_start(
-    rhs: wp.array(dtype=wp.vec3),
-    diagonal_inverse: wp.array(dtype=wp.mat33),
-    count: int,
-    chunk: int,
-    r: wp.array(dtype=wp.vec3),
-    z: wp.array(dtype=wp.vec3),
-    p: wp.array(dtype=wp.vec3),
-    dx: wp.array(dtype=wp.vec3),
-    partial: wp.array(dtype=wp.float64),
-):
-    """r = rhs, z = p = D^-1 r, dx = 0; thread t also sums r.z over its chunk of ``chunk`` particles."""
-    t = wp.tid()
-    acc = wp.float64(0.0)
-    for i in range(t * chunk, wp.min(t * chunk + chunk, count)):
-        ri = rhs[i]
-        zi = diagonal_inverse[i] * ri
-        r[i] = ri
-        z[i] = zi
-        p[i] = zi
-        dx[i] = wp.vec3(0.0)
-        acc += wp.float64(wp.dot(ri, zi))
-    partial[t] = acc
+def cg_start(rhs: wp.array(dtype=wp.vec3), r: wp.array(dtype=wp.vec3), dx: wp.array(dtype=wp.vec3)):
+    """r = rhs, dx = 0 (the preconditioner then gives z, and p = z)."""
+    i = wp.tid()
+    r[i] = rhs[i]
+    dx[i] = wp.vec3(0.0)
 
 
 @wp.kernel
 def cg_operator(
     p: wp.array(dtype=wp.vec3),
-    inv_mass: wp.array(dtype=float),
-    inv_h2: float,
-    stiffness: float,
+    mass_h2: wp.array(dtype=float),
+    extra: wp.array(dtype=wp.mat33),
+    stiffness: wp.array(dtype=float),
     offsets: wp.array(dtype=int),
     incident: wp.array(dtype=int),
     ends: wp.array(dtype=wp.vec2i),
     rest: wp.array(dtype=float),
     direction: wp.array(dtype=wp.vec3),
     residual: wp.array(dtype=float),
-    contact: wp.array(dtype=wp.vec3),
-    contact_stiffness: wp.array(dtype=float),
-    count: int,
-    chunk: int,
     q: wp.array(dtype=wp.vec3),
-    partial: wp.array(dtype=wp.float64),
+    values: wp.array(dtype=wp.float64),
 ):
-    """q = H p over thread t's chunk, and the chunk's sum of p.q."""
-    t = wp.tid()
-    acc = wp.float64(0.0)
-    for i in range(t * chunk, wp.min(t * chunk + chunk, count)):
-        qi = operator_row(i, p, inv_mass, inv_h2, stiffness, offsets, incident, ends, rest, direction, residual,
-                          contact, contact_stiffness)
-        q[i] = qi
-        acc += wp.float64(wp.dot(p[i], qi))
-    partial[t] = acc
+    """q = H p on the cloth, and each particle's share of p.q."""
+    i = wp.tid()
+    qi = operator_row(i, p, mass_h2, extra, stiffness, offsets, incident, ends, rest, direction, residual)
+    q[i] = qi
+    values[i] = wp.float64(wp.dot(p[i], qi))
 
 
 @wp.kernel
-def cg_advance(
-    scalars: wp.array(dtype=wp.float64),
-    p: wp.array(dtype=wp.vec3),
-    q: wp.array(dtype=wp.vec3),
-    diagonal_inverse: wp.array(dtype=wp.mat33),
-    count: int,
-    chunk: int,
-    dx: wp.array(dtype=wp.vec3),
-    r: wp.array(dtype=wp.vec3),
-    z: wp.array(dtype=wp.vec3),
-    partial: wp.array(dtype=wp.float64),
-):
-    """dx += alpha p, r -= alpha q, z = D^-1 r over thread t's chunk, and the chunk's sum of the new r.z."""
-    t = wp.tid()
+def cg_advance(scalars: wp.array(dtype=wp.float64), p: wp.array(dtype=wp.vec3), q: wp.array(dtype=wp.vec3),
+               dx: wp.array(dtype=wp.vec3), r: wp.array(dtype=wp.vec3)):
+    """dx += alpha p, r -= alpha q."""
+    i = wp.tid()
     alpha = float(scalars[ALPHA])
-    acc = wp.float64(0.0)
-    for i in range(t * chunk, wp.min(t * chunk + chunk, count)):
-        dx[i] = dx[i] + p[i] * alpha
-        ri = r[i] - q[i] * alpha
-        zi = diagonal_inverse[i] * ri
-        r[i] = ri
-        z[i] = zi
-        acc += wp.float64(wp.dot(ri, zi))
-    partial[t] = acc
+    dx[i] = dx[i] + p[i] * alpha
+    r[i] = r[i] - q[i] * alpha
 
 
 @wp.kernel
 def cg_direction(scalars: wp.array(dtype=wp.float64), z: wp.array(dtype=wp.vec3), p: wp.array(dtype=wp.vec3)):
-    """p = z + beta p."""
+    """p = z + beta p (beta 0 on the first iteration: p = z)."""
     i = wp.tid()
     p[i] = z[i] + p[i] * float(scalars[BETA])
 
@@ -275,6 +372,7 @@ def cg_scalars(total: wp.array(dtype=wp.float64), stage: int, scalars: wp.array(
     zero = wp.float64(0.0)
     if stage == 0:
         scalars[RZ] = value
+        scalars[BETA] = zero  # the first direction is z itself
     elif stage == 1:
         scalars[PQ] = value
         alpha = zero
@@ -289,10 +387,76 @@ def cg_scalars(total: wp.array(dtype=wp.float64), stage: int, scalars: wp.array(
         scalars[RZ] = value
 
 
+LINE_SEARCH = 4  # step lengths tried: 1, 1/2, 1/4 and 0 (so a step never raises the energy)
+STEP = 5  # the scalars' slot of the chosen step length; slots STEP + 1 .. hold each candidate's energy
+
+
 @wp.kernel
-def apply_correction(x: wp.array(dtype=Any), dx: wp.array(dtype=wp.vec3)):
+def candidate_energy(
+    x: wp.array(dtype=Any),
+    x_inertial: wp.array(dtype=Any),
+    dx: wp.array(dtype=wp.vec3),
+    step: float,
+    inv_mass: wp.array(dtype=float),
+    inv_h2: float,
+    contact: wp.array(dtype=wp.vec3),
+    offsets: wp.array(dtype=int),
+    incident: wp.array(dtype=int),
+    ends: wp.array(dtype=wp.vec2i),
+    rest: wp.array(dtype=float),
+    stiffness: wp.array(dtype=float),
+    values: wp.array(dtype=wp.float64),
+):
+    """Each particle's share of E at x + step dx: its inertia (along the surface, for a contact, as the right-hand
+    side counts it) and half of each of its sticks' spring energy."""
     i = wp.tid()
-    d = dx[i]
+    w = inv_mass[i]
+    if w == 0.0:
+        values[i] = wp.float64(0.0)
+        return
+    xi = x[i] + type(x[i])(type(x[i][0])(dx[i][0] * step), type(x[i][0])(dx[i][1] * step),
+                           type(x[i][0])(dx[i][2] * step))
+    lag64 = xi - x_inertial[i]
+    lag = wp.vec3(float(lag64[0]), float(lag64[1]), float(lag64[2]))
+    n_c = contact[i]
+    lag = lag - n_c * wp.dot(lag, n_c)
+    energy = wp.float64(0.5 * inv_h2 / w * wp.dot(lag, lag))
+    for t in range(offsets[i], offsets[i + 1]):
+        code = incident[t]
+        s = code // 2
+        e = ends[s]
+        other = e[1]
+        if code % 2 == 1:
+            other = e[0]
+        xo = x[other] + type(x[i])(type(x[i][0])(dx[other][0] * step), type(x[i][0])(dx[other][1] * step),
+                                   type(x[i][0])(dx[other][2] * step))
+        c = float(wp.length(xo - xi)) - rest[s]
+        energy += wp.float64(0.25 * stiffness[s] * c * c)
+    values[i] = energy
+
+
+@wp.kernel
+def keep_energy(total: wp.array(dtype=wp.float64), candidate: int, scalars: wp.array(dtype=wp.float64)):
+    scalars[STEP + 1 + candidate] = total[0]
+
+
+@wp.kernel
+def choose_step(scalars: wp.array(dtype=wp.float64)):
+    """The step length of the lowest energy among the candidates (the longest, on a tie)."""
+    best = 0
+    for c in range(1, LINE_SEARCH):
+        if scalars[STEP + 1 + c] < scalars[STEP + 1 + best]:
+            best = c
+    step = wp.float64(0.0)
+    if best < LINE_SEARCH - 1:
+        step = wp.float64(1.0) / wp.float64(float(1 << best))
+    scalars[STEP] = step
+
+
+@wp.kernel
+def apply_correction(x: wp.array(dtype=Any), dx: wp.array(dtype=wp.vec3), scalars: wp.array(dtype=wp.float64)):
+    i = wp.tid()
+    d = dx[i] * float(scalars[STEP])
     x[i] = x[i] + type(x[i])(type(x[i][0])(d[0]), type(x[i][0])(d[1]), type(x[i][0])(d[2]))
 
 
@@ -300,3 +464,4 @@ for_positions(stick_directions, arrays=("x",))
 for_positions(contact_normals, arrays=("x", "x_before"))
 for_positions(assemble, arrays=("x", "x_inertial"))
 for_positions(apply_correction, arrays=("x",))
+for_positions(candidate_energy, arrays=("x", "x_inertial"))

@@ -108,7 +108,8 @@ CASES = {
     "mesh": ({}, {}, [BALL, TABLE, dict(TABLE, translate=[0.0, -3.0, 0.0]), GROUND]),
     "moving-mesh": ({}, {}, [SWEEP, TABLE, dict(TABLE, translate=[[0.0, 0.0, -3.0, 0.0], [1.0, 1.0, -3.0, 0.0]])]),
     # the global correction: its own stick table and CSR, per-particle vectors and blocks, a position snapshot
-    "global": ({"global_iterations": 3}, {}, [BALL, GROUND]),
+    "global": ({"global_iterations": 3}, {}, [BALL, GROUND]),  # with its multigrid levels
+    "global-jacobi": ({"global_iterations": 3, "global_preconditioner": "jacobi"}, {"pins": ["top-left"]}),
     "global-float64-tear": ({"global_iterations": 3, "precision": "float64"}, {"tear_threshold": 1.5}, [SWEEP]),
 }
 

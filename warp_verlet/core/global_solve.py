@@ -23,6 +23,8 @@ capture. The per-particle sums gather over a CSR table of incident sticks built 
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from ..launches import FLOAT, INT, VEC2I, VEC3, BoundStage, recorded
@@ -35,6 +37,10 @@ CONTACT_SCALE = 1.0
 make the truncated solve throw the cloth off the collider (bench/results/global_solve.md)."""
 MAT33 = 36
 REDUCTION_CHUNK = 256  # values one thread adds per level of a device sum
+SMOOTHING_WEIGHT = 0.6  # damped Jacobi's weight in the multigrid cycle (2/3 is the classic choice for a Laplacian)
+SMOOTHING_SWEEPS = 1  # Jacobi sweeps before and after the coarse correction, per level
+LINE_SEARCH = 4  # step lengths tried after each Gauss-Newton solve (kernels/global_solve.py)
+COARSEST_SWEEPS = 8  # Jacobi sweeps on the coarsest level (a few nodes: an approximate solve)
 
 
 def incidence(ends: np.ndarray, particles: int) -> tuple[np.ndarray, np.ndarray]:
@@ -57,14 +63,138 @@ def reduction_sizes(particles: int) -> list[int]:
     return sizes
 
 
-def device_bytes(particles: int, sticks: int) -> int:
+def coarse_level_counts(grids: list[tuple[int, int]]) -> list[tuple[int, int, int]]:
+    """(nodes, sticks, children) of each coarse level, finest first, for the grids (rows, cols) of a scene whose
+    cloths are all grids, without building anything (the counts ``hierarchy`` builds)."""
+    from ..constraints.multilevel import level_axes
+
+    per_grid = []
+    for rows, cols in grids:
+        fine, counts = rows * cols, []
+        for r, c in level_axes(rows, cols):
+            nr, nc = len(r), len(c)
+            counts.append((nr * nc, nr * (nc - 1) + (nr - 1) * nc + 2 * (nr - 1) * (nc - 1), fine - nr * nc))
+            fine = nr * nc
+        per_grid.append(counts)
+    depth = max((len(c) for c in per_grid), default=0)
+    return [tuple(sum(c[k][i] for c in per_grid if k < len(c)) for i in range(3)) for k in range(depth)]
+
+
+def level_bytes(nodes: int, sticks: int, finer_nodes: int, children: int) -> int:
+    """A coarse level's arrays: its sticks (global and local ends, rest, weight, direction, stretch, stiffness, two
+    CSR entries), per node a CSR offset, pin flag, mass, contact block, inverse diagonal, three
+    vectors and its family (itself and its children's four parents' shares), and the prolongation to the finer
+    level (four parents and weights per finer node)."""
+    per_stick = 2 * VEC2I + 4 * FLOAT + VEC3 + 2 * INT
+    per_node = 2 * INT + INT + FLOAT + 2 * MAT33 + 3 * VEC3 + (INT + FLOAT)
+    return (sticks * per_stick + nodes * per_node + 2 * INT + 4 * children * (INT + FLOAT)
+            + finer_nodes * 4 * (INT + FLOAT))
+
+
+def device_bytes(particles: int, sticks: int, levels: tuple[tuple[int, int, int], ...] = ()) -> int:
     """The correction's arrays in float64 positions: per stick its ends, rest length, weight (a scene that tears
     uses the State's), direction and stretch, and two CSR entries; per particle a CSR offset, the clamp's
     snapshot (a position), contact normal and stiffness, right-hand side, inverse diagonal block, the five
     conjugate-gradient vectors and the levels of its sums; five scalars."""
-    per_stick = VEC2I + 2 * FLOAT + VEC3 + FLOAT + 2 * INT
-    per_particle = INT + 3 * 8 + 7 * VEC3 + MAT33 + FLOAT
-    return sticks * per_stick + particles * per_particle + INT + 8 * sum(reduction_sizes(particles)) + 5 * 8
+    per_stick = VEC2I + 2 * FLOAT + VEC3 + 2 * FLOAT + 2 * INT
+    per_particle = INT + 3 * 8 + 5 * VEC3 + (FLOAT + 2 * MAT33 + 3 * VEC3)
+    finer = [particles] + [nodes for nodes, _, _ in levels]
+    return (sticks * per_stick + particles * per_particle + INT + 8 * sum(reduction_sizes(particles))
+            + (6 + LINE_SEARCH) * 8
+            + sum(level_bytes(nodes, count, above, children)
+                  for (nodes, count, children), above in zip(levels, finer)))
+
+
+@dataclass
+class Level:
+    """One level of the operator's hierarchy, on the host. Level 0 is the cloth (every particle, every stick);
+    level l > 0 keeps every second row and column of level l - 1 (constraints/multilevel.py) with its coarse
+    sticks. ``family`` (CSR by coarse node: fine index, weight) restricts from level l - 1; ``parents`` and
+    ``weights`` (per node of level l - 1: four nodes of level l) prolong to it."""
+
+    nodes: np.ndarray  # (n,) global particle of each node
+    ends: np.ndarray  # (s, 2) the sticks' ends, global (for their directions)
+    local_ends: np.ndarray  # (s, 2) the same, as nodes of this level
+    rest: np.ndarray  # (s,) float32, m
+    fixed: np.ndarray  # (n,) int32: 1 for a pin
+    family_offsets: np.ndarray | None = None
+    family: np.ndarray | None = None
+    family_weight: np.ndarray | None = None
+    finer_parents: np.ndarray | None = None  # (n of level l - 1, 4) int32
+    finer_weights: np.ndarray | None = None  # (n of level l - 1, 4) float32
+
+
+def hierarchy(model) -> list[Level]:
+    """The levels for a scene whose cloths are all grids: level 0, then the coarse levels of the multilevel
+    hierarchy, finest first. A scene with a mesh cloth gets level 0 alone (the Jacobi preconditioner)."""
+    ends = np.asarray(model.host_sticks, np.int32)
+    fixed = (model.host_inv_mass == 0).astype(np.int32)
+    top = Level(np.arange(model.particle_count), ends, ends, np.asarray(model.host_rest, np.float32), fixed)
+    if not all(c.topology.is_grid for c in model.cloths):
+        return [top]
+    from ..constraints.multilevel import grid_hierarchy, merge_levels
+
+    per_cloth = [grid_hierarchy(c.topology.rows, c.topology.cols, c.topology.positions, c.first) for c in model.cloths]
+    levels = [top]
+    for coarse in merge_levels(per_cloth)[::-1]:  # finest coarse level first
+        finer = levels[-1]
+        local = np.full(model.particle_count, -1, np.int64)
+        keep = np.ones(model.particle_count, bool)
+        keep[coarse.child] = False
+        nodes = finer.nodes[keep[finer.nodes]]
+        local[nodes] = np.arange(len(nodes))
+        finer_local = np.full(model.particle_count, -1, np.int64)
+        finer_local[finer.nodes] = np.arange(len(finer.nodes))
+        # restriction: each coarse node gathers itself (weight 1) and every child it is a parent of
+        rows = np.concatenate([local[nodes], local[coarse.parents.reshape(-1)]])
+        cols = np.concatenate([finer_local[nodes], np.repeat(finer_local[coarse.child], 4)])
+        vals = np.concatenate([np.ones(len(nodes), np.float32), coarse.weights.reshape(-1)])
+        order = np.lexsort((cols, rows))
+        offsets = np.zeros(len(nodes) + 1, np.int32)
+        np.cumsum(np.bincount(rows, minlength=len(nodes)), out=offsets[1:])
+        # prolongation: a kept node is its own parent; a child has its four
+        parents = np.repeat(local[finer.nodes][:, None], 4, axis=1)
+        weights = np.zeros((len(finer.nodes), 4), np.float32)
+        weights[:, 0] = 1.0
+        children = finer_local[coarse.child]
+        parents[children] = local[coarse.parents]
+        weights[children] = coarse.weights
+        levels.append(Level(nodes, coarse.ends, local[coarse.ends].astype(np.int32), coarse.limit,
+                            fixed[nodes], offsets, cols[order].astype(np.int32), vals[order].astype(np.float32),
+                            parents.astype(np.int32), weights))
+    return levels
+
+
+class DeviceLevel:
+    """A level's arrays on the device: its sticks and their incidence, and the per-node working set."""
+
+    def __init__(self, level: Level, device):
+        import warp as wp
+
+        n, s = len(level.nodes), len(level.ends)
+        self.count, self.stick_count = n, s
+        offsets, codes = incidence(level.local_ends, n)
+        self.ends = wp.array(level.ends, dtype=wp.vec2i, device=device)
+        self.local_ends = self.ends if level.local_ends is level.ends else wp.array(level.local_ends, dtype=wp.vec2i,
+                                                                                     device=device)
+        self.rest = wp.array(level.rest, dtype=float, device=device)
+        self.offsets = wp.array(offsets, dtype=int, device=device)
+        self.incident = wp.array(codes, dtype=int, device=device)
+        self.direction = wp.zeros(s, dtype=wp.vec3, device=device)
+        self.residual = wp.zeros(s, dtype=float, device=device)
+        self.stiffness = wp.zeros(s, dtype=float, device=device)
+        self.mass_h2 = wp.zeros(n, dtype=float, device=device)
+        self.extra = wp.zeros(n, dtype=wp.mat33, device=device)
+        self.diagonal_inverse = wp.zeros(n, dtype=wp.mat33, device=device)
+        self.b, self.e, self.q = (wp.zeros(n, dtype=wp.vec3, device=device) for _ in range(3))
+        if level.family is not None:
+            self.fixed = wp.array(level.fixed, dtype=int, device=device)
+            self.family_offsets = wp.array(level.family_offsets, dtype=int, device=device)
+            self.family = wp.array(level.family, dtype=int, device=device)
+            self.family_weight = wp.array(level.family_weight, dtype=float, device=device)
+            self.finer_parents = wp.array(level.finer_parents, dtype=wp.vec4i, device=device)
+            self.finer_weights = wp.array(level.finer_weights, dtype=wp.vec4, device=device)
+            self.ones = wp.ones(s, dtype=float, device=device)
 
 
 class GlobalCorrection:
@@ -74,28 +204,18 @@ class GlobalCorrection:
         import warp as wp
 
         device = model.device
-        self.model = model
         self.newton = settings.global_newton
         self.iterations = settings.global_iterations
-        ends = np.asarray(model.host_sticks, np.int32)
-        offsets, codes = incidence(ends, model.particle_count)
-        self.stick_count = len(ends)
-        self.ends = wp.array(ends, dtype=wp.vec2i, device=device)
-        self.rest = wp.array(np.asarray(model.host_rest, np.float32), dtype=float, device=device)
-        self.offsets = wp.array(offsets, dtype=int, device=device)
-        self.incident = wp.array(codes, dtype=int, device=device)
-        self.ones = wp.ones(len(ends), dtype=float, device=device) if not model.tears else None
-        n, s = model.particle_count, len(ends)
-        self.direction = wp.zeros(s, dtype=wp.vec3, device=device)
-        self.residual = wp.zeros(s, dtype=float, device=device)
-        vec = lambda: wp.zeros(n, dtype=wp.vec3, device=device)  # noqa: E731
-        self.contact, self.rhs, self.r, self.z, self.p, self.q, self.dx = (vec() for _ in range(7))
-        self.diagonal_inverse = wp.zeros(n, dtype=wp.mat33, device=device)
-        self.contact_stiffness = wp.zeros(n, dtype=float, device=device)
+        levels = hierarchy(model)
+        if settings.global_preconditioner == "jacobi":
+            levels = levels[:1]
+        self.levels = [DeviceLevel(level, device) for level in levels]
+        n = model.particle_count
+        self.ones = wp.ones(len(levels[0].ends), dtype=float, device=device) if not model.tears else None
+        self.contact, self.rhs, self.r, self.p, self.dx = (wp.zeros(n, dtype=wp.vec3, device=device) for _ in range(5))
         self.x_before = wp.zeros(n, dtype=model.position_dtype, device=device)
-        sizes = reduction_sizes(n)
-        self.sums = [wp.zeros(size, dtype=wp.float64, device=device) for size in sizes]
-        self.scalars = wp.zeros(5, dtype=wp.float64, device=device)
+        self.sums = [wp.zeros(size, dtype=wp.float64, device=device) for size in reduction_sizes(n)]
+        self.scalars = wp.zeros(6 + LINE_SEARCH, dtype=wp.float64, device=device)
 
     def bind(self, model, state, place: list, clamps: list) -> BoundStage:
         """The correction against ``state``: ``place`` are the colliders' placements for the substep (run first),
@@ -104,43 +224,107 @@ class GlobalCorrection:
 
         from warp_verlet.kernels import global_solve as k
 
-        n, s = model.particle_count, self.stick_count
+        n = model.particle_count
+        top = self.levels[0]
         x, x_inertial = state.particle_q, state.particle_q_inertial
         weight = state.stick_weight if model.tears else self.ones
-        directions = recorded(k.stick_directions, s, [x, self.ends, self.rest, weight], [self.direction, self.residual])
-        snapshot = recorded(k.contact_normals, n, [x, self.x_before], [self.contact])
-        assemble = recorded(k.assemble, n, [x, x_inertial, model.inv_mass, 0.0, 0.0, CONTACT_SCALE, self.offsets,
-                                            self.incident, self.rest, self.direction, self.residual, self.contact],
-                            [self.rhs, self.diagonal_inverse, self.contact_stiffness])
-        chunk, threads = 1, n  # one particle per thread; its share of a dot product is summed level by level
-        cg = (self.offsets, self.incident, self.ends, self.rest, self.direction, self.residual, self.contact,
-              self.contact_stiffness)
-        start = recorded(k.cg_start, threads, [self.rhs, self.diagonal_inverse, n, chunk],
-                         [self.r, self.z, self.p, self.dx, self.sums[0]])
-        operator = recorded(k.cg_operator, threads, [self.p, model.inv_mass, 0.0, 0.0, *cg, n, chunk],
-                            [self.q, self.sums[0]])
-        advance = recorded(k.cg_advance, threads, [self.scalars, self.p, self.q, self.diagonal_inverse, n, chunk],
-                           [self.dx, self.r, self.z, self.sums[0]])
-        direction = recorded(k.cg_direction, n, [self.scalars, self.z], [self.p])
+        rigid = []  # the launches that set each stick's stiffness, from the rigid one that follows dt
+        with_inv_h2 = []  # the launches that read 1 / dt^2
+
+        def sticks(level, stick_weight):
+            task = recorded(k.stick_directions, level.stick_count, [x, level.ends, level.rest, stick_weight, 0.0],
+                            [level.direction, level.residual, level.stiffness])
+            rigid.append(task)
+            return task
+
+        def operator(level, p, q):
+            return recorded(k.level_operator, level.count, [p, level.mass_h2, level.extra, level.stiffness,
+                                                            level.offsets, level.incident, level.local_ends,
+                                                            level.rest, level.direction, level.residual], [q])
+
+        set_up = [sticks(top, weight)]
+        assemble = recorded(k.assemble, n, [x, x_inertial, model.inv_mass, 0.0, top.stiffness, CONTACT_SCALE,
+                                            top.offsets,
+                                            top.incident, top.rest, top.direction, top.residual, self.contact],
+                            [self.rhs, top.mass_h2, top.extra])
+        set_up.append(assemble)
+        for finer, level in zip(self.levels, self.levels[1:]):
+            set_up += [sticks(level, level.ones),
+                       recorded(k.restrict_level, level.count, [finer.mass_h2, finer.extra, level.family_offsets,
+                                                                level.family, level.family_weight, level.fixed],
+                                [level.mass_h2, level.extra])]
+        for level in self.levels:
+            set_up.append(recorded(k.level_diagonal, level.count,
+                                   [level.mass_h2, level.extra, level.stiffness, level.offsets, level.incident,
+                                    level.rest, level.direction, level.residual], [level.diagonal_inverse]))
+
+        def v_cycle(depth: int, b, e) -> list:
+            """e = V(b) from level ``depth`` down: damped Jacobi before and after, the coarse level between."""
+            level = self.levels[depth]
+            last = depth == len(self.levels) - 1
+            omega = 1.0 if len(self.levels) == 1 else SMOOTHING_WEIGHT
+            work = [recorded(k.smooth_start, level.count, [b, level.diagonal_inverse, omega], [e])]
+            sweeps = (COARSEST_SWEEPS if len(self.levels) > 1 else 1) if last else SMOOTHING_SWEEPS
+            for _ in range(sweeps - 1):
+                work += [operator(level, e, level.q),
+                         recorded(k.smooth, level.count, [b, level.q, level.diagonal_inverse, omega], [e])]
+            if last:
+                return work
+            coarse = self.levels[depth + 1]
+            work += [operator(level, e, level.q),
+                     recorded(k.restrict_residual, coarse.count, [b, level.q, coarse.family_offsets, coarse.family,
+                                                                 coarse.family_weight, coarse.mass_h2], [coarse.b]),
+                     *v_cycle(depth + 1, coarse.b, coarse.e),
+                     recorded(k.prolong_add, level.count, [coarse.e, coarse.finer_parents, coarse.finer_weights,
+                                                           level.mass_h2], [e])]
+            for _ in range(SMOOTHING_SWEEPS):
+                work += [operator(level, e, level.q),
+                         recorded(k.smooth, level.count, [b, level.q, level.diagonal_inverse, omega], [e])]
+            return work
+
+        def finish_sum() -> list:
+            """The levels of the sum of sums[0], into sums[-1][0]."""
+            return [recorded(k.sum_chunks, self.sums[i + 1].shape[0],
+                             [self.sums[i], self.sums[i].shape[0], REDUCTION_CHUNK], [self.sums[i + 1]])
+                    for i in range(len(self.sums) - 1)]
 
         def finish(stage: int) -> list:
-            """The levels of the sum of sums[0], then the scalars it sets."""
-            levels = [recorded(k.sum_chunks, self.sums[level + 1].shape[0],
-                               [self.sums[level], self.sums[level].shape[0], REDUCTION_CHUNK], [self.sums[level + 1]])
-                      for level in range(len(self.sums) - 1)]
-            return levels + [recorded(k.cg_scalars, 1, [self.sums[-1], stage], [self.scalars])]
+            """The sum of sums[0], then the scalars it sets."""
+            return finish_sum() + [recorded(k.cg_scalars, 1, [self.sums[-1], stage], [self.scalars])]
 
-        correct = recorded(k.apply_correction, n, [x, self.dx])
-        iteration = [operator, *finish(1), advance, *finish(2), direction]
-        step = [directions, assemble, start, *finish(0), *(iteration * self.iterations), correct, *clamps]
+        z = top.e  # the preconditioned residual: level 0's V-cycle output
+        precondition = v_cycle(0, self.r, z)
+        r_dot_z = [recorded(k.dot_values, n, [self.r, z], [self.sums[0]])]
+        cg_operator = recorded(k.cg_operator, n, [self.p, top.mass_h2, top.extra, top.stiffness, top.offsets,
+                                                  top.incident, top.local_ends, top.rest, top.direction,
+                                                  top.residual], [top.q, self.sums[0]])
+        start = [recorded(k.cg_start, n, [self.rhs], [self.r, self.dx]), *precondition, *r_dot_z, *finish(0),
+                 recorded(k.cg_direction, n, [self.scalars, z], [self.p])]
+        iteration = [cg_operator, *finish(1), recorded(k.cg_advance, n, [self.scalars, self.p, top.q],
+                                                         [self.dx, self.r]),
+                     *precondition, *r_dot_z, *finish(2), recorded(k.cg_direction, n, [self.scalars, z], [self.p])]
+        # A line search over LINE_SEARCH step lengths: the step is Newton's on a model of E, and where the cloth is
+        # crumpled (slack sticks, whose true stiffness across is negative) the full step can overshoot.
+        search = []
+        for candidate in range(k.LINE_SEARCH):
+            step_length = 0.0 if candidate == k.LINE_SEARCH - 1 else 1.0 / (1 << candidate)
+            energy = recorded(k.candidate_energy, n, [x, x_inertial, self.dx, step_length, model.inv_mass, 0.0,
+                                                      self.contact, top.offsets, top.incident, top.local_ends,
+                                                      top.rest, top.stiffness], [self.sums[0]])
+            with_inv_h2.append(energy)
+            search += [energy, *finish_sum(), recorded(k.keep_energy, 1, [self.sums[-1], candidate], [self.scalars])]
+        search.append(recorded(k.choose_step, 1, [], [self.scalars]))
+        correct = recorded(k.apply_correction, n, [x, self.dx, self.scalars])
+        step = [*set_up, *start, *(iteration * self.iterations), *search, correct, *clamps]
+        snapshot = recorded(k.contact_normals, n, [x, self.x_before], [self.contact])
         mean_mass = float(np.mean(1.0 / model.host_inv_mass[model.host_inv_mass > 0]))
 
         def run(state, dt: float) -> None:
             inv_h2 = 1.0 / (dt * dt)
-            stiffness = STIFFNESS * mean_mass * inv_h2
-            for launch in (assemble, operator):
-                launch.launch.set_param_by_name("inv_h2", inv_h2)
-                launch.launch.set_param_by_name("stiffness", stiffness)
+            for task in [assemble, *with_inv_h2]:
+                task.launch.set_param_by_name("inv_h2", inv_h2)
+            for task in rigid:
+                task.launch.set_param_by_name("rigid", STIFFNESS * mean_mass * inv_h2)
             for prepare in place:
                 prepare(dt)
             wp.copy(self.x_before, x)

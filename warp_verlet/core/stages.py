@@ -54,6 +54,7 @@ class Requirements:
     weight_pins: int = 0  # implicit grid sticks of a cloth whose free particles weigh alike: its pins
     elements: tuple[tuple[str, object], ...] = ()  # (kind name, its count(scene)) of the kinds a scene uses
     global_iterations: int = 0  # the global correction's conjugate-gradient iterations (0: no correction)
+    global_levels: tuple[tuple[int, int, int], ...] = ()  # its multigrid's coarse levels: (nodes, sticks, children)
 
     def count(self, kind: str):
         """Constraint kind ``kind``'s ``count(scene)`` (0 when the scene does not use it)."""
@@ -92,9 +93,22 @@ class Requirements:
             coarse_sticks=coarse[0], coarse_children=coarse[1],
             elements=tuple((kind.name, n) for kind in constraint_kinds() if (n := kind.count(scene))),
             global_iterations=scene.simulation.global_iterations,
+            global_levels=global_levels(scene),
         )
         req = replace(req, **grid_counts(scene, sticks))
         return replace(req, precision=resolve(scene, relaxes=RELAX.needed(req)))
+
+
+def global_levels(scene: "Scene") -> tuple[tuple[int, int, int], ...]:
+    """The coarse levels the global correction's multigrid builds: none without the correction, with the Jacobi
+    preconditioner, or with a mesh cloth."""
+    from .global_solve import coarse_level_counts
+
+    sim = scene.simulation
+    if not sim.global_iterations or sim.global_preconditioner != "multigrid" or any(c.resolution is None
+                                                                                     for c in scene.cloths):
+        return ()
+    return tuple(coarse_level_counts([tuple(c.resolution) for c in scene.cloths]))
 
 
 STICK_FORMS = ("auto", "explicit", "implicit")
@@ -199,7 +213,7 @@ class GlobalSolve:
         from .global_solve import device_bytes
 
         weights = 0 if req.tears else req.sticks * FLOAT  # a scene that tears lends the State's live weights
-        return (device_bytes(req.particles, req.sticks) - req.sticks * FLOAT + weights
+        return (device_bytes(req.particles, req.sticks, req.global_levels) - req.sticks * FLOAT + weights
                 + req.particles * (req.position_bytes - 3 * 8))
 
     def bind(self, model, state, solver) -> BoundStage:

@@ -48,6 +48,7 @@ if TYPE_CHECKING:  # the mesh modules (numpy) are imported only by a scene that 
 
 RELAXATIONS = ("coloured", "jacobi")
 PRECISIONS = ("auto", "float32", "float64")  # positions' float type; "auto" is resolved in precision.py
+GLOBAL_PRECONDITIONERS = ("multigrid", "jacobi")  # the global correction's preconditioner
 CONTACT_PROJECTIONS = ("after_sweeps", "every_sweep")  # when the collider clamp runs in a substep
 ORIENTATIONS = ("vertical", "horizontal")
 STICK_FAMILIES = ("structural", "shear", "bend")
@@ -76,6 +77,7 @@ class SimulationSettings:
     contact_projection: str = "after_sweeps"  # or "every_sweep": the collider clamp also ends every sweep
     global_iterations: int = 0  # conjugate-gradient iterations of the global correction per Gauss-Newton step (0: off)
     global_newton: int = 1  # Gauss-Newton steps of the global correction per substep
+    global_preconditioner: str = "multigrid"  # or "jacobi"; a scene with a mesh cloth always gets "jacobi"
     target_stretch: float | None = None  # RMS structural stretch (fraction) the substeps are chosen to stay under
     max_substeps: int = 1024  # the most substeps a target_stretch budget may choose
     max_dt_ratio: float = 2.0
@@ -231,9 +233,13 @@ SIMULATION_KEYS: tuple[Key, ...] = (
     Key("global_iterations", integer(0, 10_000), 0, "integer", "iterations", allowed="0 … 10 000",
         doc="Conjugate-gradient iterations of the global correction per Gauss-Newton step (see \"Global "
             "correction\" below); 0 leaves it out. It moves the whole cloth towards its stick lengths, with contact "
-            "inside, before each substep's sweeps."),
+            "inside, before each substep's sweeps. Not with soft sticks (`compliance`)."),
     Key("global_newton", integer(1, 100), 1, "integer", "steps", allowed="1 … 100",
         doc="Gauss-Newton steps of the global correction per substep (each re-reads the sticks' directions)."),
+    Key("global_preconditioner", choice(GLOBAL_PRECONDITIONERS), "multigrid", "string",
+        allowed='`"multigrid"`, `"jacobi"`',
+        doc="What speeds up the global correction's conjugate gradients: a multigrid cycle over the grid's levels, "
+            "or each particle's own 3 × 3 block. A scene with a mesh cloth always uses `\"jacobi\"`."),
     Key("max_dt_ratio", real(1.0), 2.0, "number", allowed="≥ 1",
         doc="Upper limit on `dt / dt_prev` in the time-step-corrected Verlet update."),
     Key("max_frame_time", real(0.0, lo_open=True), 0.1, "number", "s", allowed="> 0",
@@ -624,6 +630,13 @@ def check_scene(scene: Scene) -> None:
                 raise SceneError(file, "simulation.multilevel", f"cloth[{i}] ({spec.name!r}) has soft structural "
                                  "sticks, and the coarse levels limit stretch to the rest pose: set "
                                  "multilevel = false or make its structural sticks rigid")
+    if simulation.global_iterations:
+        for i, spec in enumerate(cloth_specs):
+            if spec.compliance:
+                raise SceneError(file, "simulation.global_iterations", f"cloth[{i}] ({spec.name!r}) has soft sticks "
+                                 f"({', '.join(sorted(spec.compliance))}), and the global correction treats every "
+                                 "stick as rigid (with soft sticks it was measured to diverge): set "
+                                 "global_iterations = 0 or remove the cloth's compliance")
     if output.kind == "override":
         _check_override(file, cloth_specs)
     for section, items in (("cloth", cloth_specs), ("collider", collider_specs)):
