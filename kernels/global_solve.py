@@ -31,13 +31,14 @@ def stick_directions(
     ends: wp.array(dtype=wp.vec2i),
     rest: wp.array(dtype=float),
     weight: wp.array(dtype=float),
+    compliance: wp.array(dtype=float),
     rigid: float,
     direction: wp.array(dtype=wp.vec3),
     residual: wp.array(dtype=float),
     stiffness: wp.array(dtype=float),
 ):
-    """Each stick's unit direction a -> b, its stretch |x_b - x_a| - L, and its spring's stiffness (N/m): ``rigid``,
-    or 0 for a torn stick. (Every stick is rigid here: the loader refuses the correction on soft sticks.)"""
+    """Each stick's unit direction a -> b, its stretch |x_b - x_a| - L, and its spring's stiffness (N/m): ``rigid``
+    for a rigid stick, 1 / compliance for a soft one (never stiffer than rigid), 0 for a torn one."""
     s = wp.tid()
     e = ends[s]
     d = x[e[1]] - x[e[0]]
@@ -49,7 +50,17 @@ def stick_directions(
         return
     direction[s] = wp.vec3(float(d[0] / length), float(d[1] / length), float(d[2] / length))
     residual[s] = float(length - type(length)(rest[s]))
-    stiffness[s] = rigid
+    k = rigid
+    if compliance[s] > 0.0:
+        k = wp.min(rigid, 1.0 / compliance[s])
+    stiffness[s] = k
+
+
+@wp.kernel
+def copy_positions(x: wp.array(dtype=Any), copy: wp.array(dtype=Any)):
+    """A kernel, not ``wp.copy``: a CPU frame capture replays kernels only."""
+    i = wp.tid()
+    copy[i] = x[i]
 
 
 @wp.kernel
@@ -460,8 +471,32 @@ def apply_correction(x: wp.array(dtype=Any), dx: wp.array(dtype=wp.vec3), scalar
     x[i] = x[i] + type(x[i])(type(x[i][0])(d[0]), type(x[i][0])(d[1]), type(x[i][0])(d[2]))
 
 
+@wp.kernel
+def hand_over_tension(
+    x: wp.array(dtype=Any),
+    ends: wp.array(dtype=wp.vec2i),
+    rest: wp.array(dtype=float),
+    weight: wp.array(dtype=float),
+    compliance: wp.array(dtype=float),
+    h2: float,
+    tension: wp.array(dtype=float),
+):
+    """Start each soft stick's XPBD tension (N s^2) where the correction left it: mu = C h^2 / compliance, the
+    spring's force over the step. The sweeps then begin at the spring's balance and move it only as far as the
+    rigid sticks' projections change it; from mu = 0 they would apply the spring's force a second time."""
+    s = wp.tid()
+    mu = float(0.0)
+    if compliance[s] > 0.0 and weight[s] != 0.0:
+        e = ends[s]
+        c = float(wp.length(x[e[1]] - x[e[0]])) - rest[s]
+        mu = c * h2 / compliance[s]
+    tension[s] = mu
+
+
 for_positions(stick_directions, arrays=("x",))
+for_positions(hand_over_tension, arrays=("x",))
 for_positions(contact_normals, arrays=("x", "x_before"))
+for_positions(copy_positions, arrays=("x", "copy"))
 for_positions(assemble, arrays=("x", "x_inertial"))
 for_positions(apply_correction, arrays=("x",))
 for_positions(candidate_energy, arrays=("x", "x_inertial"))

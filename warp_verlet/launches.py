@@ -50,14 +50,15 @@ def split_tasks(make: Callable[[int, int], PhaseTask], first: int, count: int, t
 
 
 # ---------------------------------------------------------------------------------------------- stages
-def start_compliant_substep(launches: list, tension) -> Callable[[Any, float], None]:
+def start_compliant_substep(launches: list, tension, zero: bool = True) -> Callable[[Any, float], None]:
     """A BoundStage's prepare for soft (XPBD) sticks: each substep gives ``launches`` its 1 / dt^2 and restarts the
-    tension from zero."""
+    tension from zero (unless ``zero`` is False: an earlier stage has started it)."""
     def prepare(state, dt: float) -> None:
         inv_dt2 = 1.0 / (dt * dt)
         for launch in launches:
             launch.set_param_by_name("inv_dt2", inv_dt2)
-        tension.zero_()
+        if zero:
+            tension.zero_()
 
     return prepare
 

@@ -46,7 +46,9 @@ class Sticks(ConstraintSet):
             phases = [split_tasks(make_soft, first, count, threads) for first, count in m.colour_ranges]
             launches = [task.launch for phase in phases for task in phase if task is not None]
 
-            return BoundStage(start_compliant_substep(launches, tension), phases)
+            # With the global correction on, it starts the tension where its springs left it (kernels/global_solve.py).
+            return BoundStage(start_compliant_substep(launches, tension, zero=not solver.req.global_iterations),
+                              phases)
 
         weight = state.stick_weight if m.tears else m.neighbour_weight
         scratch = solver.scratch("jacobi_positions", m.particle_count, m.position_dtype)

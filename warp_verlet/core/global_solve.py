@@ -81,22 +81,22 @@ def coarse_level_counts(grids: list[tuple[int, int]]) -> list[tuple[int, int, in
 
 
 def level_bytes(nodes: int, sticks: int, finer_nodes: int, children: int) -> int:
-    """A coarse level's arrays: its sticks (global and local ends, rest, weight, direction, stretch, stiffness, two
-    CSR entries), per node a CSR offset, pin flag, mass, contact block, inverse diagonal, three
+    """A coarse level's arrays: its sticks (global and local ends, rest, compliance, weight, direction, stretch,
+    stiffness, two CSR entries), per node a CSR offset, pin flag, mass, contact block, inverse diagonal, three
     vectors and its family (itself and its children's four parents' shares), and the prolongation to the finer
     level (four parents and weights per finer node)."""
-    per_stick = 2 * VEC2I + 4 * FLOAT + VEC3 + 2 * INT
+    per_stick = 2 * VEC2I + 5 * FLOAT + VEC3 + 2 * INT
     per_node = 2 * INT + INT + FLOAT + 2 * MAT33 + 3 * VEC3 + (INT + FLOAT)
     return (sticks * per_stick + nodes * per_node + 2 * INT + 4 * children * (INT + FLOAT)
             + finer_nodes * 4 * (INT + FLOAT))
 
 
 def device_bytes(particles: int, sticks: int, levels: tuple[tuple[int, int, int], ...] = ()) -> int:
-    """The correction's arrays in float64 positions: per stick its ends, rest length, weight (a scene that tears
+    """The correction's arrays in float64 positions: per stick its ends, rest length, compliance, weight (a scene that tears
     uses the State's), direction and stretch, and two CSR entries; per particle a CSR offset, the clamp's
     snapshot (a position), contact normal and stiffness, right-hand side, inverse diagonal block, the five
     conjugate-gradient vectors and the levels of its sums; five scalars."""
-    per_stick = VEC2I + 2 * FLOAT + VEC3 + 2 * FLOAT + 2 * INT
+    per_stick = VEC2I + 3 * FLOAT + VEC3 + 2 * FLOAT + 2 * INT
     per_particle = INT + 3 * 8 + 5 * VEC3 + (FLOAT + 2 * MAT33 + 3 * VEC3)
     finer = [particles] + [nodes for nodes, _, _ in levels]
     return (sticks * per_stick + particles * per_particle + INT + 8 * sum(reduction_sizes(particles))
@@ -117,6 +117,7 @@ class Level:
     local_ends: np.ndarray  # (s, 2) the same, as nodes of this level
     rest: np.ndarray  # (s,) float32, m
     fixed: np.ndarray  # (n,) int32: 1 for a pin
+    compliance: np.ndarray  # (s,) float32, m/N (0: rigid; coarse sticks are rigid)
     family_offsets: np.ndarray | None = None
     family: np.ndarray | None = None
     family_weight: np.ndarray | None = None
@@ -129,7 +130,8 @@ def hierarchy(model) -> list[Level]:
     hierarchy, finest first. A scene with a mesh cloth gets level 0 alone (the Jacobi preconditioner)."""
     ends = np.asarray(model.host_sticks, np.int32)
     fixed = (model.host_inv_mass == 0).astype(np.int32)
-    top = Level(np.arange(model.particle_count), ends, ends, np.asarray(model.host_rest, np.float32), fixed)
+    top = Level(np.arange(model.particle_count), ends, ends, np.asarray(model.host_rest, np.float32), fixed,
+                np.asarray(model.host_compliance, np.float32))
     if not all(c.topology.is_grid for c in model.cloths):
         return [top]
     from ..constraints.multilevel import grid_hierarchy, merge_levels
@@ -160,7 +162,7 @@ def hierarchy(model) -> list[Level]:
         parents[children] = local[coarse.parents]
         weights[children] = coarse.weights
         levels.append(Level(nodes, coarse.ends, local[coarse.ends].astype(np.int32), coarse.limit,
-                            fixed[nodes], offsets, cols[order].astype(np.int32), vals[order].astype(np.float32),
+                            fixed[nodes], np.zeros(len(coarse.ends), np.float32), offsets, cols[order].astype(np.int32), vals[order].astype(np.float32),
                             parents.astype(np.int32), weights))
     return levels
 
@@ -183,6 +185,7 @@ class DeviceLevel:
         self.direction = wp.zeros(s, dtype=wp.vec3, device=device)
         self.residual = wp.zeros(s, dtype=float, device=device)
         self.stiffness = wp.zeros(s, dtype=float, device=device)
+        self.compliance = wp.array(level.compliance, dtype=float, device=device)
         self.mass_h2 = wp.zeros(n, dtype=float, device=device)
         self.extra = wp.zeros(n, dtype=wp.mat33, device=device)
         self.diagonal_inverse = wp.zeros(n, dtype=wp.mat33, device=device)
@@ -217,9 +220,9 @@ class GlobalCorrection:
         self.sums = [wp.zeros(size, dtype=wp.float64, device=device) for size in reduction_sizes(n)]
         self.scalars = wp.zeros(6 + LINE_SEARCH, dtype=wp.float64, device=device)
 
-    def bind(self, model, state, place: list, clamps: list) -> BoundStage:
+    def bind(self, model, state, place: list, clamps: list, tension_scratch) -> BoundStage:
         """The correction against ``state``: ``place`` are the colliders' placements for the substep (run first),
-        ``clamps`` their clamp launches."""
+        ``clamps`` their clamp launches, ``tension_scratch(model)`` the soft sticks' XPBD tension it starts."""
         import warp as wp
 
         from warp_verlet.kernels import global_solve as k
@@ -232,7 +235,8 @@ class GlobalCorrection:
         with_inv_h2 = []  # the launches that read 1 / dt^2
 
         def sticks(level, stick_weight):
-            task = recorded(k.stick_directions, level.stick_count, [x, level.ends, level.rest, stick_weight, 0.0],
+            task = recorded(k.stick_directions, level.stick_count, [x, level.ends, level.rest, stick_weight,
+                                                                    level.compliance, 0.0],
                             [level.direction, level.residual, level.stiffness])
             rigid.append(task)
             return task
@@ -316,6 +320,12 @@ class GlobalCorrection:
         search.append(recorded(k.choose_step, 1, [], [self.scalars]))
         correct = recorded(k.apply_correction, n, [x, self.dx, self.scalars])
         step = [*set_up, *start, *(iteration * self.iterations), *search, correct, *clamps]
+        hand_over = None
+        if model.compliant:  # explicit sticks (soft sticks keep implicit grid sticks away): per-stick tension
+            tension = tension_scratch(model)
+            hand_over = recorded(k.hand_over_tension, top.stick_count, [x, top.ends, top.rest, weight,
+                                                                         top.compliance, 0.0], [tension])
+        before = recorded(k.copy_positions, n, [x], [self.x_before])
         snapshot = recorded(k.contact_normals, n, [x, self.x_before], [self.contact])
         mean_mass = float(np.mean(1.0 / model.host_inv_mass[model.host_inv_mass > 0]))
 
@@ -327,12 +337,15 @@ class GlobalCorrection:
                 task.launch.set_param_by_name("rigid", STIFFNESS * mean_mass * inv_h2)
             for prepare in place:
                 prepare(dt)
-            wp.copy(self.x_before, x)
+            before.run()
             for clamp in clamps:
                 clamp.run()
             snapshot.run()
             for _ in range(self.newton):
                 for task in step:
                     task.run()
+            if hand_over is not None:
+                hand_over.launch.set_param_by_name("h2", dt * dt)
+                hand_over.run()
 
         return BoundStage(run)

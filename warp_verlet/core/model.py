@@ -308,6 +308,7 @@ class Model:
         # Kept on the host for metrics (stretch over structural sticks) in the device order.
         self.host_sticks = sticks
         self.host_rest = rest
+        self.host_compliance = compliance  # m/N per stick (0: rigid), for the global correction's springs
         self.structural = family == STRUCTURAL
         self.tears = scene.tears
         if self.tears:

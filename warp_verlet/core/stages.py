@@ -136,6 +136,8 @@ def implicit_grid_obstacle(scene: "Scene") -> str | None:
         return "the cloth can tear (the tear kernel reads each stick's ends and weight)"
     if stick_count(cloth) == 0:
         return "the cloth has no sticks"
+    if scene.simulation.global_iterations and cloth.compliance:
+        return "the global correction starts each soft stick's tension, which implicit grid sticks keep per family"
     return None
 
 
@@ -222,7 +224,8 @@ class GlobalSolve:
         correction = solver.cached("global", lambda: GlobalCorrection(model, solver.settings))
         launches = [kind.bind(model, state) for kind, _ in model.colliders.kinds]
         place = [p for bound in launches for p in bound.before] if collider_placement(solver) == self.name else []
-        return correction.bind(model, state, place, [task for bound in launches for task in bound.clamps])
+        return correction.bind(model, state, place, [task for bound in launches for task in bound.clamps],
+                               lambda m: solver.scratch("stick_tension", m.stick_count, float))
 
 
 class Relax:

@@ -233,7 +233,7 @@ SIMULATION_KEYS: tuple[Key, ...] = (
     Key("global_iterations", integer(0, 10_000), 0, "integer", "iterations", allowed="0 … 10 000",
         doc="Conjugate-gradient iterations of the global correction per Gauss-Newton step (see \"Global "
             "correction\" below); 0 leaves it out. It moves the whole cloth towards its stick lengths, with contact "
-            "inside, before each substep's sweeps. Not with soft sticks (`compliance`)."),
+            "inside, before each substep's sweeps."),
     Key("global_newton", integer(1, 100), 1, "integer", "steps", allowed="1 … 100",
         doc="Gauss-Newton steps of the global correction per substep (each re-reads the sticks' directions)."),
     Key("global_preconditioner", choice(GLOBAL_PRECONDITIONERS), "multigrid", "string",
@@ -630,13 +630,6 @@ def check_scene(scene: Scene) -> None:
                 raise SceneError(file, "simulation.multilevel", f"cloth[{i}] ({spec.name!r}) has soft structural "
                                  "sticks, and the coarse levels limit stretch to the rest pose: set "
                                  "multilevel = false or make its structural sticks rigid")
-    if simulation.global_iterations:
-        for i, spec in enumerate(cloth_specs):
-            if spec.compliance:
-                raise SceneError(file, "simulation.global_iterations", f"cloth[{i}] ({spec.name!r}) has soft sticks "
-                                 f"({', '.join(sorted(spec.compliance))}), and the global correction treats every "
-                                 "stick as rigid (with soft sticks it was measured to diverge): set "
-                                 "global_iterations = 0 or remove the cloth's compliance")
     if output.kind == "override":
         _check_override(file, cloth_specs)
     for section, items in (("cloth", cloth_specs), ("collider", collider_specs)):
