@@ -249,6 +249,13 @@ class Collide:
         return BoundStage(run)
 
 
+TENSION_AVERAGE_TIME = 0.01
+"""s: the time constant over which a stick's force is averaged before it is compared with its tear force. The
+force of one substep is the impulse its projections gave over dt, so a contact's jolt (a cloth landing on the
+ground) lasts one substep and grows as dt shrinks; averaged over a fixed time it is the same at any substep
+count, and a steady load is unchanged (bench/results/tear_tension.md measures the choice)."""
+
+
 class Tear:
     """Tearing after the clamping (kernels/tear.py): zeroes the State's weight of an overlong stick, and, where a
     cloth tears by tension, of a stick whose tension over the substep passed its tear force."""
@@ -260,11 +267,12 @@ class Tear:
 
     def device_bytes(self, req: Requirements) -> int:
         # Per entry a tear length (Model) and a live weight (State); Jacobi has two entries per stick and keeps
-        # their ends. Tearing by tension (coloured only) adds a tear force per stick (Model) and, where no stick
-        # is soft, the tension the sweeps accumulate (solver scratch; soft sticks count theirs in Sticks).
+        # their ends. Tearing by tension (coloured only) adds a tear force (Model) and an average force (State) per
+        # stick, and, where no stick is soft, the tension the sweeps accumulate (solver scratch; soft sticks count
+        # theirs in Sticks).
         if req.relaxation != "coloured":
             return req.sticks * 2 * (2 * FLOAT + VEC2I)
-        by_tension = (FLOAT + (0 if req.compliant else FLOAT)) if req.tension_tears else 0
+        by_tension = (2 * FLOAT + (0 if req.compliant else FLOAT)) if req.tension_tears else 0
         return req.sticks * (2 * FLOAT + by_tension)
 
     def bind(self, model, state, solver) -> BoundStage:
@@ -277,11 +285,12 @@ class Tear:
             return BoundStage(lambda state, dt: task.run())
         tension = solver.scratch("stick_tension", model.stick_count, float)  # the sticks' sweeps fill it
         task = recorded(tear_sticks_by_tension, model.tear_ends.shape[0],
-                        [state.particle_q, model.tear_ends, model.tear_length, tension, model.tear_force, 0.0],
-                        [state.stick_weight, state.torn_entries])
+                        [state.particle_q, model.tear_ends, model.tear_length, tension, model.tear_force, 0.0, 0.0],
+                        [state.stick_force, state.stick_weight, state.torn_entries])
 
         def run(state, dt: float) -> None:
             task.launch.set_param_by_name("inv_dt2", 1.0 / (dt * dt))
+            task.launch.set_param_by_name("blend", -math.expm1(-dt / TENSION_AVERAGE_TIME))  # 1 - exp(-dt / tau)
             task.run()
 
         return BoundStage(run)
