@@ -47,7 +47,9 @@ def weight_below(k: int) -> float:
     return (LINKS - k) * PARTICLE_MASS * G
 
 
-@pytest.mark.parametrize("precision, tolerance", [("float64", 1e-6), ("float32", 1e-2)])
+# float32: a substep's fall g dt^2 = 2.7e-6 m is 45 float32 spacings of a coordinate near 0.5 m, so each
+# correction is rounded by about 2%.
+@pytest.mark.parametrize("precision, tolerance", [("float64", 1e-6), ("float32", 5e-2)])
 def test_a_still_chain_carries_the_weight_below_each_stick(precision, tolerance):
     # 2 sweeps a substep leave the chain 0.1% stretched, but once it is still the force is exact: what the
     # substep's corrections add up to is what holds the particles up against gravity.
@@ -92,7 +94,7 @@ def test_a_stick_that_never_reaches_its_tear_force_leaves_the_motion_bit_identic
     def swing(**tearing):
         scene = make_scene({"fps": 60, "substeps": 8, "iterations": 4}, resolution=[LINKS + 1, 1],
                            size=[LINK * LINKS, 0.0], pins=["top-left"], orientation="horizontal",
-                           mass=PARTICLE_MASS * (LINKS + 1), sticks=["structural", "bend"],
+                           mass=PARTICLE_MASS * (LINKS + 1), sticks=["structural", "bend"], tethers=False,
                            compliance={"bend": 1e-3} if tearing.pop("soft", False) else {}, **tearing)
         sim = Simulator(scene, "cpu")
         for _ in range(20):
@@ -109,7 +111,7 @@ def hanging_sheet(**tearing) -> Simulator:
     which carries the 15 particles below it: F = 15 m g (the soft sticks carry under 1% of it)."""
     scene = make_scene({"fps": 60, "substeps": 32, "iterations": 2}, resolution=[16, 16], size=[0.6, 0.6],
                        pins=["top-edge"], mass=0.5, sticks=["structural", "shear", "bend"],
-                       compliance={"shear": 1e-2, "bend": 1e-1}, **tearing)
+                       compliance={"shear": 1e-2, "bend": 1e-1}, tethers=False, **tearing)
     return Simulator(scene, "cpu")
 
 
@@ -117,15 +119,28 @@ SHEET_TOP_FORCE = 15 * 0.5 / 256 * G  # N
 SHEET_SPACING = 0.6 / 15  # m
 
 
-@pytest.mark.parametrize("ratio, tears", [(0.95, True), (1.05, False)])
+def settled_sheet(**tearing) -> Simulator:
+    """The sheet after 1 s without tearing (released from rest it rings for about half a second, its soft sticks
+    springing), continued with ``tearing``."""
+    still = hanging_sheet()
+    for _ in range(60):
+        still.step_frame()
+    sim = hanging_sheet(**tearing)
+    sim.take_state(still)
+    return sim
+
+
+@pytest.mark.parametrize("ratio, tears", [(0.95, True), (1.02, False)])
 def test_a_converged_sheet_tears_along_its_pinned_edge_by_tension(ratio, tears):
-    sim = hanging_sheet(tear_tension=ratio * SHEET_TOP_FORCE / SHEET_SPACING)
-    for _ in range(30):
-        sim.step_frame()
+    sim = settled_sheet(tear_tension=ratio * SHEET_TOP_FORCE / SHEET_SPACING)
+    assert sim.stretch().max < 0.01  # converged
+    for _ in range(6):  # 0.1 s, ten averaging times; the first tears are the ones checked (the sheet then hangs
+        sim.step_frame()  # by its soft sticks, springing, and tears further)
+        if sim.torn_count():
+            break
     torn = sim.torn_sticks()
     if not tears:
         assert not torn.any()
-        assert sim.stretch().max < 0.01  # converged
         return
     sticks, inv_mass = sim.model.host_sticks, sim.model.host_inv_mass
     pinned_end = (inv_mass[sticks] == 0).sum(axis=1) == 1
@@ -136,8 +151,8 @@ def test_a_converged_sheet_tears_along_its_pinned_edge_by_tension(ratio, tears):
 
 @pytest.mark.parametrize("threshold", [1.01, 1.1])
 def test_the_stretch_threshold_does_not_tear_the_same_converged_sheet(threshold):
-    sim = hanging_sheet(tear_threshold=threshold)
-    for _ in range(30):
+    sim = hanging_sheet(tear_threshold=threshold)  # from its release: the stretch peaks while it rings
+    for _ in range(66):
         sim.step_frame()
     assert sim.torn_count() == 0
     assert sim.stretch().max < 0.01
