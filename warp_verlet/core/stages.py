@@ -284,6 +284,8 @@ class Tear:
                             [state.stick_weight, state.torn_entries])
             return BoundStage(lambda state, dt: task.run())
         tension = solver.scratch("stick_tension", model.stick_count, float)  # the sticks' sweeps fill it
+        if not RELAX.needed(solver.req):
+            tension.zero_()  # no sweeps (iterations = 0): nothing pulls, and nothing else writes it
         task = recorded(tear_sticks_by_tension, model.tear_ends.shape[0],
                         [state.particle_q, model.tear_ends, model.tear_length, tension, model.tear_force, 0.0, 0.0],
                         [state.stick_force, state.stick_weight, state.torn_entries])
