@@ -253,12 +253,12 @@ TENSION_AVERAGE_TIME = 0.01
 """s: the time constant over which a stick's force is averaged before it is compared with its tear force. The
 force of one substep is the impulse its projections gave over dt, so a contact's jolt (a cloth landing on the
 ground) lasts one substep and grows as dt shrinks; averaged over a fixed time it is the same at any substep
-count, and a steady load is unchanged (bench/results/tear_tension.md measures the choice)."""
+count, and a steady load is unchanged (docs/method.md, tearing, measures the choice)."""
 
 
 class Tear:
     """Tearing after the clamping (kernels/tear.py): zeroes the State's weight of an overlong stick, and, where a
-    cloth tears by tension, of a stick whose tension over the substep passed its tear force."""
+    cloth tears by tension, of a stick whose force, averaged over TENSION_AVERAGE_TIME, passed its tear force."""
 
     name = "tear"
 

@@ -434,7 +434,7 @@ CLOTH_KEYS: tuple[Key, ...] = (  # every cloth, grid or mesh
         doc="A stick stretched beyond `tear_threshold × L` is removed (see [tearing](#tearing))."),
     Key("tear_tension", real(0.0, lo_open=True), None, "number", "N/m (tension per metre of cloth width)",
         default_text="absent: the cloth never tears by tension", allowed="> 0, finite; coloured solver only",
-        doc="A stick whose tension over a substep exceeds `tear_tension × L` newtons is removed (see "
+        doc="A stick whose tension, averaged over 10 ms, exceeds `tear_tension × L` newtons is removed (see "
             "[tearing](#tearing)). With `tear_threshold` too, either tears."),
     # None: ClothSpec.uses_tethers decides
     Key("tethers", _boolean, None, "boolean",
