@@ -28,13 +28,14 @@ SUBSTEPS = 32
 DT = 1.0 / (60 * SUBSTEPS)
 
 
-def chain(limit: float | None = None, precision: str = "float64", iterations: int = 64, **cloth) -> Simulator:
+def chain(limit: float | None = None, precision: str = "float64", iterations: int = 64, device: str = "cpu",
+          **cloth) -> Simulator:
     """The hanging chain; ``limit`` is the tear force in N (tear_tension = limit / L), None: very strong."""
     tension = 1e9 if limit is None else limit / LINK
     scene = make_scene({"fps": 60, "substeps": SUBSTEPS, "iterations": iterations, "precision": precision},
                        resolution=[LINKS + 1, 1], size=[LINK * LINKS, 0.0], pins=["top-left"],
                        mass=PARTICLE_MASS * (LINKS + 1), sticks=["structural"], tear_tension=tension, **cloth)
-    return Simulator(scene, "cpu")
+    return Simulator(scene, device)
 
 
 def top_down(sim: Simulator) -> np.ndarray:
@@ -50,10 +51,10 @@ def weight_below(k: int) -> float:
 # float32: a substep's fall g dt^2 = 2.7e-6 m is 45 float32 spacings of a coordinate near 0.5 m, so each
 # correction is rounded by about 2%.
 @pytest.mark.parametrize("precision, tolerance", [("float64", 1e-6), ("float32", 5e-2)])
-def test_a_still_chain_carries_the_weight_below_each_stick(precision, tolerance):
+def test_a_still_chain_carries_the_weight_below_each_stick(device, precision, tolerance):
     # 2 sweeps a substep leave the chain 0.1% stretched, but once it is still the force is exact: what the
     # substep's corrections add up to is what holds the particles up against gravity.
-    sim = chain(precision=precision, iterations=2)
+    sim = chain(precision=precision, iterations=2, device=device)
     for _ in range(60):
         sim.step_frame()
     force = sim.state.stick_force.numpy()[top_down(sim)]
@@ -63,12 +64,12 @@ def test_a_still_chain_carries_the_weight_below_each_stick(precision, tolerance)
 
 
 @pytest.mark.parametrize("between", [0, 2])
-def test_a_chain_tears_at_its_top_when_the_limit_is_below_the_weight_there(between):
+def test_a_chain_tears_at_its_top_when_the_limit_is_below_the_weight_there(device, between):
     # A limit between the weights below sticks `between` and `between + 1`: every stick above it carries more
     # than the limit, but the top one carries the most, so its average crosses first, at t*, and the chain
     # below falls freely, unloaded: no other stick tears.
     limit = 0.5 * (weight_below(between) + weight_below(between + 1))
-    sim = chain(limit)
+    sim = chain(limit, device=device)
     order = top_down(sim)
     expected = -TENSION_AVERAGE_TIME * math.log(1.0 - limit / weight_below(0))
     torn_at = None
@@ -80,15 +81,15 @@ def test_a_chain_tears_at_its_top_when_the_limit_is_below_the_weight_there(betwe
     assert list(sim.torn_sticks()[order]) == [True] + [False] * (LINKS - 1)
 
 
-def test_a_chain_does_not_tear_under_a_limit_just_above_its_load():
-    sim = chain(1.02 * weight_below(0))
+def test_a_chain_does_not_tear_under_a_limit_just_above_its_load(device):
+    sim = chain(1.02 * weight_below(0), device=device)
     for _ in range(30):
         sim.step_frame()
     assert sim.torn_count() == 0
     assert sim.state.stick_force.numpy()[top_down(sim)][0] == pytest.approx(weight_below(0), rel=1e-6)
 
 
-def test_a_stick_that_never_reaches_its_tear_force_leaves_the_motion_bit_identical():
+def test_a_stick_that_never_reaches_its_tear_force_leaves_the_motion_bit_identical(device):
     # The relaxation that keeps the tension moves the particles exactly as the plain one: a chain that swings
     # (started sideways) with a tear force it never reaches matches the same chain that cannot tear, bit for bit.
     def swing(**tearing):
@@ -96,7 +97,7 @@ def test_a_stick_that_never_reaches_its_tear_force_leaves_the_motion_bit_identic
                            size=[LINK * LINKS, 0.0], pins=["top-left"], orientation="horizontal",
                            mass=PARTICLE_MASS * (LINKS + 1), sticks=["structural", "bend"], tethers=False,
                            compliance={"bend": 1e-3} if tearing.pop("soft", False) else {}, **tearing)
-        sim = Simulator(scene, "cpu")
+        sim = Simulator(scene, device)
         for _ in range(20):
             sim.step_frame()
         return sim.positions()
@@ -105,34 +106,34 @@ def test_a_stick_that_never_reaches_its_tear_force_leaves_the_motion_bit_identic
         np.testing.assert_array_equal(swing(soft=soft, tear_tension=1e6), swing(soft=soft))
 
 
-def hanging_sheet(**tearing) -> Simulator:
+def hanging_sheet(device: str = "cpu", **tearing) -> Simulator:
     """A 16 x 16 sheet, 0.6 m, 0.5 kg, pinned along its top edge, rigid structural sticks and soft shear and bend,
     at the 32 x 2 budget that leaves it under 0.1% stretch. Each column hangs from its top structural stick,
     which carries the 15 particles below it: F = 15 m g (the soft sticks carry under 1% of it)."""
     scene = make_scene({"fps": 60, "substeps": 32, "iterations": 2}, resolution=[16, 16], size=[0.6, 0.6],
                        pins=["top-edge"], mass=0.5, sticks=["structural", "shear", "bend"],
                        compliance={"shear": 1e-2, "bend": 1e-1}, tethers=False, **tearing)
-    return Simulator(scene, "cpu")
+    return Simulator(scene, device)
 
 
 SHEET_TOP_FORCE = 15 * 0.5 / 256 * G  # N
 SHEET_SPACING = 0.6 / 15  # m
 
 
-def settled_sheet(**tearing) -> Simulator:
+def settled_sheet(device: str, **tearing) -> Simulator:
     """The sheet after 1 s without tearing (released from rest it rings for about half a second, its soft sticks
     springing), continued with ``tearing``."""
-    still = hanging_sheet()
+    still = hanging_sheet(device)
     for _ in range(60):
         still.step_frame()
-    sim = hanging_sheet(**tearing)
+    sim = hanging_sheet(device, **tearing)
     sim.take_state(still)
     return sim
 
 
 @pytest.mark.parametrize("ratio, tears", [(0.95, True), (1.02, False)])
-def test_a_converged_sheet_tears_along_its_pinned_edge_by_tension(ratio, tears):
-    sim = settled_sheet(tear_tension=ratio * SHEET_TOP_FORCE / SHEET_SPACING)
+def test_a_converged_sheet_tears_along_its_pinned_edge_by_tension(device, ratio, tears):
+    sim = settled_sheet(device, tear_tension=ratio * SHEET_TOP_FORCE / SHEET_SPACING)
     assert sim.stretch().max < 0.01  # converged
     for _ in range(6):  # 0.1 s, ten averaging times; the first tears are the ones checked (the sheet then hangs
         sim.step_frame()  # by its soft sticks, springing, and tears further)
@@ -150,21 +151,21 @@ def test_a_converged_sheet_tears_along_its_pinned_edge_by_tension(ratio, tears):
 
 
 @pytest.mark.parametrize("threshold", [1.01, 1.1])
-def test_the_stretch_threshold_does_not_tear_the_same_converged_sheet(threshold):
-    sim = hanging_sheet(tear_threshold=threshold)  # from its release: the stretch peaks while it rings
+def test_the_stretch_threshold_does_not_tear_the_same_converged_sheet(device, threshold):
+    sim = hanging_sheet(device, tear_threshold=threshold)  # from its release: the stretch peaks while it rings
     for _ in range(66):
         sim.step_frame()
     assert sim.torn_count() == 0
     assert sim.stretch().max < 0.01
 
 
-def test_with_both_criteria_either_tears():
+def test_with_both_criteria_either_tears(device):
     # The stretch threshold still tears what the tension does not reach: a chain with a tear force far above
     # its load but a threshold its first substeps pass (no sweeps: it falls freely from the pin).
     scene = make_scene({"fps": 60, "substeps": 4, "iterations": 0}, resolution=[LINKS + 1, 1],
                        size=[LINK * LINKS, 0.0], pins=["top-left"], sticks=["structural"], tear_tension=1e6,
                        tear_threshold=1.01)
-    sim = Simulator(scene, "cpu")
+    sim = Simulator(scene, device)
     for _ in range(10):
         sim.step()
     assert sim.torn_count() == 1
@@ -176,11 +177,11 @@ def test_with_both_criteria_either_tears():
 # the whole load; at scale 1 it holds a straight hanging particle itself and the sticks between it and its pin
 # carry nothing. Once a stick tears, every tether whose particle is cut off from its pin is dropped.
 
-def test_slack_tethers_leave_the_tension_and_the_tear_unchanged():
+def test_slack_tethers_leave_the_tension_and_the_tear_unchanged(device):
     limit = 0.7 * weight_below(0)
     runs = []
     for tethers in ({}, {"tethers": True, "tether_scale": 1.05}):
-        sim = chain(limit, **tethers)
+        sim = chain(limit, device=device, **tethers)
         forces, torn_at = [], None
         for n in range(1, 200):
             sim.step()
@@ -193,19 +194,19 @@ def test_slack_tethers_leave_the_tension_and_the_tear_unchanged():
     np.testing.assert_array_equal(force_tethered, force_plain)
 
 
-def test_taut_tethers_carry_the_load_themselves_and_nothing_tears():
-    sim = chain(0.1 * weight_below(0), tethers=True, tether_scale=1.0)
+def test_taut_tethers_carry_the_load_themselves_and_nothing_tears(device):
+    sim = chain(0.1 * weight_below(0), device=device, tethers=True, tether_scale=1.0)
     for _ in range(30):
         sim.step_frame()
     assert sim.torn_count() == 0
     assert np.abs(sim.state.stick_force.numpy()).max() < 1e-3 * weight_below(0)
 
 
-def test_a_torn_off_chain_loses_its_tethers_and_falls_freely():
+def test_a_torn_off_chain_loses_its_tethers_and_falls_freely(device):
     # Tethers at 1.05: the top stick tears at t*; once the tear is synced the chain below is cut off from the pin
     # and its tethers are dropped, so its bottom falls g t^2 / 2 from where it was (it was still at the tear:
     # the chain hung at rest). Kept, the tethers would catch it within 5% of its rest distance.
-    sim = chain(0.7 * weight_below(0), tethers=True, tether_scale=1.05)
+    sim = chain(0.7 * weight_below(0), device=device, tethers=True, tether_scale=1.05)
     for _ in range(SUBSTEPS * 6):  # 0.1 s: it tears at 12 ms
         sim.step()
         if sim.torn_count():
