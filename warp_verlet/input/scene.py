@@ -438,8 +438,8 @@ CLOTH_KEYS: tuple[Key, ...] = (  # every cloth, grid or mesh
             "[tearing](#tearing)). With `tear_threshold` too, either tears."),
     # None: ClothSpec.uses_tethers decides
     Key("tethers", _boolean, None, "boolean",
-        default_text="on for a grid with pins that cannot tear (no `tear_threshold` or `tear_tension`), else off (on a mesh: off unless "
-                     "asked, see [mesh cloth](#mesh-cloth))",
+        default_text="on for a grid with pins that cannot tear (no `tear_threshold` or `tear_tension`), else off "
+                     "(on a mesh: off unless asked, see [mesh cloth](#mesh-cloth))",
         allowed="`true` needs pins",
         doc="Long-range attachments (see [tethers](#tethers)): each free particle stays within its rest-pose "
             "distance of its nearest one or two pins."),
