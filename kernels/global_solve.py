@@ -476,21 +476,19 @@ def hand_over_tension(
     x: wp.array(dtype=Any),
     ends: wp.array(dtype=wp.vec2i),
     rest: wp.array(dtype=float),
-    weight: wp.array(dtype=float),
-    compliance: wp.array(dtype=float),
+    stiffness: wp.array(dtype=float),
     h2: float,
     tension: wp.array(dtype=float),
 ):
-    """Start each soft stick's XPBD tension (N s^2) where the correction left it: mu = C h^2 / compliance, the
-    spring's force over the step. The sweeps then begin at the spring's balance and move it only as far as the
-    rigid sticks' projections change it; from mu = 0 they would apply the spring's force a second time."""
+    """Start each stick's tension (N s^2, the sweeps' XPBD multiplier) at its spring's force over the step where the
+    correction left it: mu = k C h^2. A soft stick's sweeps then begin at the spring's balance (C = mu compliance /
+    h^2) and move it only as far as the rigid sticks' projections change it; from mu = 0 they would apply the
+    spring's force a second time. A rigid stick's projection ignores mu, but tearing by tension reads the
+    force the correction carried plus the sweeps'."""
     s = wp.tid()
-    mu = float(0.0)
-    if compliance[s] > 0.0 and weight[s] != 0.0:
-        e = ends[s]
-        c = float(wp.length(x[e[1]] - x[e[0]])) - rest[s]
-        mu = c * h2 / compliance[s]
-    tension[s] = mu
+    e = ends[s]
+    c = float(wp.length(x[e[1]] - x[e[0]])) - rest[s]
+    tension[s] = c * h2 * stiffness[s]
 
 
 for_positions(stick_directions, arrays=("x",))

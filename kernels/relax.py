@@ -106,6 +106,34 @@ def relax_colour_compliant(
 
 
 @wp.kernel
+def relax_colour_tension(
+    x: wp.array(dtype=Any),
+    inv_mass: wp.array(dtype=float),
+    ends: wp.array(dtype=wp.vec2i),
+    rest: wp.array(dtype=float),
+    weight: wp.array(dtype=float),
+    first: int,
+    tension: wp.array(dtype=float),
+):
+    """relax_colour for a cloth that tears by tension: the same moves bit for bit (compliant_correction with
+    compliance 0), and each stick adds its Lagrange multiplier to ``tension`` (mu, N s^2, zeroed at the substep's
+    start), so that mu / dt^2 is the force it transmitted over the substep (kernels/tear.py). Each stick is
+    written only by the thread that projects it."""
+    s = first + wp.tid()
+    e = ends[s]
+    i = e[0]
+    j = e[1]
+    wi = inv_mass[i]
+    wj = inv_mass[j]
+    xi = x[i]
+    xj = x[j]
+    c, mu = compliant_correction(xi, xj, wi, wj, rest[s], weight[s], 0.0, 0.0, tension[s])
+    tension[s] = mu
+    x[i] = xi + scaled(c, wi)
+    x[j] = xj - scaled(c, wj)
+
+
+@wp.kernel
 def relax_jacobi(
     x_in: wp.array(dtype=Any),
     inv_mass: wp.array(dtype=float),
@@ -140,4 +168,5 @@ def relax_jacobi(
 
 for_positions(relax_colour, arrays=("x",))
 for_positions(relax_colour_compliant, arrays=("x",))
+for_positions(relax_colour_tension, arrays=("x",))
 for_positions(relax_jacobi, arrays=("x_in", "x_out"))

@@ -16,11 +16,7 @@ RMS, MAX = 0.01, 0.10
 CASES = [
     "hanging_cloth", "wind_sheet", "ball_through_net", "cloth_on_sphere", "cloth_on_table", "sphere_sweep", "rope",
     "tablecloth",
-    "curtain_override", "curtain_frame", "rope_bend_limit", "banner_batten", "two_cloths",
-    pytest.param("flag_tear", marks=pytest.mark.xfail(strict=True, reason=(
-        "tearing is a stretch threshold, so the flag tears only while the relaxation leaves its pole sticks "
-        "stretched: with the budget that makes it converge (32 x 2) it does not tear at all. It ends at 2.6% RMS, "
-        "37% max. A tension criterion is the fix (docs/not_built.md)"))),
+    "curtain_override", "curtain_frame", "rope_bend_limit", "banner_batten", "two_cloths", "flag_tear",
 ]
 
 

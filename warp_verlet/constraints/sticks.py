@@ -29,11 +29,21 @@ class Sticks(ConstraintSet):
         return req.sticks * 2 * (INT + 2 * FLOAT) + req.particles * (req.position_bytes + INT)
 
     def bind(self, model, state, solver) -> BoundStage:
-        from warp_verlet.kernels.relax import relax_colour, relax_colour_compliant, relax_jacobi
+        from warp_verlet.kernels.relax import relax_colour, relax_colour_compliant, relax_colour_tension, relax_jacobi
 
         m, x, threads = model, state.particle_q, solver.threads
         if m.relaxation == "coloured":
             weight = state.stick_weight if m.tears else m.stick_weight
+            if m.tension_tears and not m.compliant:  # rigid sticks that keep their tension for the tear stage
+                tension = solver.scratch("stick_tension", m.stick_count, float)
+
+                def make_rigid(f, n):
+                    return recorded(relax_colour_tension, n, [x, m.inv_mass, m.stick_ends, m.stick_rest, weight, f],
+                                    [tension])
+                phases = [split_tasks(make_rigid, first, count, threads) for first, count in m.colour_ranges]
+                if solver.req.global_iterations:  # the global correction starts the tension (kernels/global_solve.py)
+                    return BoundStage(None, phases)
+                return BoundStage(lambda state, dt: tension.zero_(), phases)
             if not m.compliant:
                 def make(f, n):
                     return recorded(relax_colour, n, [x, m.inv_mass, m.stick_ends, m.stick_rest, weight, f])

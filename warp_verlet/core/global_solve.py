@@ -321,10 +321,10 @@ class GlobalCorrection:
         correct = recorded(k.apply_correction, n, [x, self.dx, self.scalars])
         step = [*set_up, *start, *(iteration * self.iterations), *search, correct, *clamps]
         hand_over = None
-        if model.compliant:  # explicit sticks (soft sticks keep implicit grid sticks away): per-stick tension
+        if model.compliant or model.tension_tears:  # explicit sticks, each with its tension in the sweeps
             tension = tension_scratch(model)
-            hand_over = recorded(k.hand_over_tension, top.stick_count, [x, top.ends, top.rest, weight,
-                                                                         top.compliance, 0.0], [tension])
+            hand_over = recorded(k.hand_over_tension, top.stick_count, [x, top.ends, top.rest, top.stiffness, 0.0],
+                                 [tension])
         before = recorded(k.copy_positions, n, [x], [self.x_before])
         snapshot = recorded(k.contact_normals, n, [x, self.x_before], [self.contact])
         mean_mass = float(np.mean(1.0 / model.host_inv_mass[model.host_inv_mass > 0]))

@@ -219,7 +219,8 @@ class Model:
     from), ``stick_compliance`` (M,) float32 m/N or None when every stick is rigid; ``colour_ranges`` the
     (first, count) of each colour. Jacobi solver: the per-particle CSR ``neighbour_start`` (N + 1,),
     ``neighbour``, ``neighbour_rest`` and ``neighbour_weight`` (2M,) instead. Tearing (only when a cloth can
-    tear): ``tear_ends`` and ``tear_length`` (E,), one entry per stick (coloured) or per stick end (Jacobi).
+    tear): ``tear_ends`` and ``tear_length`` (E,), one entry per stick (coloured) or per stick end (Jacobi);
+    where a cloth tears by tension (coloured only), ``tear_force`` (M,) float32 N (+inf: never by tension).
     Tethers (only when a cloth uses them; T tethered particles, K pins each): ``tether_particle`` (T,) int32,
     ``tether_pin`` (T, K) int32 (-1: none) and ``tether_length`` (T, K) float32 m, the rest-pose lengths a
     State's copy starts from when a cloth can tear. Other constraint kinds (warp_verlet/constraints/): ``constraints``,
@@ -269,6 +270,14 @@ class Model:
             else np.full(len(s.topology.rest_length), np.inf, np.float32)
             for s, spec in zip(slots, scene.cloths)
         ]).astype(np.float32)
+        # Tearing by tension: a stick's tear force is its cloth's tear_tension (N/m) times the width of cloth it
+        # carries, taken as its rest length (the spacing across a structural stick of a square grid); +inf where
+        # its cloth sets none.
+        tear_force = np.concatenate([
+            s.topology.rest_length * np.float32(spec.tear_tension) if spec.tear_tension
+            else np.full(len(s.topology.rest_length), np.inf, np.float32)
+            for s, spec in zip(slots, scene.cloths)
+        ]).astype(np.float32)
         self.stick_count = len(sticks)
 
         self.inv_mass = wp.array(self.host_inv_mass, dtype=float, device=device)
@@ -286,7 +295,7 @@ class Model:
             check_partition(sticks, self.colouring.colour)  # cheap, and a wrong colouring is a silent race
             order = np.argsort(self.colouring.colour, kind="stable")
             sticks, rest, compliance = sticks[order], rest[order], compliance[order]
-            family, owner, tear_length = family[order], owner[order], tear_length[order]
+            family, owner, tear_length, tear_force = family[order], owner[order], tear_length[order], tear_force[order]
             sizes = self.colouring.sizes
             self.colour_ranges = [(int(a), int(n)) for a, n in zip(np.r_[0, np.cumsum(sizes)[:-1]], sizes) if n > 0]
             if req.implicit_grid:  # the sticks are computed from the grid: no stick arrays on the device
@@ -311,8 +320,11 @@ class Model:
         self.host_compliance = compliance  # m/N per stick (0: rigid), for the global correction's springs
         self.structural = family == STRUCTURAL
         self.tears = scene.tears
+        self.tension_tears = scene.tears_by_tension  # the scene check keeps it to the coloured solver
         if self.tears:
             self._build_tearing(tear_length, owner, device, csr_stick, csr_ends)
+        if self.tension_tears:
+            self.tear_force = wp.array(tear_force, dtype=float, device=device)
         self.colliders = ColliderModel(scene, device)
         self.tether_table: TetherTable | None = build_tethers(self.cloths, scene.cloths, scene.tethers_per_particle)
         if req.grid_pins:  # computed in every sweep from the grid: the table stays on the host

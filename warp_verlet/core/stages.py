@@ -55,6 +55,7 @@ class Requirements:
     elements: tuple[tuple[str, object], ...] = ()  # (kind name, its count(scene)) of the kinds a scene uses
     global_iterations: int = 0  # the global correction's conjugate-gradient iterations (0: no correction)
     global_levels: tuple[tuple[int, int, int], ...] = ()  # its multigrid's coarse levels: (nodes, sticks, children)
+    tension_tears: bool = False  # a cloth tears by tension: the sticks keep their tension, the tear kernel reads it
 
     def count(self, kind: str):
         """Constraint kind ``kind``'s ``count(scene)`` (0 when the scene does not use it)."""
@@ -90,7 +91,7 @@ class Requirements:
             relaxation=scene.simulation.relaxation, iterations=scene.simulation.iterations, free_particles=free,
             compliant=scene.compliant, tears=scene.tears, colliders=collider_counts(scene.colliders),
             tethered=scene.tethered_particles, tethers_per_particle=scene.tethers_per_particle,
-            coarse_sticks=coarse[0], coarse_children=coarse[1],
+            coarse_sticks=coarse[0], coarse_children=coarse[1], tension_tears=scene.tears_by_tension,
             elements=tuple((kind.name, n) for kind in constraint_kinds() if (n := kind.count(scene))),
             global_iterations=scene.simulation.global_iterations,
             global_levels=global_levels(scene),
@@ -317,9 +318,16 @@ class Collide:
         return BoundStage(run)
 
 
+TENSION_AVERAGE_TIME = 0.01
+"""s: the time constant over which a stick's force is averaged before it is compared with its tear force. The
+force of one substep is the impulse its projections gave over dt, so a contact's jolt (a cloth landing on the
+ground) lasts one substep and grows as dt shrinks; averaged over a fixed time it is the same at any substep
+count, and a steady load is unchanged (docs/method.md, tearing, measures the choice)."""
+
+
 class Tear:
-    """Threshold tearing after the clamping (kernels/tear.py): zeroes the State's weight of an overlong
-    stick."""
+    """Tearing after the clamping (kernels/tear.py): zeroes the State's weight of an overlong stick, and, where a
+    cloth tears by tension, of a stick whose force, averaged over TENSION_AVERAGE_TIME, passed its tear force."""
 
     name = "tear"
 
@@ -328,15 +336,35 @@ class Tear:
 
     def device_bytes(self, req: Requirements) -> int:
         # Per entry a tear length (Model) and a live weight (State); Jacobi has two entries per stick and keeps
-        # their ends.
-        return req.sticks * (2 * FLOAT if req.relaxation == "coloured" else 2 * (2 * FLOAT + VEC2I))
+        # their ends. Tearing by tension (coloured only) adds a tear force (Model) and an average force (State) per
+        # stick, and, where no stick is soft, the tension the sweeps accumulate (solver scratch; soft sticks count
+        # theirs in Sticks).
+        if req.relaxation != "coloured":
+            return req.sticks * 2 * (2 * FLOAT + VEC2I)
+        by_tension = (2 * FLOAT + (0 if req.compliant else FLOAT)) if req.tension_tears else 0
+        return req.sticks * (2 * FLOAT + by_tension)
 
     def bind(self, model, state, solver) -> BoundStage:
-        from warp_verlet.kernels.tear import tear_sticks
+        from warp_verlet.kernels.tear import tear_sticks, tear_sticks_by_tension
 
-        task = recorded(tear_sticks, model.tear_ends.shape[0], [state.particle_q, model.tear_ends, model.tear_length],
-                        [state.stick_weight, state.torn_entries])
-        return BoundStage(lambda state, dt: task.run())
+        if not model.tension_tears:
+            task = recorded(tear_sticks, model.tear_ends.shape[0],
+                            [state.particle_q, model.tear_ends, model.tear_length],
+                            [state.stick_weight, state.torn_entries])
+            return BoundStage(lambda state, dt: task.run())
+        tension = solver.scratch("stick_tension", model.stick_count, float)  # the sticks' sweeps fill it
+        if not RELAX.needed(solver.req):
+            tension.zero_()  # no sweeps (iterations = 0): nothing pulls, and nothing else writes it
+        task = recorded(tear_sticks_by_tension, model.tear_ends.shape[0],
+                        [state.particle_q, model.tear_ends, model.tear_length, tension, model.tear_force, 0.0, 0.0],
+                        [state.stick_force, state.stick_weight, state.torn_entries])
+
+        def run(state, dt: float) -> None:
+            task.launch.set_param_by_name("inv_dt2", 1.0 / (dt * dt))
+            task.launch.set_param_by_name("blend", -math.expm1(-dt / TENSION_AVERAGE_TIME))  # 1 - exp(-dt / tau)
+            task.run()
+
+        return BoundStage(run)
 
 
 RELAX = Relax()

@@ -32,6 +32,8 @@ class State:
     - ``torn_entries``: (1,) int32, or None. Tear entries zeroed so far; only when a cloth can tear.
     - ``tether_length``: (T, K) float32, m, or None. Live tether lengths (+inf once a tear cuts a particle off
       from its pin); only when a tethered cloth can tear, otherwise the Model's lengths serve.
+    - ``stick_force``: (M,) float32, N, or None. Per stick, the running average of the force it transmits
+      (kernels/tear.py ``tear_sticks_by_tension``); only when a cloth tears by tension.
     - what each collider kind moves (its ``state_arrays``, warp_verlet/colliders), for spheres:
       ``collider_clock``: (1,) float64, s, or None. Simulated time on the device, which places the moving
       spheres inside a captured frame; only when a sphere moves. ``sphere_centres``: (S,) ``wp.vec3``, m, or
@@ -44,7 +46,7 @@ class State:
     """
 
     _ARRAYS = ("particle_q", "particle_q_inertial", "particle_dq", "stick_weight", "torn_entries",
-               "tether_length")  # then each collider kind's (state_arrays), in registry order
+               "tether_length", "stick_force")  # then each collider kind's (state_arrays), in registry order
 
     def __init__(self, model: Model):
         self.model = model
@@ -56,6 +58,7 @@ class State:
             self.torn_entries = wp.zeros(1, dtype=int) if model.tears else None
             cuttable = model.tears and model.tether_table is not None
             self.tether_length = wp.clone(model.tether_length) if cuttable else None
+            self.stick_force = wp.zeros(model.stick_count, dtype=float) if model.tension_tears else None
             self.collider_array_names: tuple[str, ...] = ()  # what the collider kinds move, present or None
             for kind in collider_kinds():  # every kind's names, None where this scene has none of it
                 for name, array in kind.state_arrays(model.colliders).items():

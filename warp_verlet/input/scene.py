@@ -115,6 +115,7 @@ class ClothSpec:
     compliance: dict[str, float] = field(default_factory=dict)  # m/N per soft family (XPBD); absent: rigid
     pins: tuple[tuple[int, int], ...] = ()
     tear_threshold: float | None = None  # a stick tears beyond this multiple of its rest length; None: never
+    tear_tension: float | None = None  # N/m: a stick tears above this tension per metre of width; None: never
     particle_masses: tuple[tuple[int, int, float], ...] = ()  # (row, col, kg): overrides of the even share
     tethers: bool | None = None  # None: on when the cloth has pins and cannot tear
     tether_scale: float = 1.0  # tether length / rest-pose distance to the pin (> 1: slack for a soft cloth)
@@ -132,7 +133,12 @@ class ClothSpec:
         along the cloth only for a flat panel whose straight lines stay on it."""
         if self.tethers is not None:
             return self.tethers
-        return self.mesh is None and self.pin_count > 0 and self.tear_threshold is None
+        return self.mesh is None and self.pin_count > 0 and not self.tears
+
+    @property
+    def tears(self) -> bool:
+        """Whether the cloth can tear, by stretch (tear_threshold), by tension (tear_tension) or both."""
+        return self.tear_threshold is not None or self.tear_tension is not None
 
     @property
     def tethers_per_particle(self) -> int:
@@ -172,7 +178,12 @@ class Scene:
 
     @property
     def tears(self) -> bool:
-        return any(c.tear_threshold is not None for c in self.cloths)
+        return any(c.tears for c in self.cloths)
+
+    @property
+    def tears_by_tension(self) -> bool:
+        """Whether a cloth tears by tension: the relaxation then keeps each stick's tension (kernels/tear.py)."""
+        return any(c.tear_tension is not None for c in self.cloths)
 
     @property
     def tethered_particles(self) -> int:
@@ -442,10 +453,14 @@ CLOTH_KEYS: tuple[Key, ...] = (  # every cloth, grid or mesh
     Key("tear_threshold", real(1.0, lo_open=True), None, "number", "– (a ratio of rest length)",
         default_text="absent: the cloth never tears", allowed="> 1, finite",
         doc="A stick stretched beyond `tear_threshold × L` is removed (see [tearing](#tearing))."),
+    Key("tear_tension", real(0.0, lo_open=True), None, "number", "N/m (tension per metre of cloth width)",
+        default_text="absent: the cloth never tears by tension", allowed="> 0, finite; coloured solver only",
+        doc="A stick whose tension, averaged over 10 ms, exceeds `tear_tension × L` newtons is removed (see "
+            "[tearing](#tearing)). With `tear_threshold` too, either tears."),
     # None: ClothSpec.uses_tethers decides
     Key("tethers", _boolean, None, "boolean",
-        default_text="on for a grid with pins and no `tear_threshold`, else off (on a mesh: off unless "
-                     "asked, see [mesh cloth](#mesh-cloth))",
+        default_text="on for a grid with pins that cannot tear (no `tear_threshold` or `tear_tension`), else off "
+                     "(on a mesh: off unless asked, see [mesh cloth](#mesh-cloth))",
         allowed="`true` needs pins",
         doc="Long-range attachments (see [tethers](#tethers)): each free particle stays within its rest-pose "
             "distance of its nearest one or two pins."),
@@ -526,6 +541,7 @@ def read_cloth(file: str, index: int, data: Any, scene_dir: Path, path: str | No
         compliance=_CLOTH["compliance"].take(t),
         pins=_GRID["pins"].bound(rows, cols).take(t),
         tear_threshold=_CLOTH["tear_threshold"].take(t),
+        tear_tension=_CLOTH["tear_tension"].take(t),
         particle_masses=_GRID["particle_masses"].bound(rows, cols).take(t),
         tethers=_CLOTH["tethers"].take(t),
         tether_scale=_CLOTH["tether_scale"].take(t),
@@ -553,8 +569,9 @@ def _read_mesh_cloth(t: _Table, index: int, scene_dir: Path, mesh_arrays: tuple 
     spec = ClothSpec(resolution=None, size=None, **values, options=_read_options(t))
     t.finish()
     spec = replace(spec, mesh=mesh_scene.load_mesh(t, request, spec.options, mesh_arrays))
-    if spec.tear_threshold is not None and spec.mesh.mesh.non_manifold_edges:
-        raise t.error("tear_threshold", f"tearing needs a manifold mesh (each edge beside at most two faces, to "
+    if spec.tears and spec.mesh.mesh.non_manifold_edges:
+        key = "tear_threshold" if spec.tear_threshold is not None else "tear_tension"
+        raise t.error(key, f"tearing needs a manifold mesh (each edge beside at most two faces, to "
                       f"know which faces a torn edge opens), and {spec.mesh.mesh.non_manifold_edges} edges have more")
     return check_cloth(t, spec)
 
@@ -617,15 +634,20 @@ def check_scene(scene: Scene) -> None:
                 raise SceneError(file, f"cloth[{i}].compliance", 'soft sticks need the coloured solver (XPBD '
                                  'accumulates each stick\'s tension in order); remove compliance or set '
                                  'simulation.relaxation = "coloured"')
+            if spec.tear_tension is not None:
+                raise SceneError(file, f"cloth[{i}].tear_tension", "tearing by tension needs the coloured solver "
+                                 "(each stick's tension is what its own projections add up to, and a Jacobi "
+                                 "particle averages its sticks' moves); remove tear_tension or set "
+                                 'simulation.relaxation = "coloured"')
     if simulation.multilevel:
         for i, spec in enumerate(cloth_specs):
             if spec.mesh is not None:
                 raise SceneError(file, "simulation.multilevel", f"cloth[{i}] ({spec.name!r}) is a mesh, and the "
                                  "multilevel hierarchy is built for grids: set multilevel = false")
-            if spec.tear_threshold is not None:
+            if spec.tears:
                 raise SceneError(file, "simulation.multilevel", f"cloth[{i}] ({spec.name!r}) can tear, and the "
                                  "coarse levels would hold a torn piece on: set multilevel = false or remove "
-                                 "its tear_threshold")
+                                 "its tear_threshold and tear_tension")
             if spec.compliance.get("structural", 0.0) > 0.0:
                 raise SceneError(file, "simulation.multilevel", f"cloth[{i}] ({spec.name!r}) has soft structural "
                                  "sticks, and the coarse levels limit stretch to the rest pose: set "
