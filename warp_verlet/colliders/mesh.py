@@ -400,6 +400,12 @@ class MeshKind:
                           c.mesh_friction])
         return ColliderLaunches((advance,), (clamp,))
 
+    def capturable(self, specs: tuple[MeshCollider, ...], device) -> bool:
+        """Whether a frame's launches replay from a capture: not with a deforming mesh, whose BVH refit
+        (``wp.Mesh.refit``) Warp's CPU capture does not record (and which is untried in a CUDA graph), so such a
+        frame is stepped launch by launch."""
+        return not any(s.point_samples for s in specs)
+
     # ------------------------------------------------------------------ output
     def samples(self, colliders, state, always_moving: bool = False):
         """Translations of the meshes moved by translate keyframes alone, in scene order (a live session drags no
