@@ -11,6 +11,8 @@ into the mesh's frame by the State's pose, so a rigidly moving mesh needs no ref
 placed each substep from its samples (linear between them, as USD interpolates points) and its BVH refitted.
 Friction acts on the cloth's motion relative to the surface point it touches (that point's move over the
 substep, from the poses or, for a deforming mesh, from its points' moves), so a moving mesh carries cloth along.
+In the cache, a mesh from a USD prim is a reference to that prim (ReferencedMesh), any other a copy of its
+triangles (CachedMesh).
 
 Inside is told from outside by the normals at the closest point (``wp.mesh_query_point_sign_normal``): one
 closest-point query per particle gives the push-out direction and the sign together, with no extra rays (the
@@ -65,6 +67,11 @@ class MeshCollider:
     # (qx, qy, qz, qw), (x, y, z) m), ...), each placing ``points`` (rotated about the origin, then translated);
     # empty: ``keyframes`` alone, unrotated.
     poses: tuple = ()
+    # A mesh read from a USD prim: (the file, absolute; the prim's path), which its cache prim references, and
+    # the scene's rotate keyframes and scale, which the cache applies over it (with ``keyframes``).
+    usd_prim: tuple | None = None
+    rotate_keys: tuple = ((0.0, (0.0, 0.0, 0.0)),)
+    scale: tuple = (1.0, 1.0, 1.0)
     # A deforming mesh (time-sampled USD points): ((time s, (V, 3) float64 points in the frame of ``points``),
     # ...), linear between them and held at the ends; empty: rigid.
     point_samples: tuple = ()
@@ -219,8 +226,9 @@ class MeshKind:
             motion = _motion(source.description, points, sources, keyframes, rotate_keys, scale, animation)
         except MeshError as exc:
             raise table.error("mesh", str(exc)) from None
+        usd_prim = (path.resolve(), prim) if path.suffix.lower() in USD_SUFFIXES else None
         return MeshCollider(source=source.description, points=points, triangles=triangles, keyframes=keyframes,
-                            **motion, **shared)
+                            usd_prim=usd_prim, rotate_keys=rotate_keys, scale=tuple(scale), **motion, **shared)
 
     def check_numbers(self, spec: MeshCollider, file: str, key: str) -> None:
         import numpy as np
@@ -416,10 +424,12 @@ class MeshKind:
             return np.zeros((0, 3), np.float32)
         return state.mesh_offsets.numpy()[[_sampled_per_frame(s) for s in colliders.meshes]]
 
-    def cached(self, spec: MeshCollider, always_moving: bool = False) -> "CachedMesh":
-        poses = spec.poses if spec.poses else (spec.rigid_poses if spec.point_samples and spec.moving else ())
+    def cached(self, spec: MeshCollider, always_moving: bool = False):
+        if spec.usd_prim is not None:
+            return ReferencedMesh(spec.name, *spec.usd_prim, spec.keyframes, spec.rotate_keys, spec.scale,
+                                  spec.purpose)
         return CachedMesh(spec.name, spec.points, spec.triangles, spec.keyframes[0][1], _sampled_per_frame(spec),
-                          spec.purpose, poses=poses, point_samples=spec.point_samples)
+                          spec.purpose, poses=spec.poses)
 
     def owns_prim(self, prim, under_colliders: bool) -> bool:
         """A Mesh under /World/Colliders other than a plane's single quad."""
@@ -431,16 +441,24 @@ class MeshKind:
         return counts is not None and list(counts) != [4]
 
     def read_prim(self, prim, reader) -> dict[str, Any]:
-        """The triangles as written, as the drawing primitive ``meshes``: (points (V, 3), triangles (T, 3))."""
+        """The triangles as written (or as the referenced asset has them: polygons fanned from their first
+        corner), as the drawing primitive ``meshes``: (points (V, 3), triangles (T, 3))."""
         import numpy as np
         from pxr import UsdGeom
 
         mesh, time = UsdGeom.Mesh(prim), reader.time
         points = reader.attribute(mesh, "points", lambda: mesh.GetPointsAttr().Get(time))
         indices = reader.attribute(mesh, "faceVertexIndices", lambda: mesh.GetFaceVertexIndicesAttr().Get(time))
-        if points is None or indices is None or len(indices) < 3 or len(indices) % 3:
+        counts = reader.attribute(mesh, "faceVertexCounts", lambda: mesh.GetFaceVertexCountsAttr().Get(time))
+        if points is None or indices is None or counts is None or len(indices) < 3:
             return {}
-        triangles = np.asarray(indices, np.int64).reshape(-1, 3)
+        counts, corners = np.asarray(counts, np.int64), np.asarray(indices, np.int64)
+        if (counts < 3).any() or counts.sum() != len(corners):
+            return {}
+        per_face = counts - 2
+        start = np.repeat(np.r_[0, np.cumsum(counts)[:-1]], per_face)
+        j = np.arange(per_face.sum()) - np.repeat(np.cumsum(per_face) - per_face, per_face)
+        triangles = np.stack([corners[start], corners[start + j + 1], corners[start + j + 2]], axis=1)
         if triangles.min() < 0 or triangles.max() >= len(points):
             return {}
         world = reader.to_world(mesh, reader.finite(mesh, points))
@@ -474,17 +492,17 @@ class MeshKind:
 
 
 def _sampled_per_frame(spec: MeshCollider) -> bool:
-    """Whether the cache samples the mesh's translation per frame: moved by translate keyframes alone (other
-    motion is authored from its keyframes when its prim is defined)."""
-    return spec.moving and not spec.poses and not spec.point_samples
+    """Whether the cache samples the mesh's translation per frame: a mesh from a file other than USD moved by
+    translate keyframes alone (other motion is authored from its keyframes when its prim is defined)."""
+    return spec.moving and not spec.poses and not spec.point_samples and spec.usd_prim is None
 
 
 @dataclass(frozen=True, eq=False)
 class CachedMesh:
-    """A mesh collider in the cache: its triangles, written once, and its translation (sampled per frame when
-    keyframes alone move it); a mesh that rotates gets its ``poses`` as time samples of its translate and orient
-    ops, a deforming one its ``point_samples`` as time samples of its points, each at its own times (USD
-    interpolates between them as the simulation does: linearly, and spherically for the rotations)."""
+    """A mesh collider from a file other than USD in the cache: its triangles, written once, and its translation
+    (sampled per frame when keyframes alone move it); a mesh that rotates gets its ``poses`` as time samples of
+    its translate and orient ops, at their own times (USD interpolates between them as the simulation does:
+    linearly, and spherically for the rotations)."""
 
     name: str
     points: Any
@@ -493,13 +511,13 @@ class CachedMesh:
     moving: bool = False
     purpose: str = "guide"
     poses: tuple = ()  # ((time s, quaternion (x, y, z, w), translation), ...)
-    point_samples: tuple = ()  # ((time s, (V, 3) points), ...)
 
     def cache_bytes(self, float_bytes: int, int_bytes: int) -> int:
         """At most what its prim takes in a cache whose numbers take these bytes (output_file.estimate_cache):
-        its points, a count and three indices per triangle, the prim itself, and its own time samples."""
-        sampled = 3 * float_bytes * len(self.points) * len(self.point_samples) + 7 * float_bytes * len(self.poses)
-        return 512 + 3 * float_bytes * len(self.points) + 4 * int_bytes * len(self.triangles) + 2 * sampled
+        its points, a count and three indices per triangle, the prim itself, and its poses' time samples (a time,
+        a translation and a quaternion each)."""
+        poses = 8 * float_bytes * len(self.poses)
+        return 512 + 3 * float_bytes * len(self.points) + 4 * int_bytes * len(self.triangles) + poses
 
     def define(self, stage, path):
         """A Mesh prim of triangles, wound counter-clockwise seen from outside, with a translate: sampled per
@@ -518,11 +536,6 @@ class CachedMesh:
         mesh.CreatePurposeAttr(self.purpose)
         op = mesh.AddTranslateOp()
         codes = stage.GetTimeCodesPerSecond()  # a time code is a frame
-        if self.point_samples:
-            for t, sample in self.point_samples:
-                at = Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(sample, np.float32))
-                mesh.GetPointsAttr().Set(at, Usd.TimeCode(t * codes))
-                mesh.GetExtentAttr().Set(UsdGeom.PointBased.ComputeExtent(at), Usd.TimeCode(t * codes))
         if self.poses:
             orient = mesh.AddOrientOp()
             for t, q, offset in self.poses:
@@ -532,6 +545,97 @@ class CachedMesh:
         if self.moving:
             return op  # sampled per frame in write_frame
         op.Set(tuple(float(v) for v in self.offset))
+        return None
+
+
+@dataclass(frozen=True, eq=False)
+class ReferencedMesh:
+    """A mesh collider read from a USD prim, in the cache: a USD reference to that prim (a path relative to the
+    cache where there is one), so that the cache carries the asset's own geometry and animation (its points and
+    its own xform ops, time-sampled or not) instead of a copy. It is the child of an Xform at
+    ``/World/Colliders/<name>`` that places it as the simulation does: the scene's translate and rotate (time-sampled
+    at their keyframes, which USD interpolates as the scene does) and scale, the asset's metersPerUnit, and the
+    transform of the prim's parent in the asset (sampled where an ancestor's xform ops are)."""
+
+    name: str
+    file: Any  # the asset, an absolute Path
+    prim_path: str
+    translate_keys: tuple
+    rotate_keys: tuple
+    scale: tuple
+    purpose: str = "guide"
+    moving: bool = False  # never sampled per frame: its motion is authored from its keys and its asset
+
+    def cache_bytes(self, float_bytes: int, int_bytes: int) -> int:
+        """At most what its prims take (output_file.estimate_cache): the Xform, its keys, the reference."""
+        keys = len(self.translate_keys) + len(self.rotate_keys)
+        return 2048 + 4 * float_bytes * keys + 17 * float_bytes * len(self._parent_samples())
+
+    def _parent_samples(self) -> list:
+        """[(time code of the asset, (4, 4) parent-to-world matrix, USD's row-vector convention), ...]: one
+        (held) when no ancestor moves, else at the ancestors' time samples and between them, halved where a
+        matrix interpolated between two samples strays from USD's own by more than POSE_TOLERANCE (in asset
+        units times the size of the prim)."""
+        import numpy as np
+        from pxr import Usd, UsdGeom
+
+        stage = Usd.Stage.Open(str(self.file), Usd.Stage.LoadAll)
+        prim = stage.GetPrimAtPath(self.prim_path)
+        codes: set[float] = set()
+        at = prim.GetParent()
+        while at and not at.IsPseudoRoot():
+            if at.IsA(UsdGeom.Xformable):
+                codes.update(UsdGeom.Xformable(at).GetTimeSamples())
+            at = at.GetParent()
+        xformable = UsdGeom.Xformable(prim)
+
+        def parent(code: float):
+            return np.asarray(xformable.ComputeParentToWorldTransform(Usd.TimeCode(code)), np.float64)
+
+        if len(codes) < 2:
+            return [(None, parent(min(codes) if codes else 0.0))]
+        extent = UsdGeom.Boundable(prim).ComputeLocalBound(Usd.TimeCode.EarliestTime(), UsdGeom.Tokens.default_)
+        size = max(1.0, float(np.abs(np.asarray(extent.GetRange().GetSize())).max()))
+        return _refine(sorted(codes), parent, lambda a, b, f: (1 - f) * a + f * b,
+                       lambda a, b: float(np.abs(a - b).max()) * size)
+
+    def define(self, stage, path):
+        """The Xform that places the asset's prim, and its child referencing it; returns None (nothing to sample
+        per frame)."""
+        import os
+        from pathlib import Path
+
+        from pxr import Gf, Usd, UsdGeom
+
+        xform = UsdGeom.Xform.Define(stage, path)
+        xform.CreatePurposeAttr(self.purpose)
+        codes = stage.GetTimeCodesPerSecond()  # a time code is a frame
+        for op, keys in ((xform.AddTranslateOp(), self.translate_keys), (xform.AddRotateXYZOp(), self.rotate_keys)):
+            if len({v for _, v in keys}) == 1:
+                op.Set(Gf.Vec3d(*keys[0][1]))
+            else:
+                for t, value in keys:
+                    op.Set(Gf.Vec3d(*value), Usd.TimeCode(t * codes))
+        xform.AddScaleOp().Set(Gf.Vec3d(*self.scale))
+        asset = Usd.Stage.Open(str(self.file), Usd.Stage.LoadAll)
+        units = UsdGeom.GetStageMetersPerUnit(asset)
+        xform.AddScaleOp(UsdGeom.XformOp.PrecisionDouble, "metersPerUnit").Set(Gf.Vec3d(units, units, units))
+        parent = xform.AddTransformOp(UsdGeom.XformOp.PrecisionDouble, "assetParent")
+        per_second = asset.GetTimeCodesPerSecond()
+        for code, matrix in self._parent_samples():
+            value = Gf.Matrix4d(*(float(v) for v in matrix.ravel()))
+            if code is None:
+                parent.Set(value)
+            else:
+                parent.Set(value, Usd.TimeCode(code / per_second * codes))
+        layer = Path(stage.GetRootLayer().realPath or stage.GetRootLayer().identifier)
+        try:
+            target = Path(os.path.relpath(self.file, layer.parent)).as_posix()
+        except ValueError:  # another drive (Windows): only the absolute path reaches it
+            target = Path(self.file).as_posix()
+        child = stage.DefinePrim(path.AppendChild(self.prim_path.rsplit("/", 1)[-1]))
+        child.GetReferences().AddReference(target, self.prim_path)
+        UsdGeom.Imageable(child).CreatePurposeAttr(self.purpose)
         return None
 
 
