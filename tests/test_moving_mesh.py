@@ -277,3 +277,27 @@ def test_a_moving_mesh_steps_alike_with_and_without_the_frames_capture(tmp_path,
         runs.append(sim.positions())
     assert np.array_equal(*runs)
     assert runs[0][:, 2].max() > 0.3  # the mesh pushed the curtain
+
+
+def test_live_turns_a_rotating_mesh(tmp_path):
+    pytest.importorskip("viser", reason="the browser views need viser: pip install 'warp-verlet[live]'")
+    from browser import free_port
+
+    from warp_verlet.apps.live_app import LiveApp
+    from warp_verlet.apps.live_session import LiveSession
+
+    trimesh.creation.box(extents=[1.0, 0.1, 0.04]).export(str(tmp_path / "paddle.obj"))
+    scene = scene_of(tmp_path, [{"type": "mesh", "mesh": "paddle.obj", "translate": [0.0, -1.0, 0.0],
+                                 "rotate": [[0.0, 0.0, 0.0, 0.0], [0.1, 0.0, 90.0, 0.0]]}])
+    app = LiveApp(LiveSession(scene, "cpu"), port=free_port(), record_path=tmp_path / "live.usdc")
+    try:
+        handle = app._collider_drawings["mesh"].items[0]
+        for _ in range(12):  # 0.2 s: past the last keyframe
+            app.session.tick(1 / 60)
+        app.draw(0.0)
+        half = math.sqrt(0.5)  # a quarter turn about +Y: (w, x, y, z) = (cos 45°, 0, sin 45°, 0)
+        np.testing.assert_allclose(np.abs(handle.wxyz), (half, 0.0, half, 0.0), atol=1e-6)
+        np.testing.assert_allclose(handle.position, (0.0, -1.0, 0.0), atol=1e-6)
+    finally:
+        app.server.stop()
+        app.session.close()
