@@ -69,3 +69,29 @@ def test_an_animated_usd_collider_plays_its_own_animation_from_the_cache(tmp_pat
         for spec, (points, triangles) in zip(scene.colliders, drawn):
             placed = spec.points_at(number / 60)
             assert triangle_set(points, triangles) == triangle_set(placed, spec.triangles), (spec.name, number)
+
+
+def test_a_spinning_usd_prim_on_a_moving_parent_is_placed_as_usd_places_it(tmp_path):
+    # The prim turns a whole turn about its own Y in a second while its parent moves: USD interpolates the angle,
+    # which the poses follow (halved until within POSE_TOLERANCE), and the cache plays it through the reference.
+    from pxr import Usd, UsdGeom
+
+    write_usd(tmp_path / "spin.usda", translate_samples={0.0: (0.0, 0.0, 0.0), 24.0: (50.0, 0.0, 0.0)},
+              spin_samples={0.0: 0.0, 24.0: 360.0})
+    scene = scene_of(tmp_path, [{"type": "mesh", "name": "spin", "mesh": "spin.usda", "prim": "/Rig/Box",
+                                 "translate": [0.0, -1.0, 0.0]}], frames=60)
+    spec = scene.colliders[0]
+    assert len(spec.poses) >= 5  # one turn between two samples: halved into quarter turns or less
+    asset = Usd.Stage.Open(str(tmp_path / "spin.usda"))
+    box = UsdGeom.Mesh(asset.GetPrimAtPath("/Rig/Box"))
+    local = np.asarray(box.GetPointsAttr().Get(), np.float64)
+    run_scene(scene, tmp_path / "out.usdc", device="cpu")
+    cache = open_cache(tmp_path / "out.usdc")
+    for seconds in (0.1, 0.25, 0.5, 0.8, 1.0):
+        matrix = np.asarray(box.ComputeLocalToWorldTransform(Usd.TimeCode(seconds * 24.0)), np.float64)
+        expected = (local @ matrix[:3, :3] + matrix[3, :3]) * CM + (0.0, -1.0, 0.0)
+        simulated = spec.points_at(seconds)
+        nearest = np.linalg.norm(expected[:, None] - simulated[None], axis=2).min(axis=1)
+        assert nearest.max() < 2e-5, seconds
+        (points, _), = read_frame(cache, round(seconds * 60)).meshes
+        assert np.abs(points - expected).max() < 2e-5, seconds  # the reference's own points, in the asset's order

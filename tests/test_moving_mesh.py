@@ -62,10 +62,11 @@ def cube_points(half: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def write_usd(path: Path, translate_samples=None, point_samples=None, topology_samples=None, scale_samples=None,
-              codes_per_second: float = 24.0) -> Path:
+              spin_samples=None, codes_per_second: float = 24.0) -> Path:
     """A USD file in centimetres with a cube Mesh at /Rig/Box: its parent's translate time-sampled by
     ``translate_samples`` {time code: (x, y, z) cm}, its points by ``point_samples`` {time code: (V, 3) cm}, its
-    faceVertexIndices by ``topology_samples`` {time code: indices}, its parent's scale by ``scale_samples``."""
+    faceVertexIndices by ``topology_samples`` {time code: indices}, its parent's scale by ``scale_samples``, and
+    its own rotateY by ``spin_samples`` {time code: degrees}."""
     from pxr import Gf, Usd, UsdGeom, Vt
 
     stage = Usd.Stage.CreateNew(str(path))
@@ -81,6 +82,10 @@ def write_usd(path: Path, translate_samples=None, point_samples=None, topology_s
         for code, value in scale_samples.items():
             op.Set(Gf.Vec3f(*value), code)
     mesh = UsdGeom.Mesh.Define(stage, "/Rig/Box")
+    if spin_samples:
+        op = mesh.AddRotateYOp()
+        for code, value in spin_samples.items():
+            op.Set(float(value), code)
     points, counts, indices = cube_points(10.0)
     mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(counts))
     mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(indices))

@@ -713,15 +713,17 @@ def slerp(q0, q1, f: float):
     return (np.sin((1 - f) * angle) * q0 + np.sin(f * angle) * q1) / np.sin(angle)
 
 
-def _refine(times, sample, interpolate, deviation) -> list:
+def _refine(times, sample, interpolate, deviation, too_far=None) -> list:
     """[(time, value), ...] at ``times`` and, where interpolating between two neighbours strays from ``sample``
-    at their middle by more than POSE_TOLERANCE, halved until it does not (at most MAX_HALVINGS times)."""
+    at their middle by more than POSE_TOLERANCE (or ``too_far(va, vb)``), halved until it does not (at most
+    MAX_HALVINGS times)."""
     values = [(t, sample(t)) for t in times]
 
     def halve(a, va, b, vb, depth: int) -> list:
         middle = 0.5 * (a + b)
         vm = sample(middle)
-        if depth >= MAX_HALVINGS or deviation(interpolate(va, vb, 0.5), vm) <= POSE_TOLERANCE:
+        close = deviation(interpolate(va, vb, 0.5), vm) <= POSE_TOLERANCE and not (too_far and too_far(va, vb))
+        if depth >= MAX_HALVINGS or close:
             return [(b, vb)]
         return halve(a, va, middle, vm, depth + 1) + halve(middle, vm, b, vb, depth + 1)
 
@@ -784,8 +786,11 @@ def _motion(description: str, points, sources, keyframes, rotate_keys, scale, an
     def placed(p):
         return corners @ quat_matrix(p[0]).T + p[1]
 
+    # Two poses a half turn apart (or nearly) have no one shortest way between them, and float32 rounding may
+    # pick either: keep neighbours within a quarter turn (|q0 . q1| >= cos 45 degrees).
     poses = _refine(times, pose, lambda a, b, f: (slerp(a[0], b[0], f), (1 - f) * a[1] + f * b[1]),
-                    lambda a, b: float(np.abs(placed(a) - placed(b)).max()))
+                    lambda a, b: float(np.abs(placed(a) - placed(b)).max()),
+                    lambda a, b: abs(float(np.dot(a[0], b[0]))) < np.cos(np.pi / 4) - 1e-9)
     out["poses"] = []
     previous = None
     for t, (q, offset) in poses:
