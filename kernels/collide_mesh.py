@@ -2,9 +2,11 @@
 
 Each particle asks each mesh's BVH for its closest point within the mesh's reach (its thickness outside, and
 deep enough inside to find any inside point: colliders/mesh.py); the sign from the normals there
-(``wp.mesh_query_point_sign_normal``) says whether it is inside. The BVH holds the mesh untranslated: the
-particle is queried at its position less the mesh's translation (the State's, placed on the device clock for a
-moving mesh), so a moving mesh needs no refit. The query runs in float32, the mesh's precision; the depth and
+(``wp.mesh_query_point_sign_normal``) says whether it is inside. The BVH holds the mesh in its own frame: the
+particle is queried at its position less the mesh's translation (``collide_meshes``, where no mesh moves), or
+moved into the mesh's frame by its rotation and translation (``collide_moving_meshes``, placed on the device
+clock each substep), so a rigidly moving mesh needs no refit; a deforming mesh's points are placed each substep
+(``place_mesh_points``) and its BVH refitted. The query runs in float32, the mesh's precision; the depth and
 direction are then taken in the positions' precision.
 """
 
@@ -12,7 +14,7 @@ from typing import Any
 
 import warp as wp
 
-from .collide_response import keyframed, project_out
+from .collide_response import project_out, project_out_moving
 from .positions import for_positions
 
 
@@ -59,19 +61,121 @@ for_positions(collide_meshes, arrays=("x", "x_inertial", "delta"))
 
 
 @wp.kernel
-def place_meshes(
+def collide_moving_meshes(
+    x: wp.array(dtype=Any),
+    x_inertial: wp.array(dtype=Any),
+    delta: wp.array(dtype=Any),
+    inv_mass: wp.array(dtype=float),
+    meshes: wp.array(dtype=wp.uint64),
+    offsets: wp.array(dtype=wp.vec3),
+    rotations: wp.array(dtype=wp.quat),
+    offsets_before: wp.array(dtype=wp.vec3),
+    rotations_before: wp.array(dtype=wp.quat),
+    deforms: wp.array(dtype=int),
+    reach: wp.array(dtype=float),
+    thickness: wp.array(dtype=float),
+    friction: wp.array(dtype=wp.vec2),  # (mu_k, mu_s) per collider
+):
+    """``collide_meshes`` for scenes where a mesh moves: each BVH holds its mesh in its own frame, placed by a
+    rotation and a translation (the State's, at the end of the substep; ``*_before`` at its start), and the
+    points of a deforming mesh are placed and refitted each substep, with their displacement over the substep as
+    the wp.Mesh's velocities. Friction acts on the particle's motion relative to the surface point it touches,
+    which moved by (its place now) - (its place at the start of the substep)."""
+    i = wp.tid()
+    if inv_mass[i] == 0.0:
+        return
+    xi = x[i]
+    for m in range(meshes.shape[0]):
+        q = rotations[m]
+        local = wp.quat_rotate_inv(q, wp.vec3(xi) - offsets[m])
+        query = wp.mesh_query_point_sign_normal(meshes[m], local, reach[m])
+        if query.result:
+            on_surface = wp.mesh_eval_position(meshes[m], query.face, query.u, query.v)
+            closest = x.dtype(wp.quat_rotate(q, on_surface) + offsets[m])
+            d = xi - closest
+            n = x.dtype(wp.quat_rotate(q, wp.mesh_eval_face_normal(meshes[m], query.face)))
+            height = wp.dot(d, n)
+            in_face = query.u > 0.0 and query.v > 0.0 and query.u + query.v < 1.0
+            distance = wp.length(d)
+            rounding = type(distance)(1.0e-6) * (type(distance)(1.0) + wp.length(closest))
+            if not in_face and distance > rounding:
+                height = type(distance)(query.sign) * distance
+                n = d / height
+            depth = type(distance)(thickness[m]) - height
+            if depth > type(depth)(0.0):
+                was = on_surface
+                if deforms[m] != 0:
+                    was = on_surface - wp.mesh_eval_velocity(meshes[m], query.face, query.u, query.v)
+                surface_step = closest - x.dtype(wp.quat_rotate(rotations_before[m], was) + offsets_before[m])
+                xi = project_out_moving(i, xi, n, depth, friction[m], x_inertial, delta, surface_step)
+    x[i] = xi
+
+
+for_positions(collide_moving_meshes, arrays=("x", "x_inertial", "delta"))
+
+
+@wp.kernel
+def place_moving_meshes(
     clock: wp.array(dtype=wp.float64),
     key_start: wp.array(dtype=int),
     key_times: wp.array(dtype=float),
     key_offsets: wp.array(dtype=wp.vec3),
+    key_rotations: wp.array(dtype=wp.quat),
     offsets: wp.array(dtype=wp.vec3),
+    rotations: wp.array(dtype=wp.quat),
+    offsets_before: wp.array(dtype=wp.vec3),
+    rotations_before: wp.array(dtype=wp.quat),
 ):
-    """Translation of mesh m at the current time: linear between keyframes, held before the first and after
-    the last. A mesh of one keyframe is left where it is."""
+    """Mesh m's place at the current time, its place until now kept as where it was at the substep's start:
+    translation linear and rotation spherical-linear between keyframes (dense enough that this follows the
+    scene's and the asset's own interpolation: colliders/mesh.py), held before the first and after the last."""
     m = wp.tid()
+    offsets_before[m] = offsets[m]
+    rotations_before[m] = rotations[m]
     t = float(clock[0])
     first = key_start[m]
     last = key_start[m + 1] - 1
     if last == first:
         return
-    offsets[m] = keyframed(t, first, last, key_times, key_offsets)
+    offset = key_offsets[first]
+    rotation = key_rotations[first]
+    if t >= key_times[last]:
+        offset = key_offsets[last]
+        rotation = key_rotations[last]
+    elif t > key_times[first]:
+        for k in range(first, last):
+            t0 = key_times[k]
+            t1 = key_times[k + 1]
+            if t >= t0 and t < t1:
+                f = (t - t0) / (t1 - t0)
+                offset = wp.lerp(key_offsets[k], key_offsets[k + 1], f)
+                rotation = wp.quat_slerp(key_rotations[k], key_rotations[k + 1], f)
+    offsets[m] = offset
+    rotations[m] = rotation
+
+
+@wp.kernel
+def place_mesh_points(
+    clock: wp.array(dtype=wp.float64),
+    sample_times: wp.array(dtype=float),
+    samples: wp.array(dtype=wp.vec3),
+    points: wp.array(dtype=wp.vec3),
+    displacement: wp.array(dtype=wp.vec3),
+):
+    """A deforming mesh's point v at the current time, linear between its samples (each ``points.shape[0]``
+    long, one after the other) and held at the ends, and how far it moved since the last placing."""
+    v = wp.tid()
+    n = points.shape[0]
+    t = float(clock[0])
+    last = sample_times.shape[0] - 1
+    p = samples[v]
+    if t >= sample_times[last]:
+        p = samples[last * n + v]
+    elif t > sample_times[0]:
+        for k in range(last):
+            t0 = sample_times[k]
+            t1 = sample_times[k + 1]
+            if t >= t0 and t < t1:
+                p = wp.lerp(samples[k * n + v], samples[(k + 1) * n + v], (t - t0) / (t1 - t0))
+    displacement[v] = p - points[v]
+    points[v] = p

@@ -62,3 +62,29 @@ def keyframed(t: float, first: int, last: int, key_times: wp.array(dtype=float),
             if t >= t0 and t < t1:
                 v = wp.lerp(key_values[k], key_values[k + 1], (t - t0) / (t1 - t0))
     return v
+
+
+@wp.func
+def project_out_moving(
+    i: int,
+    xi: Any,
+    normal: Any,
+    depth: Any,
+    friction: wp.vec2,
+    x_inertial: wp.array(dtype=Any),
+    delta: wp.array(dtype=Any),
+    surface_step: Any,
+):
+    """``project_out`` against a moving surface: friction acts on the particle's displacement over the substep
+    relative to ``surface_step``, how far the surface point it touches moved over the same substep, so that a
+    particle stuck to a moving body is carried along with it."""
+    xi = xi + normal * depth
+    if friction[1] > 0.0:
+        step = xi - (x_inertial[i] - delta[i]) - surface_step
+        tangential = step - normal * wp.dot(step, normal)
+        slip = wp.length(tangential)
+        if slip < depth * type(depth)(friction[1]):
+            xi = xi - tangential
+        else:  # slip >= mu_s depth > 0
+            xi = xi - tangential * wp.min(depth * type(depth)(friction[0]) / slip, type(depth)(1.0))
+    return xi

@@ -8,6 +8,12 @@ closer than the thickness, it takes its share of the push that separates the pai
 along the separation, times w_i / (w_i + w_j), and writes the average of its pushes to ``x_out``; the caller
 copies ``x_out`` back. Every thread reads the same old positions and no thread writes another's particle, and the
 grid's order is fixed, so the sum order is fixed and the result repeatable on every device.
+
+Friction (``friction``: (mu_k, mu_s) per particle; a pair takes the mean of its two) is Coulomb's at the position
+level, as the colliders' (collide_response.py), on the pair's relative tangential move over the substep (each
+particle's x - x_prev, x_prev = x_inertial - delta): below mu_s × the pair's push (h - d) it is removed, otherwise
+shortened by mu_k × the push, each particle taking its inverse-mass share, averaged with the pushes. Over the
+sweeps of a substep the pushes add up to the substep's normal correction and the removed slip to mu_k × it.
 """
 
 from typing import Any
@@ -71,10 +77,14 @@ def contact_gather(
     candidate: wp.array(dtype=int),
     candidate_count: wp.array(dtype=int),
     max_candidates: int,
+    x_inertial: wp.array(dtype=Any),
+    delta: wp.array(dtype=Any),
+    friction: wp.array(dtype=wp.vec2),
     first: int,
     x_out: wp.array(dtype=Any),
 ):
-    """Each sweep: a particle's share of the push of every candidate pair closer than its thickness, averaged."""
+    """Each sweep: a particle's share of the push of every candidate pair closer than its thickness, and of the
+    pair's friction, averaged."""
     i = first + wp.tid()
     xi = x_in[i]
     wi = inv_mass[i]
@@ -93,10 +103,20 @@ def contact_gather(
             share = wi / (wi + inv_mass[j])
             total += d * (gap / dist * type(dist)(share))
             count += 1
+            mu = 0.5 * (friction[i] + friction[j])  # (mu_k, mu_s); mu_s >= mu_k, so 0 means no friction
+            if mu[1] > 0.0:
+                n = d / dist
+                relative = (xi - (x_inertial[i] - delta[i])) - (x_in[j] - (x_inertial[j] - delta[j]))
+                tangential = relative - n * wp.dot(relative, n)
+                slip = wp.length(tangential)
+                kept = type(dist)(0.0)  # the fraction of the slip left: 0 sticks
+                if slip >= gap * type(dist)(mu[1]):  # slip >= mu_s gap > 0: it slides
+                    kept = type(dist)(1.0) - wp.min(gap * type(dist)(mu[0]) / slip, type(dist)(1.0))
+                total -= tangential * ((type(dist)(1.0) - kept) * type(dist)(share))
     if count > 0:
         xi = xi + total / type(total[0])(float(count))
     x_out[i] = xi
 
 
 for_positions(contact_candidates, arrays=("x",), scalars=("query_radius",))
-for_positions(contact_gather, arrays=("x_in", "x_out"))
+for_positions(contact_gather, arrays=("x_in", "x_out", "x_inertial", "delta"))

@@ -204,7 +204,7 @@ def test_a_moving_mesh_pushes_through_a_curtain_and_leaves_no_particle_inside(tm
     for k in range(1, 8 * 50 + 1):
         if k == 2:
             issued = launches.of(sim.step)
-            assert issued[-3:] == ["advance_clock", "place_meshes", "collide_meshes"]  # placed, then clamped
+            assert issued[-3:] == ["advance_clock", "place_moving_meshes", "collide_moving_meshes"]  # placed, then clamped
         else:
             sim.step()
         q = sim.positions().astype(np.float64)

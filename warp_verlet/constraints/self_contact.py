@@ -15,8 +15,12 @@ thickness and lists each particle's candidate pairs, those within ``QUERY_REACH`
 per substep, so a list kept for longer would miss new pairs. Each sweep then (``phases``) gathers, per particle,
 the pushes of its candidates closer than the thickness, from the same old positions, into a scratch buffer
 (their average: Jacobi, as the Jacobi sticks do in kernels/relax.py) and copies the buffer back in a second
-launch: no atomics on positions, so the result is bit-for-bit repeatable on every device. Friction is not
-modelled.
+launch: no atomics on positions, so the result is bit-for-bit repeatable on every device.
+
+Friction (``self_friction_coefficient`` μ_k, ``self_static_friction_coefficient`` μ_s) is the colliders' Coulomb law
+at the position level, on the pair's relative motion over the substep: a pair pushed apart by d_n whose relative
+tangential move is under μ_s d_n sticks (the move is removed), otherwise the move is shortened by μ_k d_n; each
+particle takes its inverse-mass share, as of the push. A pair uses the mean of its two particles' coefficients.
 
 A thickness is at most the cloth's rest spacing (a grid's ``size / (n - 1)``, the smaller of its two axes; a
 mesh's median edge): above it, the rest neighbours that never collide (within ``REST_EXCLUSION`` × the
@@ -64,6 +68,27 @@ COLLISION_THICKNESS = Key(
         "uses the mean of theirs). The rest spacing is a grid's `size / (n - 1)`, the smaller of its two axes, or "
         "a mesh's median edge. Keep a particle's move per substep under half of it, or a fast layer can pass "
         "through another between two substeps. Only with `self_collision = true`.")
+
+SELF_FRICTION_COEFFICIENT = Key(
+    "self_friction_coefficient", real(0.0), None, type="number", default_text="`0`", allowed="≥ 0",
+    doc="Coulomb's kinetic friction coefficient μ_k of `self_collision`, on the relative motion of two particles in "
+        "contact: a sliding pair's relative move along the contact in a substep is shortened by μ_k times the "
+        "distance the contact pushed them apart, so a cloth sliding on another that lies on the ground stops from "
+        "v after v² / (2 μ_k g), whatever the substeps. A pair of two cloths uses the mean of theirs. "
+        "Only with `self_collision = true`.")
+SELF_STATIC_FRICTION_COEFFICIENT = Key(
+    "self_static_friction_coefficient", real(0.0), None, type="number",
+    default_text="`self_friction_coefficient`", allowed="≥ 0; at least `self_friction_coefficient`",
+    doc="Coulomb's static friction coefficient μ_s of `self_collision`: a pair whose relative move along the "
+        "contact in a substep is under μ_s times the distance the contact pushed them apart stops moving relative "
+        "to each other. Only with `self_collision = true`.")
+
+
+def friction_of(spec) -> tuple[float, float]:
+    """The cloth's self-contact Coulomb coefficients (μ_k, μ_s), as the gather takes them; (0, 0) without."""
+    kinetic = spec.options.get(SELF_FRICTION_COEFFICIENT.name) or 0.0
+    static = spec.options.get(SELF_STATIC_FRICTION_COEFFICIENT.name)
+    return kinetic, kinetic if static is None else static
 
 
 def rest_spacing(spec) -> float | None:
@@ -124,7 +149,8 @@ def _rest_box(spec) -> tuple[np.ndarray, np.ndarray]:
 
 class ContactData:
     """The contact's device data, per particle of the scene: ``thickness`` (N,) float32 m (0: its cloth does not
-    collide), ``rest`` (N,) vec3 float32 m (rest position) and ``cloth`` (N,) int32 (its cloth's index); and for
+    collide), ``rest`` (N,) vec3 float32 m (rest position), ``cloth`` (N,) int32 (its cloth's index) and
+    ``friction`` (N,) vec2 float32 (its cloth's self-contact (μ_k, μ_s)); and for
     the hash grid, ``cell`` (m, its cell and query radius) and ``dims``. The candidates, rewritten each substep,
     are the solver's scratch."""
 
@@ -134,16 +160,19 @@ class ContactData:
         n = model.particle_count
         thickness = np.zeros(n, np.float32)
         cloth = np.zeros(n, np.int32)
+        friction = np.zeros((n, 2), np.float32)
         for k, (slot, spec) in enumerate(zip(model.cloths, scene.cloths)):
             cloth[slot.particles] = k
             h = thickness_of(spec)
             if h is not None:
                 thickness[slot.particles] = h
+                friction[slot.particles] = friction_of(spec)
         self.cell = QUERY_REACH * float(thickness.max())
         self.dims = scene_grid_dims(scene)
         self.thickness = wp.array(thickness, dtype=float, device=device)
         self.rest = wp.array(model.rest_positions.astype(np.float32), dtype=wp.vec3, device=device)
         self.cloth = wp.array(cloth, dtype=int, device=device)
+        self.friction = wp.array(friction, dtype=wp.vec2, device=device)
 
 
 def scene_grid_dims(scene) -> tuple[int, int, int]:
@@ -161,7 +190,7 @@ class SelfContact(ConstraintSet):
     rebuilt each substep, then in each sweep a Jacobi gather of the pushes and a copy back."""
 
     name = "self contact"
-    cloth_keys = (SELF_COLLISION, COLLISION_THICKNESS)
+    cloth_keys = (SELF_COLLISION, COLLISION_THICKNESS, SELF_FRICTION_COEFFICIENT, SELF_STATIC_FRICTION_COEFFICIENT)
 
     def capturable(self, device) -> bool:
         # Warp's HashGrid.build replayed from a CUDA graph left the grid stale past a small cloth: on an H100 a
@@ -172,10 +201,18 @@ class SelfContact(ConstraintSet):
     def check_cloth(self, spec, table):
         given = spec.options.get(COLLISION_THICKNESS.name)
         if not spec.options.get(SELF_COLLISION.name):
-            if given is not None:
-                raise table.error(COLLISION_THICKNESS.name,
-                                  "a collision thickness needs self_collision = true on the same cloth")
+            for key, what in ((COLLISION_THICKNESS, "a collision thickness"),
+                              (SELF_FRICTION_COEFFICIENT, "a self-contact friction coefficient"),
+                              (SELF_STATIC_FRICTION_COEFFICIENT, "a self-contact friction coefficient")):
+                if spec.options.get(key.name) is not None:
+                    raise table.error(key.name, f"{what} needs self_collision = true on the same cloth")
             return None
+        kinetic = spec.options.get(SELF_FRICTION_COEFFICIENT.name) or 0.0
+        static = spec.options.get(SELF_STATIC_FRICTION_COEFFICIENT.name)
+        if static is not None and static < kinetic:
+            raise table.error(SELF_STATIC_FRICTION_COEFFICIENT.name,
+                              f"must be at least self_friction_coefficient ({kinetic:g}): a pair that slides is held "
+                              f"at most as hard as one at rest; got {static:g}")
         spacing = rest_spacing(spec)
         if spacing is None:
             raise table.error(SELF_COLLISION.name, "self-collision needs a cloth of two particles or more")
@@ -198,9 +235,9 @@ class SelfContact(ConstraintSet):
         return bool(req.count(self.name))
 
     def device_bytes(self, req) -> int:
-        # per particle: thickness, rest position, cloth (Model); a scratch position, the candidates and their
-        # count (solver); the hash grid
-        return (req.particles * (FLOAT + VEC3 + INT + req.position_bytes + (MAX_CANDIDATES + 1) * INT)
+        # per particle: thickness, rest position, cloth, friction (μ_k, μ_s) (Model); a scratch position, the
+        # candidates and their count (solver); the hash grid
+        return (req.particles * (FLOAT + VEC3 + INT + 2 * FLOAT + req.position_bytes + (MAX_CANDIDATES + 1) * INT)
                 + hash_grid_bytes(req.particles, req.count(self.name)[1]))
 
     def build(self, model, scene, device):
@@ -229,7 +266,8 @@ class SelfContact(ConstraintSet):
 
         def gather(f, count):
             return recorded(contact_gather, count, [x, model.inv_mass, data.thickness, candidate, candidate_count,
-                                                    MAX_CANDIDATES, f, scratch])
+                                                    MAX_CANDIDATES, state.particle_q_inertial, state.particle_dq,
+                                                    data.friction, f, scratch])
 
         # ``search`` holds the grid, which the recorded launch reads by its id only.
         return BoundStage(search, [split_tasks(gather, 0, n, solver.threads),

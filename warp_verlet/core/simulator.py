@@ -205,7 +205,9 @@ class Simulator:
         # (replayed in C++, bit-identical, and faster: bench/results/code_choices.md). Threaded relaxation needs
         # its launches issued from Python, so it is not captured.
         self._use_graph = use_graph and self.threads == 1 and all(
-            kind.capturable(self.device) for kind in constraint_kinds() if kind.needed(req))
+            kind.capturable(self.device) for kind in constraint_kinds() if kind.needed(req)) and all(
+            kind.capturable(specs, self.device) for kind, specs in self.model.colliders.kinds
+            if hasattr(kind, "capturable"))  # a collider kind may say its launches do not replay (a refit)
         if self.dt < self.min_dt:
             raise WarpVerletError(self.solver.too_small(self.dt, scene_dt=True))
 

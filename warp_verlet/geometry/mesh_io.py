@@ -303,3 +303,101 @@ def _named_vertices(path: Path, mesh, faces: Faces, points: int, kind: str, name
     if len(members) and (members.min() < 0 or members.max() >= points):
         raise MeshError(f"{where}: GeomSubset {name!r} names a point outside [0, {points})")
     return np.unique(members)
+
+
+class UsdAnimation:
+    """How a USD Mesh prim moves over time, for a collider: its local-to-world transform (the prim's and its
+    ancestors' xform ops) and its points, where they are time-sampled. Time is the scene's, in seconds: a time
+    code is seconds × the stage's timeCodesPerSecond (time code 0 is the scene's start), and between samples
+    USD's own interpolation applies (``world_at`` and ``points_at`` ask the stage). Open only while a collider is
+    read (``read_usd_animation``)."""
+
+    def __init__(self, description: str, stage, prim):
+        from pxr import UsdGeom
+
+        self.description = description
+        self.stage = stage
+        self.prim = prim
+        self.codes_per_second = float(stage.GetTimeCodesPerSecond())
+        self.to_metres = np.diag([UsdGeom.GetStageMetersPerUnit(stage)] * 3 + [1.0])
+        transform_codes: set[float] = set()
+        at = prim
+        while at and not at.IsPseudoRoot():
+            if at.IsA(UsdGeom.Xformable):
+                transform_codes.update(UsdGeom.Xformable(at).GetTimeSamples())
+            at = at.GetParent()
+        self.transform_times = self._seconds(transform_codes) if len(transform_codes) > 1 else ()
+        mesh = UsdGeom.Mesh(prim)
+        point_codes = mesh.GetPointsAttr().GetTimeSamples()
+        self.point_times = self._seconds(point_codes) if len(point_codes) > 1 else ()
+        self._check_topology(mesh, point_codes)
+
+    def _seconds(self, codes) -> tuple[float, ...]:
+        return tuple(float(c) / self.codes_per_second for c in sorted(codes))
+
+    def _code(self, seconds: float):
+        from pxr import Usd
+
+        return Usd.TimeCode(seconds * self.codes_per_second)
+
+    def _when(self, seconds: float) -> str:
+        return f"at time code {seconds * self.codes_per_second:g} ({seconds:g} s)"
+
+    def _check_topology(self, mesh, point_codes) -> None:
+        """The faces may not change over time, and every points sample has as many points as the first."""
+        counts_attr, indices_attr = mesh.GetFaceVertexCountsAttr(), mesh.GetFaceVertexIndicesAttr()
+        for attr, name in ((counts_attr, "faceVertexCounts"), (indices_attr, "faceVertexIndices")):
+            codes = attr.GetTimeSamples()
+            if len(codes) > 1:
+                first = np.asarray(attr.Get(codes[0]))
+                for code in codes[1:]:
+                    if not np.array_equal(np.asarray(attr.Get(code)), first):
+                        raise MeshError(f"{self.description}: its topology changes over time ({name} at time code "
+                                        f"{code:g} differs from time code {codes[0]:g}); a mesh collider keeps its "
+                                        "faces, only its points and transform may be time-sampled")
+        if len(point_codes) > 1:
+            attr = mesh.GetPointsAttr()
+            first = len(attr.Get(point_codes[0]) or [])
+            for code in point_codes[1:]:
+                count = len(attr.Get(code) or [])
+                if count != first:
+                    raise MeshError(f"{self.description}: its topology changes over time ({count} points at time "
+                                    f"code {code:g}, {first} at time code {point_codes[0]:g}); a mesh collider "
+                                    "keeps its points and faces, only their positions may be time-sampled")
+
+    @property
+    def moves(self) -> bool:
+        return bool(self.transform_times or self.point_times)
+
+    def world_at(self, seconds: float) -> np.ndarray:
+        """(4, 4) column-vector affine at ``seconds``: the prim's points to metres in USD's world."""
+        from pxr import UsdGeom
+
+        matrix = np.asarray(UsdGeom.Xformable(self.prim).ComputeLocalToWorldTransform(self._code(seconds)),
+                            np.float64).T
+        if not np.isfinite(matrix).all():
+            raise MeshError(f"{self.description}: its local-to-world transform is not finite {self._when(seconds)}")
+        return self.to_metres @ matrix
+
+    def points_at(self, seconds: float) -> np.ndarray:
+        """(V, 3) float64: the prim's points in its own space at ``seconds``, as authored (file units)."""
+        from pxr import UsdGeom
+
+        raw = UsdGeom.Mesh(self.prim).GetPointsAttr().Get(self._code(seconds))
+        points = np.asarray(raw if raw is not None else [], np.float64).reshape(-1, 3)
+        finite = np.isfinite(points).all(axis=1)
+        if not finite.all():
+            bad = int(np.flatnonzero(~finite)[0])
+            raise MeshError(f"{self.description}: vertex {bad} is not a finite point {self._when(seconds)}: "
+                            f"{_point_text(points[bad])} in the file ({int((~finite).sum())} such vertices)")
+        return points
+
+
+def read_usd_animation(path: Path, prim_path: str) -> UsdAnimation:
+    """The animation of the Mesh prim ``prim_path`` of the USD file at ``path`` (read_mesh has read and checked
+    the prim at its first sample already)."""
+    from pxr import Usd
+
+    with usd_diagnostics():  # read_mesh reported what USD had to say of this file
+        stage = Usd.Stage.Open(str(path), Usd.Stage.LoadAll)
+        return UsdAnimation(f"{path} prim {prim_path}", stage, stage.GetPrimAtPath(prim_path))

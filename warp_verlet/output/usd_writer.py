@@ -5,7 +5,8 @@ Layout of a cache::
     /World                 Xform, the stage's defaultPrim
     /World/<cloth>         Mesh (faces of any size, UVs in primvars:st) or, for a rope, linear BasisCurves
     /World/Colliders/<n>   each collider as its kind defines it (warp_verlet/colliders): a Sphere (time-sampled
-                           translate when it moves), or a large quad Mesh for a plane
+                           translate when it moves), a large quad Mesh for a plane, a Mesh of triangles for a
+                           mesh collider, or for one read from a USD prim an Xform placing a reference to it
 
 ``points`` and ``extent`` are time-sampled every frame; a time code is a frame number
 (timeCodesPerSecond == framesPerSecond == fps). A mesh keeps the faces and UVs it was given (triangles,
@@ -419,6 +420,8 @@ def validate_cache(path: str | os.PathLike[str]) -> list[str]:
     # Time samples outside [start, end] mean endTimeCode was not kept up to date.
     time_range = (stage.GetStartTimeCode(), stage.GetEndTimeCode())
     for prim in stage.Traverse():
+        if _referenced_collider(prim):
+            continue  # the asset's own prim (colliders/mesh.ReferencedMesh): its geometry and samples are the asset's
         if prim.IsA(UsdGeom.Mesh):
             problems += _check_mesh(UsdGeom.Mesh(prim), time_range)
         elif prim.IsA(UsdGeom.BasisCurves):
@@ -426,6 +429,15 @@ def validate_cache(path: str | os.PathLike[str]) -> list[str]:
             counts = curves.GetCurveVertexCountsAttr().Get()
             problems += _check_points(curves, int(np.sum(counts)) if counts else 0, time_range)
     return problems
+
+
+def _referenced_collider(prim: Usd.Prim) -> bool:
+    """A collider prim under /World/Colliders that references its source asset (or lies below one)."""
+    while prim and prim.GetPath().HasPrefix(COLLIDERS_PATH):
+        if prim.HasAuthoredReferences():
+            return True
+        prim = prim.GetParent()
+    return False
 
 
 def _check_stage_metadata(stage: Usd.Stage) -> list[str]:
@@ -531,7 +543,8 @@ def complete_cache_problems(path: str | os.PathLike[str], frames: int) -> list[s
         stage = Usd.Stage.Open(str(path))
     if (stage.GetStartTimeCode(), stage.GetEndTimeCode()) != (0, frames):
         return [f"{path}: frames {stage.GetStartTimeCode():g} .. {stage.GetEndTimeCode():g}, expected 0 .. {frames}"]
-    shapes = [p for p in stage.Traverse() if p.IsA(UsdGeom.PointBased) and UsdGeom.PointBased(p).GetPointsAttr().GetNumTimeSamples()]
+    shapes = [p for p in stage.Traverse() if p.IsA(UsdGeom.PointBased) and UsdGeom.PointBased(p).GetPointsAttr().GetNumTimeSamples()
+              and not _referenced_collider(p)]
     if not shapes:
         return [f"{path}: no animated points"]
     for prim in shapes:
