@@ -322,6 +322,12 @@ class Model:
             self.tether_particle = wp.array(table.particle, dtype=int, device=device)
             self.tether_pin = wp.array2d(table.pin, dtype=int, device=device)
             self.tether_length = wp.array2d(table.length, dtype=float, device=device)
+        self.air = None  # [simulation.air]'s device data (core/aerodynamics.AirModel), where a face feels air
+        if req.air is not None:
+            from .aerodynamics import AirModel
+
+            self.air = AirModel(self, scene, req.air, device)
+            self._hold(self.air, "air")
         self.constraints = {}  # constraint kind name -> the device data its build made (kinds with data only)
         for kind in constraint_kinds():
             data = kind.build(self, scene, device) if kind.needed(req) else None
