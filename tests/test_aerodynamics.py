@@ -51,13 +51,13 @@ def mean_height_per_frame(sim: Simulator, frames: int) -> np.ndarray:
 # ------------------------------------------------------------------------------------------- analytic answers
 
 @pytest.mark.parametrize("precision", ["float64", "float32"])
-def test_a_flat_sheet_falls_at_its_terminal_velocity(precision):
+def test_a_flat_sheet_falls_at_its_terminal_velocity(precision, device):
     """Drag 1/2 rho C_d A v^2 balances m g at v = sqrt(2 m g / (rho C_d A)) (0.825 m/s for 50 g on 1 m^2): the
     sheet's mean speed over its last second is that within 0.5 % (well inside the 5 % asked of the model; it
     settles within about 0.3 s, the time constant v / g = 0.08 s)."""
     mass, side, rho, cd = 0.05, 1.0, 1.2, 1.2
     sim = Simulator(parse_scene(falling_sheet({"density": rho}, precision=precision, drag_coefficient=cd),
-                                file="<test>"), "cpu", use_graph=False)
+                                file="<test>"), device)  # on CUDA, captured frames
     heights = mean_height_per_frame(sim, 120)
     speed = -(heights[-1] - heights[-61])  # m over the last 60 frames (1 s)
     terminal = math.sqrt(2 * mass * G / (rho * cd * side * side))
@@ -66,15 +66,15 @@ def test_a_flat_sheet_falls_at_its_terminal_velocity(precision):
     assert np.ptp(flat) < 1e-4  # it stays flat, face-on to its fall
 
 
-def test_a_sheet_falling_edge_on_falls_freely():
+def test_a_sheet_falling_edge_on_falls_freely(device):
     """A vertical sheet falling along its own plane presents no area to the air (v_rel . n = 0 on every face):
     after 0.5 s it has fallen g t^2 / 2 within 0.1 %, while the same sheet face-on has fallen far less."""
     frames = 30
-    edge_on = Simulator(parse_scene(falling_sheet({}, orientation="vertical"), file="<test>"), "cpu", use_graph=False)
+    edge_on = Simulator(parse_scene(falling_sheet({}, orientation="vertical"), file="<test>"), device)
     drop = mean_height_per_frame(edge_on, frames)
     t = frames / 60.0
     assert drop[0] - drop[-1] == pytest.approx(0.5 * G * t * t, rel=1e-3)
-    face_on = Simulator(parse_scene(falling_sheet({}), file="<test>"), "cpu", use_graph=False)
+    face_on = Simulator(parse_scene(falling_sheet({}), file="<test>"), device)
     face_drop = mean_height_per_frame(face_on, frames)
     assert face_drop[0] - face_drop[-1] < 0.5 * (0.5 * G * t * t)
 
@@ -170,20 +170,20 @@ def test_a_flag_flutters_in_a_steady_stream_and_not_in_a_uniform_wind():
 
 # ------------------------------------------------------------------------------------------- gusts, keyframes
 
-def gusty_positions(air: dict, frames: int = 20) -> np.ndarray:
+def gusty_positions(air: dict, device: str = "cpu", frames: int = 20) -> np.ndarray:
     sim = Simulator(make_scene({"substeps": 2, "iterations": 2, "air": air}, resolution=[8, 8],
-                               pins=["top-left", "top-right"]), "cpu", use_graph=False)
+                               pins=["top-left", "top-right"]), device)
     for _ in range(frames):
         sim.step_frame()
     return sim.state.positions()
 
 
-def test_gusts_are_the_same_for_a_seed_and_differ_across_seeds():
+def test_gusts_are_the_same_for_a_seed_and_differ_across_seeds(device):
     air = {"velocity": [2.0, 0.0, 0.0], "gust_speed": 3.0, "gust_length": 0.5, "gust_period": 0.4}
-    first = gusty_positions({**air, "gust_seed": 7})
-    assert np.array_equal(first, gusty_positions({**air, "gust_seed": 7}))
-    other = gusty_positions({**air, "gust_seed": 8})
-    still = gusty_positions({"velocity": [2.0, 0.0, 0.0]})
+    first = gusty_positions({**air, "gust_seed": 7}, device)
+    assert np.array_equal(first, gusty_positions({**air, "gust_seed": 7}, device))
+    other = gusty_positions({**air, "gust_seed": 8}, device)
+    still = gusty_positions({"velocity": [2.0, 0.0, 0.0]}, device)
     assert np.abs(other - first).max() > 1e-3 and np.abs(first - still).max() > 1e-3
 
 
@@ -202,13 +202,13 @@ def test_the_gusts_rms_speed_is_gust_speed():
     assert math.sqrt((g * g).sum(axis=1).mean()) == pytest.approx(2.0, rel=0.1)
 
 
-def test_keyframed_air_is_the_constant_air_while_its_keyframes_hold_it():
+def test_keyframed_air_is_the_constant_air_while_its_keyframes_hold_it(device):
     """Keyframes [[0, v], [0.25, v], [0.5, 0]] give the constant air v up to 0.25 s (the device clock reads the
     keys at each step's start; the interpolation between two equal keys rounds to within an ulp of v, so the
     positions agree to 1e-5 m), and differ by centimetres after."""
     def heights(air: dict) -> list[np.ndarray]:
         sim = Simulator(make_scene({"substeps": 2, "iterations": 2, "air": air}, resolution=[6, 6],
-                                   pins=["top-left"]), "cpu", use_graph=False)
+                                   pins=["top-left"]), device)
         out = []
         for _ in range(30):
             sim.step_frame()
@@ -289,12 +289,12 @@ def test_the_memory_estimate_counts_the_air(case):
 # ------------------------------------------------------------------------------------------- tearing
 
 @pytest.mark.parametrize("relaxation", ["coloured", "jacobi"])
-def test_a_torn_face_feels_no_air(relaxation):
+def test_a_torn_face_feels_no_air(relaxation, device):
     """Every structural stick torn: every face is torn, and the sheet in a stream falls exactly as in still
     air (free fall: shear sticks still hold it together)."""
     def torn_sheet(air: dict) -> Simulator:
         sim = Simulator(make_scene({"relaxation": relaxation, "air": air}, resolution=[6, 6],
-                                   sticks=["structural", "shear"], tear_threshold=50.0), "cpu", use_graph=False)
+                                   sticks=["structural", "shear"], tear_threshold=50.0), device)
         model = sim.model
         model.restore_tears(sim.state, model.host_sticks[model.structural])
         return sim
@@ -306,8 +306,7 @@ def test_a_torn_face_feels_no_air(relaxation):
     assert np.array_equal(windy.state.positions(), calm.state.positions())
     # and intact, the stream moves it
     intact = Simulator(make_scene({"relaxation": relaxation, "air": {"velocity": [8.0, 0.0, 3.0]}},
-                                  resolution=[6, 6], sticks=["structural", "shear"], tear_threshold=50.0), "cpu",
-                       use_graph=False)
+                                  resolution=[6, 6], sticks=["structural", "shear"], tear_threshold=50.0), device)
     for _ in range(10):
         intact.step_frame()
     assert np.abs(intact.state.positions() - calm.state.positions()).max() > 1e-2
