@@ -123,8 +123,8 @@ def test_lift_pushes_across_the_relative_wind():
     sim.state.set_positions(turned)
     sim.step()
     dt = sim.dt
-    # From rest the exact start (kernels/integrate.py) takes the uniform acceleration's a dt^2 / 2 into its first
-    # increment, and the air's per-particle acceleration enters the step that follows as a dt^2.
+    # From rest the exact start (kernels/integrate.py) gives the uniform acceleration a dt^2 / 2 in the first
+    # step; the air's per-particle acceleration enters that step as a dt^2.
     moved = (sim.state.positions() - turned).mean(axis=0) / (dt * dt)
     q = rho * side * side * speed * speed / (4.0 * mass)
     # The face's normal n ~ (-1, 0, 1)/sqrt2 (either sign): drag along n, q C_d sqrt2 n = q C_d (1, 0, -1) with
