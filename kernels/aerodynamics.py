@@ -4,8 +4,8 @@ One thread per face (a triangle, a quad or any polygon of k corners, as the clot
 
 - its velocity v_face is the mean of its corners' Verlet velocities (x - x_prev) / dt_prev, where in the
   summed form (integrate.py) x - x_prev = delta + (x - x_inertial);
-- its vector area S = 1/2 sum_k (x_k - c) x (x_k+1 - c) about the centroid c gives the area A = |S| and the
-  unit normal n = S / A (exact for a flat polygon; for a bent quad, the area it presents to the flow);
+- its vector area S = 1/2 sum_k (x_k - x_0) x (x_k+1 - x_0) gives the area A = |S| and the unit normal
+  n = S / A (exact for a flat polygon; for a bent quad, the area it presents to the flow);
 - the air's velocity v_air at the centroid is the keyframed velocity at the device clock plus the gusts, a sum
   of seeded sinusoids g(x, t) = sum_m d_m sin(K_m . x - w_m t + phi_m) (warp_verlet/core/aerodynamics.py
   draws d, K, w and phi from the seed);
@@ -73,20 +73,24 @@ def face_forces(
                     share[f] = zero
                     return
     corners = type(dt)(float(end - first))
+    # One pass over the corners, relative to the first (so that float32 keeps the small differences of a face
+    # far from the origin): the sum of (x_k - x_0) x (x_k+1 - x_0) is twice the vector area, the closing side
+    # adding nothing.
+    origin = x[face_corner[first]]
     centre = zero
     velocity = zero
+    area_vector = zero
+    previous = zero
     for k in range(first, end):
         p = face_corner[k]
-        centre = centre + x[p]
-        velocity = velocity + (delta[p] + (x[p] - x_inertial[p]))
-    centre = centre / corners
+        xp = x[p]
+        r = xp - origin
+        centre = centre + r
+        velocity = velocity + (delta[p] + (xp - x_inertial[p]))
+        area_vector = area_vector + wp.cross(previous, r)
+        previous = r
+    centre = origin + centre / corners
     velocity = velocity * (inv_dt_prev / corners)
-    area_vector = zero
-    for k in range(first, end):
-        following = k + 1
-        if following == end:
-            following = first
-        area_vector = area_vector + wp.cross(x[face_corner[k]] - centre, x[face_corner[following]] - centre)
     area_vector = area_vector * type(dt)(0.5)
     area = wp.length(area_vector)
 

@@ -3,10 +3,11 @@ by a hurricane, and air of density 0.
 
 Energy here is not conserved: the air does work on the cloth. What stays bounded is checked instead: finite
 positions; the kinetic energy, at most that of the whole free mass moving at the air's speed, 1/2 M U^2 (a
-flag's free edge whips, but the cloth as a whole is driven by the air and cannot outrun it); the structural
-stretch (rigid sticks, so it is the relaxation's residual under the load); for a free sheet, its mean
-velocity along the stream, which drag can bring up to the air's speed U but never past it (the overshoot limit
-of kernels/aerodynamics.py, without which a 0.05 kg/m^2 sheet at 50 m/s, 1/240 s steps, diverges)."""
+flag's free edge whips, but a pinned flag driven by the air stays far below it); the structural
+stretch (rigid sticks, so it is the relaxation's residual under the load); for a free sheet driven by drag
+alone, its mean velocity along the stream, which drag brings up to the air's speed U and not past it (the
+overshoot limit of kernels/aerodynamics.py, without which a 0.05 kg/m^2 sheet at 50 m/s, 1/240 s steps,
+diverges)."""
 
 from __future__ import annotations
 
@@ -48,7 +49,8 @@ def flag_in(speed: float, label: str, device: str, size: str) -> list[Check]:
     return [
         count_check(case, "particles with a NaN/inf coordinate, summed over frames", bad),
         Check(case, "kinetic energy max KE / (1/2 M U^2)", kinetic / bound, 1.0,
-              "physics: the cloth as a whole cannot outrun the air", f"fastest particle {fastest / speed:.2f} U"),
+              "the whole free mass moving at the air's speed: a flag the air drives stays far below it",
+              f"fastest particle {fastest / speed:.2f} U"),
         Check(case, "structural stretch max over the run", stretch, STRETCH_BOUND,
               "bounded: a cloth, not a divergence (rigid sticks, 4 x 8)"),
     ]
@@ -65,13 +67,14 @@ def air_hurricane(device: str = "cpu", size: str = "test") -> list[Check]:
 
 
 def air_carried_sheet(device: str = "cpu", size: str = "test") -> list[Check]:
-    """A free 1 m, 0.05 kg/m^2 sheet, turned 60 degrees to a 50 m/s stream (unpinned, gravity on), for 2 s: it is
-    carried off, its mean velocity along the stream rising to U and never past it."""
+    """A free 1 m, 0.05 kg/m^2 sheet, turned 60 degrees to a 50 m/s stream, for 2 s, by drag alone (no gravity,
+    no lift: with them it could glide faster than the air, as a sail can): it is carried off, its mean velocity
+    along the stream rising to U and not past it. Without the overshoot limit the same sheet diverges."""
     n = 16 if size == "test" else 64
     case = f"air: free sheet carried by {HURRICANE:g} m/s ({n}x{n})"
-    sc = scene({"iterations": 8, "air": {"velocity": [HURRICANE, 0.0, 0.0]}},
+    sc = scene({"iterations": 8, "gravity": [0.0, 0.0, 0.0], "air": {"velocity": [HURRICANE, 0.0, 0.0]}},
                {"name": "free", "resolution": [n, n], "size": [1.0, 1.0], "origin": [0.0, 1.0, 0.0], "mass": 0.05,
-                "sticks": ["structural", "shear"]})
+                "sticks": ["structural", "shear"], "lift_coefficient": 0.0})
     sim = Simulator(sc, device)
     p = sim.positions().astype(np.float64)
     turn = np.radians(60.0)
@@ -87,9 +90,9 @@ def air_carried_sheet(device: str = "cpu", size: str = "test") -> list[Check]:
     top, last = max(mean_speeds), mean_speeds[-1]
     return [
         count_check(case, "particles with a NaN/inf coordinate, summed over frames", bad),
-        Check(case, "mean velocity along the stream, max / U", top / HURRICANE, 1.0 + 1e-3,
-              "physics: drag cannot push a body past the air's velocity; 1e-3 for float32 rounding of "
-              "(x - x_prev) / dt some 100 m downstream", f"at the end {last / HURRICANE:.4f} U"),
+        Check(case, "mean velocity along the stream, max / U", top / HURRICANE, 1.01,
+              "physics: drag drives the sheet to the stream's velocity; 1 % as each face of a crumpling sheet is "
+              "pushed by its own relative velocity, not the mean's", f"at the end {last / HURRICANE:.4f} U"),
         Check(case, "carried: 1 - (mean velocity at the end / U)", 1.0 - last / HURRICANE, 0.1,
               "physics: drag brings the sheet to the stream's speed (time constant under 0.1 s at 50 m/s)"),
     ]

@@ -284,7 +284,7 @@ def _air_velocity(value: Any, key: str) -> tuple[tuple[float, tuple[float, float
         return read_path(value, key)
     if isinstance(value, list) and any(isinstance(v, list) for v in value):
         raise _Invalid("expected [x, y, z] numbers (a constant velocity) or an array of [t, x, y, z] keyframes, "
-                       f"got a mix of numbers and arrays")
+                       "got a mix of numbers and arrays")
     return ((0.0, vector(3, _any_real)(value, key)),)
 
 
