@@ -17,7 +17,9 @@ under the uniform ``wind`` acceleration.
 
 from __future__ import annotations
 
+import math
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -65,6 +67,38 @@ def cost_rows(sizes: list[int], device: str, threads: int | None, frames: int, r
                      "air ms/frame": f"{with_air - without:.3f} (best {best_with - best_without:.3f})",
                      "with / without": f"{with_air / without:.3f} (best {best_with / best_without:.3f})",
                      "spread": f"±{100 * max(spread_plain, spread_air):.1f}%"})
+    return rows
+
+
+STAGE_COLUMNS = ["device", "cloth", "stage", "µs/substep without air", "µs/substep with air"]
+
+
+def stage_rows(sizes: list[int], device: str, threads: int | None, runs: int = 200, repeats: int = 5) -> list[dict]:
+    """Each stage of one substep on its own (the solver's bound stages, run ``runs`` times against the state of a
+    frame already stepped), the best of ``repeats``: the air's own cost, out of the frame's noise."""
+    rows = []
+    for n in sizes:
+        timings: dict[str, dict[str, float]] = {}
+        for label, air in (("without", None), ("with", AIR)):
+            sim = Simulator(sheet(n, air), device, threads=threads)
+            sim.step_frame()
+            dt = sim.settings.dt
+            for name, run in sim.solver.bind(sim.state):
+                best = math.inf
+                for _ in range(repeats):
+                    wp.synchronize_device(sim.device)
+                    start = time.perf_counter()
+                    for _ in range(runs):
+                        run(sim.state, dt)
+                    wp.synchronize_device(sim.device)
+                    best = min(best, (time.perf_counter() - start) / runs)
+                timings.setdefault(name, {})[label] = 1e6 * best
+            sim.close()
+        for name in sorted(timings, key=lambda name: list(timings).index(name) if name != "air" else -1):
+            t = timings[name]
+            rows.append({"device": device, "cloth": f"{n} x {n}", "stage": name,
+                         "µs/substep without air": f"{t['without']:.0f}" if "without" in t else "–",
+                         "µs/substep with air": f"{t['with']:.0f}" if "with" in t else "–"})
     return rows
 
 
@@ -124,7 +158,10 @@ def main(argv: list[str] | None = None) -> int:
         "### Air: frame time without and with `[simulation.air]`", "", *machine(args.device).lines(["bench.aerodynamics", *argv]),
         "", f"The benchmark cloth, 4 substeps x 8 sweeps, air {AIR}; median (and best) of {args.repeats} batches "
         f"of {args.frames} frames each, alternated without / with air; spread: half the range of the batches.", "",
-        markdown_table(cost_rows(args.sizes, args.device, args.threads, args.frames, args.repeats), COST_COLUMNS)]
+        markdown_table(cost_rows(args.sizes, args.device, args.threads, args.frames, args.repeats), COST_COLUMNS),
+        "", "Each stage of a substep on its own, best of 5 x 200 runs (\"air\" is the face kernel with its clock; "
+        "\"integrate\" with air gathers each particle's faces):", "",
+        markdown_table(stage_rows(args.sizes, args.device, args.threads), STAGE_COLUMNS)]
     if args.flutter:
         sections += ["", "### A flag in a steady stream (CPU)", "",
                      "Motion across the stream of the free edge's mid-height particle over the last 2 s of 6.", "",

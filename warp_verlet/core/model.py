@@ -222,7 +222,9 @@ class Model:
     tear): ``tear_ends`` and ``tear_length`` (E,), one entry per stick (coloured) or per stick end (Jacobi).
     Tethers (only when a cloth uses them; T tethered particles, K pins each): ``tether_particle`` (T,) int32,
     ``tether_pin`` (T, K) int32 (-1: none) and ``tether_length`` (T, K) float32 m, the rest-pose lengths a
-    State's copy starts from when a cloth can tear. Other constraint kinds (warp_verlet/constraints/): ``constraints``,
+    State's copy starts from when a cloth can tear. Air (only where ``[simulation.air]`` pushes on a face):
+    ``air``, the faces, the particles' face lists, the keyframes and gusts (core/aerodynamics.AirModel), else
+    None. Other constraint kinds (warp_verlet/constraints/): ``constraints``,
     kind name -> the device data its ``build`` made, documented in its module.
     """
 
