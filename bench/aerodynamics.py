@@ -70,16 +70,18 @@ def cost_rows(sizes: list[int], device: str, threads: int | None, frames: int, r
     return rows
 
 
-STAGE_COLUMNS = ["device", "cloth", "stage", "µs/substep without air", "µs/substep with air"]
+STAGE_COLUMNS = ["device", "cloth", "stage", "µs/substep without air", "µs/substep with air",
+                 "µs/substep with steady air (no gusts, no clock)"]
+STEADY_AIR = {"velocity": AIR["velocity"]}
 
 
-def stage_rows(sizes: list[int], device: str, threads: int | None, runs: int = 200, repeats: int = 5) -> list[dict]:
+def stage_rows(sizes: list[int], device: str, threads: int | None, runs: int = 100, repeats: int = 15) -> list[dict]:
     """Each stage of one substep on its own (the solver's bound stages, run ``runs`` times against the state of a
     frame already stepped), the best of ``repeats``: the air's own cost, out of the frame's noise."""
     rows = []
     for n in sizes:
         timings: dict[str, dict[str, float]] = {}
-        for label, air in (("without", None), ("with", AIR)):
+        for label, air in (("without", None), ("with", AIR), ("steady", STEADY_AIR)):
             sim = Simulator(sheet(n, air), device, threads=threads)
             sim.step_frame()
             dt = sim.settings.dt
@@ -98,7 +100,9 @@ def stage_rows(sizes: list[int], device: str, threads: int | None, runs: int = 2
             t = timings[name]
             rows.append({"device": device, "cloth": f"{n} x {n}", "stage": name,
                          "µs/substep without air": f"{t['without']:.0f}" if "without" in t else "–",
-                         "µs/substep with air": f"{t['with']:.0f}" if "with" in t else "–"})
+                         "µs/substep with air": f"{t['with']:.0f}" if "with" in t else "–",
+                         "µs/substep with steady air (no gusts, no clock)": f"{t['steady']:.0f}" if "steady" in t
+                         else "–"})
     return rows
 
 
@@ -159,7 +163,7 @@ def main(argv: list[str] | None = None) -> int:
         "", f"The benchmark cloth, 4 substeps x 8 sweeps, air {AIR}; median (and best) of {args.repeats} batches "
         f"of {args.frames} frames each, alternated without / with air; spread: half the range of the batches.", "",
         markdown_table(cost_rows(args.sizes, args.device, args.threads, args.frames, args.repeats), COST_COLUMNS),
-        "", "Each stage of a substep on its own, best of 5 x 200 runs (\"air\" is the face kernel with its clock; "
+        "", "Each stage of a substep on its own, best of 15 x 100 runs (\"air\" is the face kernel with its clock; "
         "\"integrate\" with air gathers each particle's faces):", "",
         markdown_table(stage_rows(args.sizes, args.device, args.threads), STAGE_COLUMNS)]
     if args.flutter:
