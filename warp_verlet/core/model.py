@@ -25,7 +25,7 @@ from ..errors import ArgumentError
 from ..constraints import kinds as constraint_kinds
 from ..constraints.tethers import TetherTable, build_tethers
 from ..input.scene import Scene
-from .stages import MAX_UNIFORM_MASS_PINS, Requirements
+from .stages import AERODYNAMICS, MAX_UNIFORM_MASS_PINS, Requirements
 from ..geometry.faces import edge_faces
 from ..geometry.mesh_cloth import STRUCTURAL
 from ..geometry.topology import (BEND_H, BEND_V, FAMILY_OF_CLASS, SHEAR_ANTI, SHEAR_DIAG, STRUCT_H, STRUCT_V,
@@ -325,7 +325,7 @@ class Model:
             self.tether_pin = wp.array2d(table.pin, dtype=int, device=device)
             self.tether_length = wp.array2d(table.length, dtype=float, device=device)
         self.air = None  # [simulation.air]'s device data (core/aerodynamics.AirModel), where a face feels air
-        if req.air is not None:
+        if AERODYNAMICS.needed(req):
             from .aerodynamics import AirModel
 
             self.air = AirModel(self, scene, req.air, device)
