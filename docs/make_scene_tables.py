@@ -57,7 +57,7 @@ def key_tables() -> dict[str, tuple[Key, ...]]:
 
     tables: dict[str, tuple[Key, ...]] = {
         "simulation": scene.SIMULATION_KEYS, "output": scene.OUTPUT_KEYS, "cloth": scene.CLOTH_KEYS,
-        "grid": scene.GRID_KEYS, "mesh": mesh_scene.MESH_KEYS,
+        "grid": scene.GRID_KEYS, "mesh": mesh_scene.MESH_KEYS, "simulation.air": scene.AIR_KEYS,
     }
     for module_name, kinds_name, shared_name, prefix in REGISTRIES:
         module = _optional_module(module_name)

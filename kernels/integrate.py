@@ -24,6 +24,7 @@ from typing import Any
 
 import warp as wp
 
+from .aerodynamics import air_acceleration
 from .positions import for_positions
 
 
@@ -71,5 +72,35 @@ def verlet_step(
     delta[i] = step
 
 
+@wp.kernel
+def verlet_step_air(
+    x: wp.array(dtype=Any),
+    x_inertial: wp.array(dtype=Any),
+    delta: wp.array(dtype=Any),
+    inv_mass: wp.array(dtype=float),
+    velocity_scale: Any,
+    accel_offset: Any,
+    share: wp.array(dtype=Any),
+    particle_face_start: wp.array(dtype=int),
+    particle_face: wp.array(dtype=int),
+    force_scale: Any,
+):
+    """verlet_step with each particle's own acceleration from the air (kernels/aerodynamics.py) added to the
+    uniform one: ``force_scale`` is dt (dt + dt_prev) / 2, the factor ``accel_offset`` has."""
+    i = wp.tid()
+    if inv_mass[i] == 0.0:
+        return  # pins never move
+    xi = x[i]
+    move = delta[i] + (xi - x_inertial[i])
+    air = air_acceleration(i, inv_mass[i], share, particle_face_start, particle_face)
+    step = move * velocity_scale + accel_offset + air * force_scale
+    xi = xi + step
+    x[i] = xi
+    x_inertial[i] = xi
+    delta[i] = step
+
+
 for_positions(verlet_start, arrays=("x", "x_inertial", "delta"), vectors=("accel",), scalars=("dt",))
 for_positions(verlet_step, arrays=("x", "x_inertial", "delta"), vectors=("accel_offset",), scalars=("velocity_scale",))
+for_positions(verlet_step_air, arrays=("x", "x_inertial", "delta", "share"), vectors=("accel_offset",),
+              scalars=("velocity_scale", "force_scale"))

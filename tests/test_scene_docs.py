@@ -130,7 +130,7 @@ def test_kind_registries_add_their_tables(monkeypatch):
 def test_without_the_registries_the_scene_tables_remain(monkeypatch):
     monkeypatch.setitem(sys.modules, "warp_verlet.colliders", None)  # as if the package were not there
     monkeypatch.setitem(sys.modules, "warp_verlet.constraints", None)
-    assert set(tables_tool.key_tables()) == {"simulation", "output", "cloth", "grid", "mesh"}
+    assert set(tables_tool.key_tables()) == {"simulation", "simulation.air", "output", "cloth", "grid", "mesh"}
 
 
 def test_a_kind_without_keys_or_a_name_is_an_error(monkeypatch):

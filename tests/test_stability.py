@@ -98,6 +98,18 @@ def test_gale_tears_every_stick_then_free_fall(device):
     assert_all_pass(cases.tearing_gale(device))
 
 
+def test_a_flag_in_a_gale_and_a_hurricane_stays_bounded(device):
+    assert_all_pass(cases.air_gale(device) + cases.air_hurricane(device))
+
+
+def test_a_free_sheet_in_a_hurricane_is_carried_at_the_streams_speed_and_never_past_it(device):
+    assert_all_pass(cases.air_carried_sheet(device))
+
+
+def test_air_of_density_zero_is_no_air(device):
+    assert_all_pass(cases.air_zero_density(device))
+
+
 # ---------------------------------------------------------------------------------------------- degenerate geometry
 
 

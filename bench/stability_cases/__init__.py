@@ -1,6 +1,6 @@
 """The stability cases, shared by ``tests/test_stability.py`` (small sizes) and ``bench.stability`` (large), one
 module per category: stiff, extreme_steps, loads, degenerate, over_constrained, long_runs, tethers (with small
-steps), divergence; what they share (the :class:`Check` row, scenes, energy) is in ``base``.
+steps), divergence, air; what they share (the :class:`Check` row, scenes, energy) is in ``base``.
 
 Each case builds its scene, runs it and returns :class:`Check` rows: a stated pass criterion, the measured
 value, the bound and where the bound comes from. A check passes when ``measured <= bound`` (a NaN never
@@ -8,6 +8,7 @@ passes). Sizes differ between ``size="test"`` and ``size="bench"``; the criteria
 a case says so. ``CASES`` maps each case's name to its function, in the order the suite runs them.
 """
 
+from .air import air_carried_sheet, air_gale, air_hurricane, air_zero_density
 from .base import SIZES, Check, count_check
 from .degenerate import coincident, small_sphere, start_inside, zero_area
 from .divergence import divergence
@@ -41,6 +42,10 @@ CASES = {
     "tether_energy": tether_energy,
     "small_steps": small_steps,
     "divergence": divergence,
+    "air_gale": air_gale,
+    "air_hurricane": air_hurricane,
+    "air_carried_sheet": air_carried_sheet,
+    "air_zero_density": air_zero_density,
 }
 
 __all__ = ["CASES", "SIZES", "STEP_RANGE", "Check", "count_check", *CASES]

@@ -25,7 +25,7 @@ from ..errors import ArgumentError
 from ..constraints import kinds as constraint_kinds
 from ..constraints.tethers import TetherTable, build_tethers
 from ..input.scene import Scene
-from .stages import MAX_UNIFORM_MASS_PINS, Requirements
+from .stages import AERODYNAMICS, MAX_UNIFORM_MASS_PINS, Requirements
 from ..geometry.faces import edge_faces
 from ..geometry.mesh_cloth import STRUCTURAL
 from ..geometry.topology import (BEND_H, BEND_V, FAMILY_OF_CLASS, SHEAR_ANTI, SHEAR_DIAG, STRUCT_H, STRUCT_V,
@@ -223,7 +223,9 @@ class Model:
     where a cloth tears by tension (coloured only), ``tear_force`` (M,) float32 N (+inf: never by tension).
     Tethers (only when a cloth uses them; T tethered particles, K pins each): ``tether_particle`` (T,) int32,
     ``tether_pin`` (T, K) int32 (-1: none) and ``tether_length`` (T, K) float32 m, the rest-pose lengths a
-    State's copy starts from when a cloth can tear. Other constraint kinds (warp_verlet/constraints/): ``constraints``,
+    State's copy starts from when a cloth can tear. Air (only where ``[simulation.air]`` pushes on a face):
+    ``air``, the faces, the particles' face lists, the keyframes and gusts (core/aerodynamics.AirModel), else
+    None. Other constraint kinds (warp_verlet/constraints/): ``constraints``,
     kind name -> the device data its ``build`` made, documented in its module.
     """
 
@@ -335,6 +337,12 @@ class Model:
             self.tether_particle = wp.array(table.particle, dtype=int, device=device)
             self.tether_pin = wp.array2d(table.pin, dtype=int, device=device)
             self.tether_length = wp.array2d(table.length, dtype=float, device=device)
+        self.air = None  # [simulation.air]'s device data (core/aerodynamics.AirModel), where a face feels air
+        if AERODYNAMICS.needed(req):
+            from .aerodynamics import AirModel
+
+            self.air = AirModel(self, scene, req.air, device)
+            self._hold(self.air, "air")
         self.constraints = {}  # constraint kind name -> the device data its build made (kinds with data only)
         for kind in constraint_kinds():
             data = kind.build(self, scene, device) if kind.needed(req) else None

@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..input.scene import Scene
+    from .aerodynamics import AirCounts
 
 from ..constraints import kinds as constraint_kinds
 from ..launches import FLOAT, VEC2I, VEC3, VEC3D, BoundStage, recorded
@@ -56,6 +57,7 @@ class Requirements:
     global_iterations: int = 0  # the global correction's conjugate-gradient iterations (0: no correction)
     global_levels: tuple[tuple[int, int, int], ...] = ()  # its multigrid's coarse levels: (nodes, sticks, children)
     tension_tears: bool = False  # a cloth tears by tension: the sticks keep their tension, the tear kernel reads it
+    air: "AirCounts | None" = None  # [simulation.air]'s faces, keys, clock (core/aerodynamics.py); None: no air
 
     def count(self, kind: str):
         """Constraint kind ``kind``'s ``count(scene)`` (0 when the scene does not use it)."""
@@ -82,6 +84,7 @@ class Requirements:
         from .precision import resolve
 
         from ..colliders import counts as collider_counts
+        from .aerodynamics import air_counts
 
         free = any(c.pin_count < c.particle_count for c in scene.cloths)
         counts = [hierarchy_counts(*c.resolution) for c in scene.cloths] if scene.simulation.multilevel else []
@@ -95,6 +98,7 @@ class Requirements:
             elements=tuple((kind.name, n) for kind in constraint_kinds() if (n := kind.count(scene))),
             global_iterations=scene.simulation.global_iterations,
             global_levels=global_levels(scene),
+            air=air_counts(scene),
         )
         req = replace(req, **grid_counts(scene, sticks))
         return replace(req, precision=resolve(scene, relaxes=RELAX.needed(req)))
@@ -171,8 +175,50 @@ def grid_counts(scene: "Scene", sticks: str) -> dict:
 
 
 
+class Aerodynamics:
+    """Drag and lift on every face from the air (kernels/aerodynamics.py, warp_verlet/core/aerodynamics.py): each
+    face's force, shared among its corners, which the Verlet step then gathers. Only with air that pushes."""
+
+    name = "air"
+
+    def needed(self, req: Requirements) -> bool:
+        return req.air is not None and req.free_particles
+
+    def device_bytes(self, req: Requirements) -> int:
+        from .aerodynamics import device_bytes
+
+        return device_bytes(req.air, req.particles, req.position_bytes, req.tears)
+
+    def bind(self, model, state, solver) -> BoundStage:
+        import warp as wp
+
+        from warp_verlet.kernels.aerodynamics import face_forces
+        from warp_verlet.kernels.collide_sphere import advance_clock
+        from warp_verlet.kernels.positions import instance
+
+        air, real = model.air, model.position_scalar
+        kernel = instance(face_forces, model.position_dtype)
+        share = solver.scratch("air_share", air.face_params.shape[0], model.position_dtype)
+        clock = state.air_clock if air.clock else air.no_clock
+        weight = state.stick_weight if model.tears else air.no_weight
+        inputs = [state.particle_q, state.particle_q_inertial, state.particle_dq, air.face_start, air.face_corner,
+                  air.face_params, air.side_entry, weight, clock, air.key_times, air.key_values, air.gust_direction,
+                  air.gust_wave, air.gust_timing, air.density]
+        faces = air.face_params.shape[0]
+
+        def run(state, dt: float) -> None:
+            # The force at the start of the step, from the velocity over the last one (the exact start set
+            # dt_prev = dt before the first).
+            wp.launch(kernel, faces, inputs=[*inputs, real(1.0 / state.dt_prev), real(dt), share])
+            if air.clock:
+                wp.launch(advance_clock, 1, inputs=[clock, wp.float64(dt)])
+
+        return BoundStage(run)
+
+
 class Integrate:
-    """The Verlet step (kernels/integrate.py): gravity and wind in one acceleration, damping per second."""
+    """The Verlet step (kernels/integrate.py): gravity and wind in one acceleration, damping per second; with air,
+    each particle's share of its faces' forces too (Aerodynamics)."""
 
     name = "integrate"
 
@@ -183,6 +229,8 @@ class Integrate:
         return 0  # it updates the State's positions, prediction and increment, which every scene has
 
     def bind(self, model, state, solver) -> BoundStage:
+        if AERODYNAMICS.needed(solver.req):
+            return self._bind_air(model, state, solver)
         import warp as wp
 
         from warp_verlet.kernels.integrate import verlet_step
@@ -199,6 +247,27 @@ class Integrate:
             velocity_scale = real(math.exp(-settings.damping * dt) * ratio)
             accel_offset = accel * real(dt * (dt + state.dt_prev) * 0.5)
             wp.launch(kernel, n, inputs=[x, x_inertial, dq, inv_mass, velocity_scale, accel_offset])
+
+        return BoundStage(run)
+
+    def _bind_air(self, model, state, solver) -> BoundStage:
+        """The step with the air's per-particle acceleration, gathered from the Aerodynamics stage's shares."""
+        import warp as wp
+
+        from warp_verlet.kernels.integrate import verlet_step_air
+        from warp_verlet.kernels.positions import instance
+
+        settings, accel, real, air = solver.settings, solver.accel, model.position_scalar, model.air
+        kernel = instance(verlet_step_air, model.position_dtype)
+        share = solver.scratch("air_share", air.face_params.shape[0], model.position_dtype)
+        arrays = [state.particle_q, state.particle_q_inertial, state.particle_dq, model.inv_mass]
+
+        def run(state, dt: float) -> None:
+            ratio = min(dt / state.dt_prev, settings.max_dt_ratio)
+            velocity_scale = real(math.exp(-settings.damping * dt) * ratio)
+            factor = real(dt * (dt + state.dt_prev) * 0.5)
+            wp.launch(kernel, model.particle_count, inputs=[*arrays, velocity_scale, accel * factor, share,
+                                                            air.particle_face_start, air.particle_face, factor])
 
         return BoundStage(run)
 
@@ -369,7 +438,8 @@ class Tear:
 
 RELAX = Relax()
 GLOBAL = GlobalSolve()
-STAGES = (Integrate(), GLOBAL, RELAX, Collide(), Tear())
+AERODYNAMICS = Aerodynamics()
+STAGES = (AERODYNAMICS, Integrate(), GLOBAL, RELAX, Collide(), Tear())
 """The stages of a substep, in order."""
 
 

@@ -38,6 +38,8 @@ class State:
       ``collider_clock``: (1,) float64, s, or None. Simulated time on the device, which places the moving
       spheres inside a captured frame; only when a sphere moves. ``sphere_centres``: (S,) ``wp.vec3``, m, or
       None. Where each sphere is now; only when there are spheres.
+    - ``air_clock``: (1,) float64, s, or None. Simulated time on the device, at which the air's keyframes and
+      gusts are read; only when the air changes with time.
 
     Host scalars: ``time`` (s simulated), ``steps`` (substeps taken) and ``dt_prev`` (s, the last step's dt,
     None before the first step: the next step then runs the exact start). On the host too, ``start_velocity``:
@@ -46,7 +48,7 @@ class State:
     """
 
     _ARRAYS = ("particle_q", "particle_q_inertial", "particle_dq", "stick_weight", "torn_entries",
-               "tether_length", "stick_force")  # then each collider kind's (state_arrays), in registry order
+               "tether_length", "stick_force", "air_clock")  # then each collider kind's (state_arrays), in registry order
 
     def __init__(self, model: Model):
         self.model = model
@@ -59,6 +61,9 @@ class State:
             cuttable = model.tears and model.tether_table is not None
             self.tether_length = wp.clone(model.tether_length) if cuttable else None
             self.stick_force = wp.zeros(model.stick_count, dtype=float) if model.tension_tears else None
+            # Simulated time on the device for air that changes with time (keyframes, gusts), as a moving
+            # sphere's clock: a captured frame replays it.
+            self.air_clock = wp.zeros(1, dtype=wp.float64) if model.air is not None and model.air.clock else None
             self.collider_array_names: tuple[str, ...] = ()  # what the collider kinds move, present or None
             for kind in collider_kinds():  # every kind's names, None where this scene has none of it
                 for name, array in kind.state_arrays(model.colliders).items():

@@ -41,7 +41,7 @@ from ..writer_registry import is_output_suffix, suffixes_text  # the output form
 
 from ..colliders import kind_of, read_collider, specs_of
 from ..colliders.plane import PLANE, PlaneCollider
-from ..colliders.sphere import SPHERE, SphereCollider
+from ..colliders.sphere import SPHERE, SphereCollider, read_path
 
 if TYPE_CHECKING:  # the mesh modules (numpy) are imported only by a scene that has a mesh cloth
     from .mesh_scene import MeshSpec
@@ -57,6 +57,45 @@ OUTPUT_KINDS = ("cache", "override")  # a standalone point cache, or a layer ove
 TORN_FACES = ("remove", "holes")  # how a cache shows torn faces: left out of the topology, or holeIndices
 # Named pin groups; each maps (rows, cols) to a list of (row, col). Row 0 is the top edge (the origin's
 # edge), column 0 the left edge.
+
+
+# Default aerodynamic coefficients of a cloth's faces (docs/scenes.md, "Air", says where they come from).
+FABRIC_DRAG_COEFFICIENT = 1.2
+FABRIC_LIFT_COEFFICIENT = 0.5
+AIR_DENSITY = 1.2  # kg/m^3: dry air at sea level and 20 °C
+
+
+@dataclass(frozen=True)
+class AirSettings:
+    """The air a scene's cloths move through ([simulation.air]): its velocity (keyframes, (time s, (x, y, z)
+    m/s), linear between them and held at the ends, as a sphere's path), its density, and an optional seeded
+    gust field (warp_verlet/core/aerodynamics.py)."""
+
+    velocity: tuple[tuple[float, tuple[float, float, float]], ...] = ((0.0, (0.0, 0.0, 0.0)),)
+    density: float = AIR_DENSITY
+    gust_speed: float = 0.0  # m/s, RMS over space and time; 0: no gusts
+    gust_length: float = 1.0  # m
+    gust_period: float = 1.0  # s
+    gust_seed: int = 0
+
+    @property
+    def keyframes(self):
+        """The velocity's keyframes, named as a collider's are (colliders.kind.keyframe_arrays reads them)."""
+        return self.velocity
+
+    @property
+    def moving(self) -> bool:
+        """Whether the velocity changes with time (more than one distinct keyframe value)."""
+        return len({v for _, v in self.velocity}) > 1
+
+    @property
+    def gusts(self) -> bool:
+        return self.gust_speed > 0.0
+
+    @property
+    def felt(self) -> bool:
+        """Whether the air pushes at all: a density of 0 is no air."""
+        return self.density > 0.0
 
 
 TARGET_ITERATIONS = 2  # sweeps per substep when target_stretch chooses the substeps (warp_verlet/core/budget.py)
@@ -84,6 +123,7 @@ class SimulationSettings:
     max_frame_time: float = 0.1
     position_bound: float = 1.0e4
     precision: str = "auto"  # positions' float type: "float32", "float64", or "auto" (warp_verlet/core/precision.py)
+    air: AirSettings | None = None  # [simulation.air]: drag and lift on the cloths' faces; None: no air
 
     @property
     def dt(self) -> float:
@@ -120,6 +160,8 @@ class ClothSpec:
     tethers: bool | None = None  # None: on when the cloth has pins and cannot tear
     tether_scale: float = 1.0  # tether length / rest-pose distance to the pin (> 1: slack for a soft cloth)
     mesh: "MeshSpec | None" = None  # a mesh cloth (then pins and particle_masses above are empty)
+    drag_coefficient: float = FABRIC_DRAG_COEFFICIENT  # of its faces in [simulation.air]
+    lift_coefficient: float = FABRIC_LIFT_COEFFICIENT
     options: Mapping[str, Any] = field(default_factory=lambda: kind_options({}))
     """The values of the keys the constraint kinds declare (cloth_keys_of_kinds), by key name (each key's default
     where the scene does not give it), as each kind's ``check_cloth`` resolved them; read-only."""
@@ -218,7 +260,8 @@ SIMULATION_KEYS: tuple[Key, ...] = (
     Key("gravity", vector(3, _any_real), (0.0, -9.81, 0.0), "[x, y, z] numbers", "m/s²", allowed="finite",
         doc="Uniform acceleration applied to every free particle."),
     Key("wind", vector(3, _any_real), (0.0, 0.0, 0.0), "[x, y, z] numbers", "m/s²", allowed="finite",
-        doc="Uniform acceleration added to `gravity` (see below)."),
+        doc="Uniform acceleration added to `gravity`: not air, so no drag and no flutter (see below). For air "
+            "that pushes on each face, see `[simulation.air]`."),
     Key("damping", real(0.0), 0.0, "number", "1/s", allowed="≥ 0",
         doc="Rate at which the implicit velocity decays: it falls as `exp(-damping × t)`, whatever `substeps` is. "
             "0 means no damping (see below)."),
@@ -260,7 +303,52 @@ SIMULATION_KEYS: tuple[Key, ...] = (
     Key("precision", choice(PRECISIONS), "auto", "string", allowed='`"auto"`, `"float32"`, `"float64"`',
         doc="Float type of the particle positions (see *The smallest step* below). `\"auto\"`: float32, unless the "
             "scene's `dt` is below the float32 limit, then float64."),
+    Key("air", accepts(TABLE)(lambda value, key: read_air(value, key)), None, "table", default_text="absent: no air",
+        allowed="the keys of `[simulation.air]`",
+        doc="Air with a velocity and a density: drag and lift on every face of the cloths (see [air](#air))."),
 )
+
+
+@accepts(ARRAY)
+def _air_velocity(value: Any, key: str) -> tuple[tuple[float, tuple[float, float, float]], ...]:
+    """A constant [x, y, z], or keyframes [[t, x, y, z], ...] as a sphere's path (colliders/sphere.read_path)."""
+    if isinstance(value, list) and value and all(isinstance(v, list) for v in value):
+        return read_path(value, key)
+    if isinstance(value, list) and any(isinstance(v, list) for v in value):
+        raise _Invalid("expected [x, y, z] numbers (a constant velocity) or an array of [t, x, y, z] keyframes, "
+                       "got a mix of numbers and arrays")
+    return ((0.0, vector(3, _any_real)(value, key)),)
+
+
+AIR_KEYS: tuple[Key, ...] = (
+    Key("velocity", _air_velocity, ((0.0, (0.0, 0.0, 0.0)),), "[x, y, z] numbers, or array of [t, x, y, z]",
+        "m/s (s, m/s)", default_text="`[0.0, 0.0, 0.0]`: still air",
+        allowed="finite; keyframes: at least one, times strictly increasing",
+        doc="The air's velocity: constant, or keyframed (linear between keyframes, held at the first before it and "
+            "at the last after it, as a sphere's `path`)."),
+    Key("density", real(0.0), AIR_DENSITY, "number", "kg/m³", allowed="≥ 0",
+        doc="Mass of air per volume (1.2 at sea level and 20 °C). 0 means no aerodynamic force at all."),
+    Key("gust_speed", real(0.0), 0.0, "number", "m/s", allowed="≥ 0",
+        doc="RMS speed of the gusts added to `velocity` (0: none); see [gusts](#gusts)."),
+    Key("gust_length", real(0.0, lo_open=True), 1.0, "number", "m", allowed="> 0",
+        doc="Mean wavelength of the gusts in space."),
+    Key("gust_period", real(0.0, lo_open=True), 1.0, "number", "s", allowed="> 0",
+        doc="Mean period of the gusts in time."),
+    Key("gust_seed", integer(0, 2**32 - 1), 0, "integer", allowed="0 … 4 294 967 295",
+        doc="Seed of the gusts' random sinusoids: the same seed gives the same gusts."),
+)
+
+
+def read_air(data: Any, key: str) -> AirSettings:
+    """The [simulation.air] table ``data``, whose dotted key is ``key``: the parser of the ``air`` key, so a
+    problem is raised as :class:`Invalid` naming the inner key, and the table reader adds the file."""
+    try:
+        t = _Table("", key, data)
+        settings = AirSettings(**{k.name: k.take(t) for k in AIR_KEYS})
+        t.finish()
+    except SceneError as error:
+        raise _Invalid(error.problem, error.key) from None
+    return settings
 
 
 def read_simulation(file: str, data: Any, path: str = "simulation") -> SimulationSettings:
@@ -466,6 +554,12 @@ CLOTH_KEYS: tuple[Key, ...] = (  # every cloth, grid or mesh
             "distance of its nearest one or two pins."),
     Key("tether_scale", real(1.0), 1.0, "number", "– (a ratio of the rest-pose distance)", allowed="≥ 1, finite",
         doc="Slack: a tether allows `tether_scale ×` the rest distance, for a cloth meant to stretch."),
+    Key("drag_coefficient", real(0.0), FABRIC_DRAG_COEFFICIENT, "number", allowed="≥ 0",
+        doc="C_d of this cloth's faces in `[simulation.air]`: the pressure force along a face's normal (see "
+            "[air](#air)); 1.2 is a flat plate across the flow."),
+    Key("lift_coefficient", real(0.0), FABRIC_LIFT_COEFFICIENT, "number", allowed="≥ 0",
+        doc="C_l of this cloth's faces in `[simulation.air]`: the force across the relative wind of a face held "
+            "at an angle to it (see [air](#air))."),
 )
 
 GRID_KEYS: tuple[Key, ...] = (  # a grid cloth: its particles from resolution and size
@@ -545,6 +639,8 @@ def read_cloth(file: str, index: int, data: Any, scene_dir: Path, path: str | No
         particle_masses=_GRID["particle_masses"].bound(rows, cols).take(t),
         tethers=_CLOTH["tethers"].take(t),
         tether_scale=_CLOTH["tether_scale"].take(t),
+        drag_coefficient=_CLOTH["drag_coefficient"].take(t),
+        lift_coefficient=_CLOTH["lift_coefficient"].take(t),
         options=_read_options(t),
     )
     t.finish()
@@ -760,6 +856,13 @@ def _check_float32(file: str, simulation: SimulationSettings, cloths: tuple, col
             larger = "gravity" if abs(g) >= abs(w) else "wind"
             raise SceneError(file, f"simulation.{larger}[{k}]", f"gravity + wind = {g + w:g} m/s^2, which float32 "
                              f"cannot hold ({limit})")
+    air = simulation.air
+    if air is not None:
+        for k, (time, velocity) in enumerate(air.velocity):
+            where = f"simulation.air.velocity[{k}]" if len(air.velocity) > 1 else "simulation.air.velocity"
+            fits(where, (time, *velocity) if len(air.velocity) > 1 else velocity)
+        for name in ("density", "gust_speed", "gust_length", "gust_period"):
+            fits(f"simulation.air.{name}", [getattr(air, name)])
     dt = 1.0 / (simulation.fps * simulation.substeps)
     if not FLOAT32_TINY <= dt <= FLOAT32_MAX:
         raise SceneError(file, "simulation.fps", f"the step 1 / (fps x substeps) = {dt:g} s is beyond what float32 "
@@ -793,6 +896,8 @@ def _check_float32(file: str, simulation: SimulationSettings, cloths: tuple, col
                                  "must be a normal float32")
         for family, alpha in c.compliance.items():
             fits(f"{key}.compliance.{family}", [alpha])
+        fits(f"{key}.drag_coefficient", [c.drag_coefficient])
+        fits(f"{key}.lift_coefficient", [c.lift_coefficient])
     for j, c in enumerate(colliders):
         key = f"collider[{j}]"
         fits(f"{key}.thickness", [c.thickness])
