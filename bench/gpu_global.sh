@@ -1,0 +1,31 @@
+#!/usr/bin/env bash
+# The global correction, the air and the contact work on the lent GPU machine (../shared/tools/gpu-warp/README.md),
+# in parts that each fit one command:
+# PART=tests    every CUDA-marked test;
+# PART=drape256, drape1024  the drape: plain sweeps and the global correction (multigrid, Jacobi);
+# PART=more     the hanging cloth at 1024^2 with the correction, the drape at 2048^2, and the air's cost.
+# Results under $OUT (default bench/results/h100-global).
+set -uo pipefail
+out=${OUT:-bench/results/h100-global}
+mkdir -p "$out"
+export PYTHONUNBUFFERED=1
+[ -e warp_verlet/kernels ] || ln -sfn ../kernels warp_verlet/kernels  # no editable install there
+nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv,noheader | tee "$out/gpu-${PART}.txt"
+case "$PART" in
+  tests)
+    timeout 560 python3 -m pytest -q -m cuda -p no:cacheprovider tests 2>&1 | tail -30 | tee "$out/pytest-cuda.txt" ;;
+  drape256)
+    timeout 560 python3 -m bench.convergence --device cuda --scenes drape --drape-sizes 256 \
+      --methods plain global3 global5 global10 global_jacobi30 --budgets 4x1 8x1 16x1 32x1 64x2 --ref 256x2 \
+      --out "$out" --stem gpu-drape-256 2>&1 | tail -60 ;;
+  drape1024)
+    timeout 250 python3 -m bench.convergence --device cuda --scenes drape --drape-sizes 1024 \
+      --methods plain --budgets 16x1 32x1 64x2 128x1 --ref 256x2 --out "$out" --stem gpu-drape-1024 2>&1 | tail -20
+    timeout 300 python3 -m bench.convergence --device cuda --scenes drape --drape-sizes 1024 \
+      --methods global3 global10 --budgets 4x1 8x1 16x1 --ref 256x2 --out "$out" --stem gpu-drape-1024 2>&1 | tail -20 ;;
+  more)
+    timeout 300 python3 -m bench.convergence --device cuda --scenes hanging drape --sizes 1024 --drape-sizes 2048 \
+      --methods plain global3 global10 --budgets 4x1 8x1 16x1 64x1 --ref 128x2 \
+      --out "$out" --stem gpu-more 2>&1 | tail -40
+    timeout 200 python3 -m bench.aerodynamics --device cuda --sizes 256 1024 --out "$out" 2>&1 | tail -20 ;;
+esac
