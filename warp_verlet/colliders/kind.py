@@ -98,6 +98,9 @@ class ColliderKind(Protocol):
     - ``state_arrays(colliders)``: what moves, created where the State is built: name -> array, or None where
       this scene needs none; every name the kind ever creates, always (the State keeps them as attributes).
     - ``bind(model, state)``: its :class:`ColliderLaunches` against one State.
+    - ``capturable(specs, device)``, optional: False when its launches do not replay from a frame capture (a
+      deforming mesh's BVH refit is host work Warp's CPU capture does not record); the simulator then steps
+      such a scene launch by launch. A kind without it is capturable.
 
     Output (cache, preview, viewer, live page; pxr and viser imported inside, where they are used):
 
