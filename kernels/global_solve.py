@@ -326,28 +326,6 @@ def cg_start(rhs: wp.array(dtype=wp.vec3), r: wp.array(dtype=wp.vec3), dx: wp.ar
 
 
 @wp.kernel
-def cg_operator(
-    p: wp.array(dtype=wp.vec3),
-    mass_h2: wp.array(dtype=float),
-    extra: wp.array(dtype=wp.mat33),
-    stiffness: wp.array(dtype=float),
-    offsets: wp.array(dtype=int),
-    incident: wp.array(dtype=int),
-    ends: wp.array(dtype=wp.vec2i),
-    rest: wp.array(dtype=float),
-    direction: wp.array(dtype=wp.vec3),
-    residual: wp.array(dtype=float),
-    q: wp.array(dtype=wp.vec3),
-    values: wp.array(dtype=wp.float64),
-):
-    """q = H p on the cloth, and each particle's share of p.q."""
-    i = wp.tid()
-    qi = operator_row(i, p, mass_h2, extra, stiffness, offsets, incident, ends, rest, direction, residual)
-    q[i] = qi
-    values[i] = wp.float64(wp.dot(p[i], qi))
-
-
-@wp.kernel
 def cg_advance(scalars: wp.array(dtype=wp.float64), p: wp.array(dtype=wp.vec3), q: wp.array(dtype=wp.vec3),
                dx: wp.array(dtype=wp.vec3), r: wp.array(dtype=wp.vec3)):
     """dx += alpha p, r -= alpha q."""

@@ -299,12 +299,10 @@ class GlobalCorrection:
         z = top.e  # the preconditioned residual: level 0's V-cycle output
         precondition = v_cycle(0, self.r, z)
         r_dot_z = [recorded(k.dot_values, n, [self.r, z], [self.sums[0]])]
-        cg_operator = recorded(k.cg_operator, n, [self.p, top.mass_h2, top.extra, top.stiffness, top.offsets,
-                                                  top.incident, top.local_ends, top.rest, top.direction,
-                                                  top.residual], [top.q, self.sums[0]])
+        cg_operator = [operator(top, self.p, top.q), recorded(k.dot_values, n, [self.p, top.q], [self.sums[0]])]
         start = [recorded(k.cg_start, n, [self.rhs], [self.r, self.dx]), *precondition, *r_dot_z, *finish(0),
                  recorded(k.cg_direction, n, [self.scalars, z], [self.p])]
-        iteration = [cg_operator, *finish(1), recorded(k.cg_advance, n, [self.scalars, self.p, top.q],
+        iteration = [*cg_operator, *finish(1), recorded(k.cg_advance, n, [self.scalars, self.p, top.q],
                                                          [self.dx, self.r]),
                      *precondition, *r_dot_z, *finish(2), recorded(k.cg_direction, n, [self.scalars, z], [self.p])]
         # A line search over LINE_SEARCH step lengths: the step is Newton's on a model of E, and where the cloth is
