@@ -4,6 +4,7 @@
 # PART=tests    every CUDA-marked test;
 # PART=drape256, drape1024  the drape: plain sweeps and the global correction (multigrid, Jacobi);
 # PART=rerun    the correction's drape rows again (after a change to it);
+# PART=contact  self-collision and mesh colliders at 1024^2 and 2048^2, 32 x 1;
 # PART=more     the hanging cloth at 1024^2 with the correction, the drape at 2048^2, and the air's cost.
 # Results under $OUT (default bench/results/h100-global).
 set -uo pipefail
@@ -30,6 +31,11 @@ case "$PART" in
       2>&1 | tail -12
     timeout 300 python3 -m bench.convergence --device cuda --scenes drape --drape-sizes 1024 \
       --methods global3 --budgets 8x1 16x1 32x1 --ref 256x2 --out "$out" --stem gpu-drape-1024-b 2>&1 | tail -8 ;;
+  contact)
+    timeout 300 python3 -m bench.self_contact --device cuda --sizes 1024 2048 --substeps 32 --iterations 1 --frames 20 \
+      --out "$out" 2>&1 | tail -12
+    timeout 250 python3 -m bench.mesh_collider --device cuda --sizes 1024 2048 --subdivisions 5 6 --substeps 32 \
+      --iterations 1 --frames 20 --out "$out" 2>&1 | tail -12 ;;
   more)
     timeout 300 python3 -m bench.convergence --device cuda --scenes hanging drape --sizes 1024 --drape-sizes 2048 \
       --methods plain global3 global10 --budgets 4x1 8x1 16x1 64x1 --ref 128x2 \
