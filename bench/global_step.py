@@ -156,7 +156,7 @@ def run_drape(n: int, substeps: int, iterations: int, linear: str, newton: int, 
               contact_projection: str = "after_sweeps") -> dict:
     import warp as wp
 
-    from bench.convergence import build_scene, merge, scene_tables
+    from bench.convergence import merge, scene_tables
     from warp_verlet.input.scene import parse_scene
     from warp_verlet.core.simulator import Simulator
 

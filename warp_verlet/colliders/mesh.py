@@ -29,7 +29,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..scene_keys import ARRAY, Key, accepts, any_real, scale_factors, text, vector
-from .kind import FLOAT, FLOAT64, INT, VEC3, ColliderLaunches, InsideReport, LiveDrawing, coulomb, keyframe_arrays
+from .kind import FLOAT, FLOAT64, INT, VEC3, ColliderLaunches, InsideReport, LiveDrawing, coulomb
 
 MESH_ID = 8  # bytes of a wp.Mesh id (uint64) on the device
 QUAT = 16  # bytes of a wp.quat

@@ -223,8 +223,6 @@ class GlobalCorrection:
     def bind(self, model, state, place: list, clamps: list, tension_scratch) -> BoundStage:
         """The correction against ``state``: ``place`` are the colliders' placements for the substep (run first),
         ``clamps`` their clamp launches, ``tension_scratch(model)`` the soft sticks' XPBD tension it starts."""
-        import warp as wp
-
         from warp_verlet.kernels import global_solve as k
 
         n = model.particle_count
