@@ -10,12 +10,15 @@ Each substep, when ``simulation.global_iterations`` > 0:
 
 1. the colliders clamp the prediction once (a moving collider is placed for the substep first); each particle
    they moved is *in contact*, with the direction of that move as its normal;
-2. ``global_newton`` Gauss-Newton steps: the sticks become springs of stiffness ``STIFFNESS`` x m / h^2 (rigid to
-   the step's resolution, yet well conditioned enough for a short conjugate-gradient run), every contact a
-   normal-only penalty of ``CONTACT_SCALE`` x its particle's diagonal, and ``global_iterations`` iterations of
-   conjugate gradients preconditioned by the 3 x 3 diagonal blocks solve H dx = -grad E
-   (kernels/global_solve.py). After each step the colliders clamp again, so no step leaves a particle inside;
-3. the sweeps and the clamp then run as without it.
+2. ``global_newton`` Gauss-Newton steps: the rigid sticks become springs of stiffness ``STIFFNESS`` x m / h^2
+   (rigid to the step's resolution, yet well conditioned enough for a short conjugate-gradient run), a soft
+   stick one of 1 / compliance, every contact a normal-only stiffness of ``CONTACT_SCALE`` x its particle's
+   diagonal. ``global_iterations`` conjugate-gradient iterations, preconditioned by a multigrid V-cycle over the
+   grid's levels (:func:`hierarchy`) or by the 3 x 3 diagonal blocks, solve H dx = -grad E
+   (kernels/global_solve.py); a line search over ``LINE_SEARCH`` step lengths keeps the one of lowest energy,
+   and the colliders clamp again, so no step leaves a particle inside;
+3. each stick's tension is handed to the sweeps (``hand_over_tension``), which then run, with the clamp, as
+   without the correction.
 
 Everything is device work with fixed counts (no convergence test on the host), so a frame still replays from one
 capture. The per-particle sums gather over a CSR table of incident sticks built here once, in a fixed order.
