@@ -164,7 +164,8 @@ def run_drape(n: int, substeps: int, iterations: int, linear: str, newton: int, 
     tables = scene_tables("drape", n, "plain", substeps, iterations, frames)
     tables = merge(tables, {"simulation": {"precision": "float64", "contact_projection": contact_projection}})
     scene = parse_scene(tables, file=f"<drape {n}>")
-    sim = Simulator(scene, "cpu", threads=1)
+    # A host stage must run every substep: a captured frame would replay only the kernels.
+    sim = Simulator(scene, "cpu", threads=1, use_graph=linear == "none")
     step = None
     if linear != "none":
         step = GlobalStep(sim.model, (np.zeros(3), 0.25), -0.5, linear, newton)
@@ -185,7 +186,6 @@ def run_drape(n: int, substeps: int, iterations: int, linear: str, newton: int, 
             return out
 
         solver.bind = bind
-        sim._use_graph = False  # the host stage must run every substep, not be captured once
     start = time.perf_counter()
     for _ in range(frames):
         sim.step_frame()

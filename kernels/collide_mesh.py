@@ -14,8 +14,28 @@ from typing import Any
 
 import warp as wp
 
-from .collide_response import project_out, project_out_moving
+from .collide_response import key_interval, project_out, project_out_moving
 from .positions import for_positions
+
+
+@wp.func
+def surface_depth(xi: Any, closest: Any, face_normal: Any, u: float, v: float, sign: float, thickness: float):
+    """The way out of a mesh for a particle at ``xi`` whose closest surface point is ``closest`` (both in the
+    positions' type, in the world), at barycentric (u, v) of a face of normal ``face_normal``, on the ``sign``
+    side (the query's: -1 inside), and how far it must go to be ``thickness`` outside: (outward direction,
+    depth; depth <= 0 when it already is)."""
+    d = xi - closest
+    n = face_normal
+    height = wp.dot(d, n)  # signed distance, when the closest point lies inside the face
+    in_face = u > 0.0 and v > 0.0 and u + v < 1.0
+    distance = wp.length(d)
+    # Off the face (at an edge or a corner), the way out is along d. So close to the surface that d is float32
+    # rounding, the face's normal is the better guess.
+    rounding = type(distance)(1.0e-6) * (type(distance)(1.0) + wp.length(closest))
+    if not in_face and distance > rounding:
+        height = type(distance)(sign) * distance
+        n = d / height  # outward: away from the surface outside, towards it inside
+    return n, type(distance)(thickness) - height
 
 
 @wp.kernel
@@ -40,18 +60,8 @@ def collide_meshes(
         query = wp.mesh_query_point_sign_normal(meshes[m], wp.vec3(xi) - offsets[m], reach[m])
         if query.result:
             closest = x.dtype(wp.mesh_eval_position(meshes[m], query.face, query.u, query.v) + offsets[m])
-            d = xi - closest
-            n = x.dtype(wp.mesh_eval_face_normal(meshes[m], query.face))
-            height = wp.dot(d, n)  # signed distance, when the closest point lies inside the face
-            in_face = query.u > 0.0 and query.v > 0.0 and query.u + query.v < 1.0
-            distance = wp.length(d)
-            # Off the face (at an edge or a corner), the way out is along d. So close to the surface that d is
-            # float32 rounding, the face's normal is the better guess.
-            rounding = type(distance)(1.0e-6) * (type(distance)(1.0) + wp.length(closest))
-            if not in_face and distance > rounding:
-                height = type(distance)(query.sign) * distance
-                n = d / height  # outward: away from the surface outside, towards it inside
-            depth = type(distance)(thickness[m]) - height
+            normal = x.dtype(wp.mesh_eval_face_normal(meshes[m], query.face))
+            n, depth = surface_depth(xi, closest, normal, query.u, query.v, query.sign, thickness[m])
             if depth > type(depth)(0.0):
                 xi = project_out(i, xi, n, depth, friction[m], x_inertial, delta)
     x[i] = xi
@@ -92,16 +102,8 @@ def collide_moving_meshes(
         if query.result:
             on_surface = wp.mesh_eval_position(meshes[m], query.face, query.u, query.v)
             closest = x.dtype(wp.quat_rotate(q, on_surface) + offsets[m])
-            d = xi - closest
-            n = x.dtype(wp.quat_rotate(q, wp.mesh_eval_face_normal(meshes[m], query.face)))
-            height = wp.dot(d, n)
-            in_face = query.u > 0.0 and query.v > 0.0 and query.u + query.v < 1.0
-            distance = wp.length(d)
-            rounding = type(distance)(1.0e-6) * (type(distance)(1.0) + wp.length(closest))
-            if not in_face and distance > rounding:
-                height = type(distance)(query.sign) * distance
-                n = d / height
-            depth = type(distance)(thickness[m]) - height
+            normal = x.dtype(wp.quat_rotate(q, wp.mesh_eval_face_normal(meshes[m], query.face)))
+            n, depth = surface_depth(xi, closest, normal, query.u, query.v, query.sign, thickness[m])
             if depth > type(depth)(0.0):
                 was = on_surface
                 if deforms[m] != 0:
@@ -137,19 +139,15 @@ def place_moving_meshes(
     last = key_start[m + 1] - 1
     if last == first:
         return
+    k, f = key_interval(t, first, last, key_times)
     offset = key_offsets[first]
     rotation = key_rotations[first]
-    if t >= key_times[last]:
+    if k >= last:
         offset = key_offsets[last]
         rotation = key_rotations[last]
-    elif t > key_times[first]:
-        for k in range(first, last):
-            t0 = key_times[k]
-            t1 = key_times[k + 1]
-            if t >= t0 and t < t1:
-                f = (t - t0) / (t1 - t0)
-                offset = wp.lerp(key_offsets[k], key_offsets[k + 1], f)
-                rotation = wp.quat_slerp(key_rotations[k], key_rotations[k + 1], f)
+    elif k >= first:
+        offset = wp.lerp(key_offsets[k], key_offsets[k + 1], f)
+        rotation = wp.quat_slerp(key_rotations[k], key_rotations[k + 1], f)
     offsets[m] = offset
     rotations[m] = rotation
 
@@ -168,14 +166,11 @@ def place_mesh_points(
     n = points.shape[0]
     t = float(clock[0])
     last = sample_times.shape[0] - 1
+    k, f = key_interval(t, 0, last, sample_times)
     p = samples[v]
-    if t >= sample_times[last]:
+    if k >= last:
         p = samples[last * n + v]
-    elif t > sample_times[0]:
-        for k in range(last):
-            t0 = sample_times[k]
-            t1 = sample_times[k + 1]
-            if t >= t0 and t < t1:
-                p = wp.lerp(samples[k * n + v], samples[(k + 1) * n + v], (t - t0) / (t1 - t0))
+    elif k >= 0:
+        p = wp.lerp(samples[k * n + v], samples[(k + 1) * n + v], f)
     displacement[v] = p - points[v]
     points[v] = p

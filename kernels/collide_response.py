@@ -25,42 +25,44 @@ import warp as wp
 
 
 @wp.func
-def project_out(
-    i: int,
-    xi: Any,
-    normal: Any,
-    depth: Any,
-    friction: wp.vec2,
-    x_inertial: wp.array(dtype=Any),
-    delta: wp.array(dtype=Any),
-):
-    """Move xi out by depth along normal, apply Coulomb friction (``friction`` = (mu_k, mu_s), mu_s >= mu_k) to
-    its tangential displacement over the substep, return the new position."""
-    xi = xi + normal * depth
-    if friction[1] > 0.0:  # mu_s >= mu_k, so no static friction means no friction (and the frictionless bits)
-        step = xi - (x_inertial[i] - delta[i])
-        tangential = step - normal * wp.dot(step, normal)
-        slip = wp.length(tangential)
-        if slip < depth * type(depth)(friction[1]):
-            xi = xi - tangential
-        else:  # slip >= mu_s depth > 0
-            xi = xi - tangential * wp.min(depth * type(depth)(friction[0]) / slip, type(depth)(1.0))
-    return xi
+def coulomb_removed(slip: Any, depth: Any, friction: wp.vec2):
+    """Coulomb's law at the position level: the fraction of a tangential move ``slip`` long that friction takes
+    off, for a normal correction ``depth`` and ``friction`` = (mu_k, mu_s): all of it while slip < mu_s depth (it
+    sticks), else mu_k depth / slip of it (it slides)."""
+    removed = type(depth)(1.0)
+    if slip >= depth * type(depth)(friction[1]):  # slip >= mu_s depth > 0
+        removed = wp.min(depth * type(depth)(friction[0]) / slip, type(depth)(1.0))
+    return removed
+
+
+@wp.func
+def key_interval(t: float, first: int, last: int, key_times: wp.array(dtype=float)):
+    """Where time ``t`` falls among keys ``first`` .. ``last``: (k, f), between keys k and k + 1 at fraction f;
+    k = first - 1 before (or at) the first key, k = last at or after the last, both held."""
+    k = first - 1
+    f = float(0.0)
+    if t >= key_times[last]:
+        k = last
+    elif t > key_times[first]:
+        for j in range(first, last):
+            t0 = key_times[j]
+            t1 = key_times[j + 1]
+            if t >= t0 and t < t1:
+                k = j
+                f = (t - t0) / (t1 - t0)
+    return k, f
 
 
 @wp.func
 def keyframed(t: float, first: int, last: int, key_times: wp.array(dtype=float), key_values: wp.array(dtype=wp.vec3)):
     """A collider's keyframed vec3 at time ``t`` (its keys ``first`` .. ``last``): linear between keyframes, held
     at the first before it and at the last after it."""
+    k, f = key_interval(t, first, last, key_times)
     v = key_values[first]
-    if t >= key_times[last]:
+    if k >= last:
         v = key_values[last]
-    elif t > key_times[first]:
-        for k in range(first, last):
-            t0 = key_times[k]
-            t1 = key_times[k + 1]
-            if t >= t0 and t < t1:
-                v = wp.lerp(key_values[k], key_values[k + 1], (t - t0) / (t1 - t0))
+    elif k >= first:
+        v = wp.lerp(key_values[k], key_values[k + 1], f)
     return v
 
 
@@ -79,12 +81,24 @@ def project_out_moving(
     relative to ``surface_step``, how far the surface point it touches moved over the same substep, so that a
     particle stuck to a moving body is carried along with it."""
     xi = xi + normal * depth
-    if friction[1] > 0.0:
+    if friction[1] > 0.0:  # mu_s >= mu_k, so no static friction means no friction (and the frictionless bits)
         step = xi - (x_inertial[i] - delta[i]) - surface_step
         tangential = step - normal * wp.dot(step, normal)
-        slip = wp.length(tangential)
-        if slip < depth * type(depth)(friction[1]):
-            xi = xi - tangential
-        else:  # slip >= mu_s depth > 0
-            xi = xi - tangential * wp.min(depth * type(depth)(friction[0]) / slip, type(depth)(1.0))
+        xi = xi - tangential * coulomb_removed(wp.length(tangential), depth, friction)
     return xi
+
+
+@wp.func
+def project_out(
+    i: int,
+    xi: Any,
+    normal: Any,
+    depth: Any,
+    friction: wp.vec2,
+    x_inertial: wp.array(dtype=Any),
+    delta: wp.array(dtype=Any),
+):
+    """Move xi out by depth along normal, apply Coulomb friction (``friction`` = (mu_k, mu_s), mu_s >= mu_k) to
+    its tangential displacement over the substep, return the new position: ``project_out_moving`` against a
+    surface that stays put."""
+    return project_out_moving(i, xi, normal, depth, friction, x_inertial, delta, type(xi)(0.0))

@@ -21,7 +21,7 @@ from typing import Any
 
 import warp as wp
 
-from .positions import for_positions
+from .positions import for_positions, shifted, to_vec3
 
 
 
@@ -48,7 +48,7 @@ def stick_directions(
         residual[s] = 0.0
         stiffness[s] = 0.0
         return
-    direction[s] = wp.vec3(float(d[0] / length), float(d[1] / length), float(d[2] / length))
+    direction[s] = to_vec3(d / length)
     residual[s] = float(length - type(length)(rest[s]))
     k = rigid
     if compliance[s] > 0.0:
@@ -74,7 +74,7 @@ def contact_normals(
     d = x[i] - x_before[i]
     length = wp.length(d)
     if length > type(length)(0.0):
-        normal[i] = wp.vec3(float(d[0] / length), float(d[1] / length), float(d[2] / length))
+        normal[i] = to_vec3(d / length)
     else:
         normal[i] = wp.vec3(0.0)
 
@@ -108,8 +108,7 @@ def assemble(
         extra[i] = wp.mat33(0.0)
         return
     m_h2 = inv_h2 / w
-    lag = x[i] - x_inertial[i]
-    g = wp.vec3(float(lag[0]), float(lag[1]), float(lag[2])) * m_h2
+    g = to_vec3(x[i] - x_inertial[i]) * m_h2
     n_c = contact[i]
     # A contact's push is not an error of inertia: only the lag along the surface is pulled back.
     g = g - n_c * wp.dot(g, n_c)
@@ -139,6 +138,29 @@ def sideways(rest: float, residual: float):
 
 
 @wp.func
+def spring_block(n: wp.vec3, k: float, rest: float, residual: float):
+    """A stick spring's 3 x 3 Hessian block: k along its direction n, k (L - L0) / L across it when stretched."""
+    across = k * sideways(rest, residual)
+    return wp.outer(n, n) * (k - across) + wp.identity(3, dtype=float) * across
+
+
+@wp.func
+def spring_times(n: wp.vec3, k: float, rest: float, residual: float, d: wp.vec3):
+    """``spring_block(n, k, rest, residual) * d``, without forming the block (the operator's inner loop)."""
+    across = k * sideways(rest, residual)
+    return n * ((k - across) * wp.dot(n, d)) + d * across
+
+
+@wp.func
+def other_end(code: int, ends: wp.array(dtype=wp.vec2i)):
+    """The particle at the far end of incidence entry ``code`` (2 s + the near end's index in the stick)."""
+    e = ends[code // 2]
+    if code % 2 == 1:
+        return e[0]
+    return e[1]
+
+
+@wp.func
 def operator_row(
     i: int,
     p: wp.array(dtype=wp.vec3),
@@ -161,15 +183,7 @@ def operator_row(
     for t in range(offsets[i], offsets[i + 1]):
         code = incident[t]
         s = code // 2
-        e = ends[s]
-        other = e[1]
-        if code % 2 == 1:
-            other = e[0]
-        n = direction[s]
-        d = pi - p[other]
-        k = stiffness[s]
-        across = k * sideways(rest[s], residual[s])
-        out = out + n * ((k - across) * wp.dot(n, d)) + d * across
+        out = out + spring_times(direction[s], stiffness[s], rest[s], residual[s], pi - p[other_end(code, ends)])
     return out
 
 
@@ -213,10 +227,7 @@ def level_diagonal(
     block = wp.identity(3, dtype=float) * m_h2 + extra[i]
     for t in range(offsets[i], offsets[i + 1]):
         s = incident[t] // 2
-        n = direction[s]
-        k = stiffness[s]
-        across = k * sideways(rest[s], residual[s])
-        block = block + wp.outer(n, n) * (k - across) + wp.identity(3, dtype=float) * across
+        block = block + spring_block(direction[s], stiffness[s], rest[s], residual[s])
     diagonal_inverse[i] = wp.inverse(block)
 
 
@@ -403,22 +414,16 @@ def candidate_energy(
     if w == 0.0:
         values[i] = wp.float64(0.0)
         return
-    xi = x[i] + type(x[i])(type(x[i][0])(dx[i][0] * step), type(x[i][0])(dx[i][1] * step),
-                           type(x[i][0])(dx[i][2] * step))
-    lag64 = xi - x_inertial[i]
-    lag = wp.vec3(float(lag64[0]), float(lag64[1]), float(lag64[2]))
+    xi = shifted(x[i], dx[i], step)
+    lag = to_vec3(xi - x_inertial[i])
     n_c = contact[i]
     lag = lag - n_c * wp.dot(lag, n_c)
     energy = wp.float64(0.5 * inv_h2 / w * wp.dot(lag, lag))
     for t in range(offsets[i], offsets[i + 1]):
         code = incident[t]
         s = code // 2
-        e = ends[s]
-        other = e[1]
-        if code % 2 == 1:
-            other = e[0]
-        xo = x[other] + type(x[i])(type(x[i][0])(dx[other][0] * step), type(x[i][0])(dx[other][1] * step),
-                                   type(x[i][0])(dx[other][2] * step))
+        other = other_end(code, ends)
+        xo = shifted(x[other], dx[other], step)
         c = float(wp.length(xo - xi)) - rest[s]
         energy += wp.float64(0.25 * stiffness[s] * c * c)
     values[i] = energy
@@ -445,8 +450,7 @@ def choose_step(scalars: wp.array(dtype=wp.float64)):
 @wp.kernel
 def apply_correction(x: wp.array(dtype=Any), dx: wp.array(dtype=wp.vec3), scalars: wp.array(dtype=wp.float64)):
     i = wp.tid()
-    d = dx[i] * float(scalars[STEP])
-    x[i] = x[i] + type(x[i])(type(x[i][0])(d[0]), type(x[i][0])(d[1]), type(x[i][0])(d[2]))
+    x[i] = shifted(x[i], dx[i], float(scalars[STEP]))
 
 
 @wp.kernel

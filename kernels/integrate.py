@@ -50,6 +50,21 @@ def verlet_start(
         delta[i] = delta[i] * dt - accel * (type(dt)(0.5) * dt * dt)
 
 
+@wp.func
+def implicit_move(i: int, x: wp.array(dtype=Any), x_inertial: wp.array(dtype=Any), delta: wp.array(dtype=Any)):
+    """x - x_prev, with the constraints' moves since the last step folded in."""
+    return delta[i] + (x[i] - x_inertial[i])
+
+
+@wp.func
+def take_step(i: int, x: wp.array(dtype=Any), x_inertial: wp.array(dtype=Any), delta: wp.array(dtype=Any), step: Any):
+    """Move particle i by ``step``, which is both its prediction and its next increment."""
+    xi = x[i] + step
+    x[i] = xi
+    x_inertial[i] = xi
+    delta[i] = step
+
+
 @wp.kernel
 def verlet_step(
     x: wp.array(dtype=Any),
@@ -62,14 +77,7 @@ def verlet_step(
     i = wp.tid()
     if inv_mass[i] == 0.0:
         return  # pins never move
-    xi = x[i]
-    # x - x_prev, with the constraints' moves since the last step folded in.
-    move = delta[i] + (xi - x_inertial[i])
-    step = move * velocity_scale + accel_offset
-    xi = xi + step
-    x[i] = xi
-    x_inertial[i] = xi
-    delta[i] = step
+    take_step(i, x, x_inertial, delta, implicit_move(i, x, x_inertial, delta) * velocity_scale + accel_offset)
 
 
 @wp.kernel
@@ -90,14 +98,9 @@ def verlet_step_air(
     i = wp.tid()
     if inv_mass[i] == 0.0:
         return  # pins never move
-    xi = x[i]
-    move = delta[i] + (xi - x_inertial[i])
     air = air_acceleration(i, inv_mass[i], share, particle_face_start, particle_face)
-    step = move * velocity_scale + accel_offset + air * force_scale
-    xi = xi + step
-    x[i] = xi
-    x_inertial[i] = xi
-    delta[i] = step
+    take_step(i, x, x_inertial, delta,
+              implicit_move(i, x, x_inertial, delta) * velocity_scale + accel_offset + air * force_scale)
 
 
 for_positions(verlet_start, arrays=("x", "x_inertial", "delta"), vectors=("accel",), scalars=("dt",))

@@ -44,3 +44,16 @@ def instance(kernel, vec):
 def scaled(v: Any, s: float):
     """``v * s`` with the float32 ``s`` converted to ``v``'s scalar type first."""
     return v * type(v[0])(s)
+
+
+@wp.func
+def to_vec3(v: Any):
+    """A vector of the positions' type as float32 (the identity for float32): for a correction or a direction,
+    which need not the positions' precision."""
+    return wp.vec3(float(v[0]), float(v[1]), float(v[2]))
+
+
+@wp.func
+def shifted(x: Any, d: wp.vec3, s: float):
+    """``x + s d``, with the float32 move ``s d`` converted to ``x``'s type first."""
+    return x + type(x)(type(x[0])(d[0] * s), type(x[0])(d[1] * s), type(x[0])(d[2] * s))

@@ -76,6 +76,32 @@ def relax_colour(
     x[j] = xj - scaled(c, wj)
 
 
+@wp.func
+def project_compliant(
+    s: int,
+    x: wp.array(dtype=Any),
+    inv_mass: wp.array(dtype=float),
+    ends: wp.array(dtype=wp.vec2i),
+    rest: wp.array(dtype=float),
+    weight: wp.array(dtype=float),
+    compliance: float,
+    inv_dt2: float,
+    tension: wp.array(dtype=float),
+):
+    """Stick s's XPBD projection (compliance 0: the rigid move), accumulating its tension mu."""
+    e = ends[s]
+    i = e[0]
+    j = e[1]
+    wi = inv_mass[i]
+    wj = inv_mass[j]
+    xi = x[i]
+    xj = x[j]
+    c, mu = compliant_correction(xi, xj, wi, wj, rest[s], weight[s], compliance, inv_dt2, tension[s])
+    tension[s] = mu
+    x[i] = xi + scaled(c, wi)
+    x[j] = xj - scaled(c, wj)
+
+
 @wp.kernel
 def relax_colour_compliant(
     x: wp.array(dtype=Any),
@@ -92,17 +118,7 @@ def relax_colour_compliant(
     in the positions' precision and stored as float32: it restarts from 0 every substep, so its rounding does
     not accumulate across steps."""
     s = first + wp.tid()
-    e = ends[s]
-    i = e[0]
-    j = e[1]
-    wi = inv_mass[i]
-    wj = inv_mass[j]
-    xi = x[i]
-    xj = x[j]
-    c, mu = compliant_correction(xi, xj, wi, wj, rest[s], weight[s], compliance[s], inv_dt2, tension[s])
-    tension[s] = mu
-    x[i] = xi + scaled(c, wi)
-    x[j] = xj - scaled(c, wj)
+    project_compliant(s, x, inv_mass, ends, rest, weight, compliance[s], inv_dt2, tension)
 
 
 @wp.kernel
@@ -120,17 +136,7 @@ def relax_colour_tension(
     start), so that mu / dt^2 is the force it transmitted over the substep (kernels/tear.py). Each stick is
     written only by the thread that projects it."""
     s = first + wp.tid()
-    e = ends[s]
-    i = e[0]
-    j = e[1]
-    wi = inv_mass[i]
-    wj = inv_mass[j]
-    xi = x[i]
-    xj = x[j]
-    c, mu = compliant_correction(xi, xj, wi, wj, rest[s], weight[s], 0.0, 0.0, tension[s])
-    tension[s] = mu
-    x[i] = xi + scaled(c, wi)
-    x[j] = xj - scaled(c, wj)
+    project_compliant(s, x, inv_mass, ends, rest, weight, 0.0, 0.0, tension)
 
 
 @wp.kernel

@@ -20,6 +20,7 @@ from typing import Any
 
 import warp as wp
 
+from .collide_response import coulomb_removed
 from .positions import for_positions
 
 
@@ -108,11 +109,7 @@ def contact_gather(
                 n = d / dist
                 relative = (xi - (x_inertial[i] - delta[i])) - (x_in[j] - (x_inertial[j] - delta[j]))
                 tangential = relative - n * wp.dot(relative, n)
-                slip = wp.length(tangential)
-                kept = type(dist)(0.0)  # the fraction of the slip left: 0 sticks
-                if slip >= gap * type(dist)(mu[1]):  # slip >= mu_s gap > 0: it slides
-                    kept = type(dist)(1.0) - wp.min(gap * type(dist)(mu[0]) / slip, type(dist)(1.0))
-                total -= tangential * ((type(dist)(1.0) - kept) * type(dist)(share))
+                total -= tangential * (coulomb_removed(wp.length(tangential), gap, mu) * type(dist)(share))
     if count > 0:
         xi = xi + total / type(total[0])(float(count))
     x_out[i] = xi
