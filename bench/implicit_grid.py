@@ -38,8 +38,9 @@ from .common import (HANGING_DAMPING, arg_parser, copy_bandwidth, hanging_sheet,
 from .throughput import RELAX_BYTES_PER_PROJECTION
 
 FRAMES, WARM_UP, SETTLE = 60, 2, 20
-FORMS = ("explicit", "auto", "implicit")
-"""Stick arrays and the tether table; implicit sticks and the tether table ("auto" on a GPU); both implicit."""
+FORMS = ("explicit", "auto", "implicit", "tiled")
+"""Stick arrays and the tether table; implicit sticks and the tether table ("auto" on a GPU); both implicit;
+implicit sticks swept tile by tile in shared memory (kernels/grid_tiles.py) with the tether table."""
 
 
 def sheet(n: int, substeps: int, iterations: int, **simulation):
@@ -67,11 +68,11 @@ def timed(sim: Simulator, repeats: int) -> tuple[float, float]:
 
 
 def budget_rows(device: str, sizes: list[int], budgets: list[tuple[int, int]], repeats: int,
-                copy_gbs: float | None) -> list[dict]:
+                copy_gbs: float | None, forms: tuple[str, ...] = FORMS) -> list[dict]:
     rows = []
     for n in sizes:
         finals = {}
-        for form in FORMS:
+        for form in forms:
             sim = Simulator(sheet(n, *budgets[0]), device, sticks=form)
             for substeps, iterations in budgets:
                 sim.retune(substeps=substeps, iterations=iterations)
@@ -84,6 +85,8 @@ def budget_rows(device: str, sizes: list[int], budgets: list[tuple[int, int]], r
                 data = explicit_bytes_per_sweep(sim) * sweeps
                 key = (substeps, iterations)
                 same = "" if form == "explicit" else ("yes" if np.array_equal(points, finals[key]) else "NO")
+                if form == "tiled":  # another order of the same projections: its own error, not the same bits
+                    same = "(tile order)"
                 finals.setdefault(key, points)
                 row = {"grid": f"{n}x{n}", "S x K": f"{substeps} x {iterations}", "sticks": form,
                        "constraint sets": " + ".join(sim.constraint_sets), "ms/frame": f"{per_frame * 1e3:.3f}",
@@ -147,8 +150,14 @@ def main(argv=None) -> int:
     p.add_argument("--target-size", type=int, default=1024, help="grid of the budget table (0: none)")
     p.add_argument("--out", type=Path, default=None, help="write implicit-grid.md/.csv and target-stretch.md/.csv")
     p.add_argument("--block-dim", type=int, default=None, help="threads per block of the implicit sticks' launches")
+    p.add_argument("--forms", nargs="+", default=list(FORMS), choices=FORMS, help="the sticks' forms to run")
+    p.add_argument("--tile", type=int, default=None, help="cells per side of the tiled sweep's tiles")
     args = p.parse_args(argv)
     quiet_warp()
+    if args.tile:
+        from warp_verlet.constraints import sticks
+
+        sticks.GRID_TILE = args.tile
     if args.block_dim:
         from warp_verlet.core import stages
 
@@ -162,7 +171,7 @@ def main(argv=None) -> int:
     rows = []
     for n in args.sizes:
         rows += budget_rows(str(device), [n], parse(args.large_budgets if n >= 2048 else args.budgets), args.repeats,
-                            copy_gbs)
+                            copy_gbs, tuple(args.forms))
     title = ("Hanging sheet with tethers at 1 s, stick and tether arrays (explicit) against implicit grid sticks "
              f"with the tether table (auto, on a GPU) and with implicit tethers (implicit): {machine(device)}")
     if copy_gbs:

@@ -57,7 +57,7 @@ def main(argv=None) -> int:
             ms, n = times[colour[0]]
             print(f"{args.size}^2 {args.budget} auto, {block} threads per block: a colour {ms / n * 1e3:.1f} us")
     stages.GRID_BLOCK_DIM = chosen  # the table below is of the block size the simulator uses
-    for sticks in ("explicit", "auto", "implicit"):
+    for sticks in ("explicit", "auto", "implicit", "tiled"):
         times, first = kernel_times(args.size, substeps, iterations, args.device, sticks)
         print(f"{args.size}^2 {args.budget} {sticks}: {sum(t for t, _ in times.values()):.3f} ms of kernels per frame")
         for name, (ms, n) in sorted(times.items(), key=lambda kv: -kv[1][0]):

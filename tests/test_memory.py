@@ -120,7 +120,12 @@ IMPLICIT = ["coloured", "tethers", "compliance", "multilevel", "float64", "movin
             "rigid-patches", "self-contact", "global"]
 
 
-@pytest.mark.parametrize("case", list(CASES) + [f"{c}/implicit" for c in IMPLICIT])
+# The rigid float32 cases that allow tiled sweeps (kernels/grid_tiles.py).
+TILED = ["coloured", "tethers", "multilevel", "moving-sphere", "planes", "angle-limit", "rigid-patches",
+         "self-contact", "global"]
+
+
+@pytest.mark.parametrize("case", list(CASES) + [f"{c}/implicit" for c in IMPLICIT] + [f"{c}/tiled" for c in TILED])
 def test_estimate_matches_the_arrays_allocated(case):
     case, _, sticks = case.partition("/")
     simulation, cloth, *colliders = CASES[case]

@@ -8,7 +8,7 @@ tearing and the stretch metrics share); this module binds their sweeps.
 from __future__ import annotations
 
 from .kind import ConstraintSet
-from ..launches import (FLOAT, FLOAT64, INT, VEC2I, BoundStage, copy_back_phase, recorded, split_tasks,
+from ..launches import (FLOAT, FLOAT64, INT, VEC2I, BoundStage, PhaseTask, copy_back_phase, recorded, split_tasks,
                         start_compliant_substep)
 
 
@@ -72,6 +72,14 @@ class Sticks(ConstraintSet):
 
 
 
+def grid_table_bytes(req) -> int:
+    """The implicit grid sticks' tables: rest lengths 1 and 2 columns and rows apart, the squared steps of the
+    shear sticks (float64), and the pins where the free particles weigh alike."""
+    r, c = req.grid_rows, req.grid_cols
+    steps = max(c - 1, 0) + max(c - 2, 0) + max(r - 1, 0) + max(r - 2, 0)
+    return steps * FLOAT + (max(c - 1, 0) + max(r - 1, 0)) * FLOAT64 + req.weight_pins * INT
+
+
 GRID_BLOCK_DIM = 128
 """Threads per block of the implicit grid sticks' launches: 128 ran faster per frame on an H100 than Warp's
 default 256 and than 512 (bench/results/code_choices.md)."""
@@ -85,14 +93,10 @@ class GridSticks(ConstraintSet):
     name = "grid sticks"
 
     def needed(self, req) -> bool:
-        return req.sticks > 0 and req.implicit_grid
+        return req.sticks > 0 and req.implicit_grid and not req.grid_tiles
 
     def device_bytes(self, req) -> int:
-        r, c = req.grid_rows, req.grid_cols
-        steps = max(c - 1, 0) + max(c - 2, 0) + max(r - 1, 0) + max(r - 2, 0)  # 1 and 2 columns, 1 and 2 rows apart
-        tables = steps * FLOAT + (max(c - 1, 0) + max(r - 1, 0)) * FLOAT64  # rest lengths; squared steps (shear)
-        # a tension per soft stick (solver scratch); the pins where the free particles weigh alike
-        return tables + req.soft_sticks * FLOAT + req.weight_pins * INT
+        return grid_table_bytes(req) + req.soft_sticks * FLOAT  # a tension per soft stick (solver scratch)
 
     def bind(self, model, state, solver) -> BoundStage:
         from warp_verlet.kernels.grid_relax import relax_grid_colour, relax_grid_colour_compliant
@@ -119,3 +123,49 @@ class GridSticks(ConstraintSet):
             return BoundStage(None, phases)
 
         return BoundStage(start_compliant_substep(soft_launches, tension), phases)
+
+
+GRID_TILE = 16
+"""Cells per side of a tiled sweep's tile (kernels/grid_tiles.py); a block runs one thread per cell."""
+
+
+class GridTiles(ConstraintSet):
+    """Implicit grid sticks swept tile by tile (kernels/grid_tiles.py): a block holds a tile of the cloth and
+    its halo in shared memory and projects every colour of the tile's sticks there; four launches a sweep, one
+    per tile colour. Rigid sticks, float32 positions. The same projections as GridSticks in another order
+    (block Gauss-Seidel), so not the same positions bit for bit."""
+
+    name = "grid tiles"
+
+    def needed(self, req) -> bool:
+        return req.sticks > 0 and req.grid_tiles
+
+    def device_bytes(self, req) -> int:
+        from warp_verlet.kernels.grid_relax import GridColour
+        import warp as wp
+
+        from warp_verlet.core.model import GRID_COLOURS
+
+        return grid_table_bytes(req) + GRID_COLOURS * (wp.types.type_size_in_bytes(GridColour) + INT)
+
+    def bind(self, model, state, solver) -> BoundStage:
+        import warp as wp
+
+        from warp_verlet.kernels.grid_tiles import relax_grid_tiles
+
+        g, x, tile = model.grid, state.particle_q, GRID_TILE
+        kernel = relax_grid_tiles(tile)
+        tiles_down, tiles_across = -(-g.rows // tile), -(-g.cols // tile)
+        tasks = []
+        for row_parity in (0, 1):
+            for col_parity in (0, 1):
+                down, across = (tiles_down - row_parity + 1) // 2, (tiles_across - col_parity + 1) // 2
+                if down * across == 0:
+                    continue
+                launch = wp.launch_tiled(
+                    kernel, dim=[down * across], block_dim=tile * tile, record_cmd=True,
+                    inputs=[x, model.inv_mass, g.tile_colours, g.tile_colour_rows, len(g.colours), g.colours[0].pins, g.col_rest1,
+                            g.col_rest2, g.row_rest1, g.row_rest2, g.col_sq1, g.row_sq1, g.rows, row_parity,
+                            col_parity, across])
+                tasks.append(PhaseTask(kernel.key, launch.launch, launch))
+        return BoundStage(None, [[task] for task in tasks])

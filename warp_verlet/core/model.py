@@ -59,8 +59,8 @@ def stick_form(sticks: str, colouring: str, device) -> str:
     lengths cost integer divisions and a square root per stick; bench/results/implicit_grid). Implicit sticks
     follow the analytic colouring's order, so Warp's graph colouring makes "auto" explicit (and "implicit" an
     error)."""
-    if colouring == "graph" and sticks == "implicit":
-        raise ArgumentError("sticks='implicit' projects in the analytic grid colouring's order; "
+    if colouring == "graph" and sticks in ("implicit", "tiled"):
+        raise ArgumentError(f"sticks={sticks!r} projects in the analytic grid colouring's order; "
                             "colouring='graph' needs sticks='explicit' or 'auto'")
     if sticks == "auto" and (colouring == "graph" or device.is_cpu):
         return "explicit"
@@ -116,6 +116,9 @@ class GridColourDevice:
         return self.rows * self.cols
 
 
+GRID_COLOURS = 12
+"""The most colours a grid cloth's implicit sticks take: six directions, two parities each."""
+
 # Per grid class (topology's order): (dr, dc, first column, parity along "row" or "col", q).
 GRID_DIRECTIONS = {
     STRUCT_H: (0, 1, 0, "col", 1), STRUCT_V: (1, 0, 0, "row", 1),
@@ -130,7 +133,7 @@ class GridDevice:
     and 2 columns apart and per row for 1 and 2 rows apart, the squared steps (float64) and their roots (the
     rest lengths of sticks along one axis, float32)."""
 
-    def __init__(self, slot: "ClothSlot", spec, device, uniform: bool):
+    def __init__(self, slot: "ClothSlot", spec, device, uniform: bool, tiles: bool = False):
         from warp_verlet.kernels.grid_relax import GridColour
 
         top = slot.topology
@@ -185,6 +188,12 @@ class GridDevice:
                 soft += n_rows * n_cols if compliance > 0.0 else 0
         self.colours: tuple[GridColourDevice, ...] = tuple(colours)
         self.soft_sticks = soft
+        self.rows, self.cols = rows, cols
+        if tiles:  # the tiled sweep (kernels/grid_tiles.py) reads every colour's layout in one launch
+            spare = GRID_COLOURS - len(colours)
+            self.tile_colours = wp.array([c.layout for c in colours] + [GridColour()] * spare, dtype=GridColour,
+                                         device=device)
+            self.tile_colour_rows = wp.array([c.rows for c in colours] + [0] * spare, dtype=int, device=device)
 
 
 class GridTethersDevice:
@@ -243,7 +252,7 @@ class Model:
         req = requirements if requirements is not None else Requirements.of(scene, sticks)
         self.precision = req.precision
         self.stick_request = sticks  # what Requirements.of was asked: the solver's Requirements must be asked the same
-        self.sticks_form = "implicit" if req.implicit_grid else "explicit"
+        self.sticks_form = ("tiled" if req.grid_tiles else "implicit") if req.implicit_grid else "explicit"
         double = self.precision == "float64"
         self.position_dtype = wp.vec3d if double else wp.vec3
         self.position_scalar = wp.float64 if double else wp.float32
@@ -301,7 +310,8 @@ class Model:
             sizes = self.colouring.sizes
             self.colour_ranges = [(int(a), int(n)) for a, n in zip(np.r_[0, np.cumsum(sizes)[:-1]], sizes) if n > 0]
             if req.implicit_grid:  # the sticks are computed from the grid: no stick arrays on the device
-                self.grid = GridDevice(self.cloths[0], scene.cloths[0], device, uniform=req.weight_pins > 0)
+                self.grid = GridDevice(self.cloths[0], scene.cloths[0], device, uniform=req.weight_pins > 0,
+                                       tiles=req.grid_tiles)
                 self._hold(self.grid, "grid")
                 if [c.count for c in self.grid.colours] != [n for _, n in self.colour_ranges]:
                     raise AssertionError("implicit grid colours differ from the analytic colouring")

@@ -91,7 +91,7 @@ class StretchReadback:
 
         self.device = device
         with wp.ScopedDevice(device):
-            if model.sticks_form == "implicit":
+            if model.sticks_form in ("implicit", "tiled"):
                 top, g = model.cloths[0].topology, model.grid
                 chunk = self.COLUMNS_PER_THREAD
                 count = top.rows * -(-top.cols // chunk)

@@ -39,7 +39,7 @@ class VerletSolver:
             raise ArgumentError(f"req.precision = {req.precision!r} but the model's positions are {model.precision}")
         self.precision = model.precision
         implicit_tethers = hasattr(model, "grid_tethers")
-        if req.implicit_grid != (model.sticks_form == "implicit") or bool(req.grid_pins) != implicit_tethers:
+        if req.implicit_grid != (model.sticks_form in ("implicit", "tiled")) or bool(req.grid_pins) != implicit_tethers:
             raise ArgumentError(f"need (implicit sticks {req.implicit_grid}, implicit tethers {bool(req.grid_pins)}) "
                                 f"does not match the model's {model.sticks_form} sticks: ask Requirements.of with the model's "
                                 "stick_request")

@@ -52,6 +52,7 @@ class Requirements:
     grid_cols: int = 0
     soft_sticks: int = 0  # implicit grid sticks of families with a compliance (each keeps an XPBD tension)
     grid_pins: int = 0  # implicit grid tethers: the cloth's pins (0: the tethers are arrays)
+    grid_tiles: bool = False  # implicit grid sticks swept tile by tile in shared memory (kernels/grid_tiles.py)
     weight_pins: int = 0  # implicit grid sticks of a cloth whose free particles weigh alike: its pins
     elements: tuple[tuple[str, object], ...] = ()  # (kind name, its count(scene)) of the kinds a scene uses
     global_iterations: int = 0  # the global correction's conjugate-gradient iterations (0: no correction)
@@ -101,7 +102,13 @@ class Requirements:
             air=air_counts(scene),
         )
         req = replace(req, **grid_counts(scene, sticks))
-        return replace(req, precision=resolve(scene, relaxes=RELAX.needed(req)))
+        req = replace(req, precision=resolve(scene, relaxes=RELAX.needed(req)))
+        if req.grid_tiles and req.precision != "float32":
+            from ..errors import ArgumentError
+
+            raise ArgumentError("sticks = 'tiled' holds float32 positions in shared memory, but the scene's positions "
+                                "are float64 (simulation.precision)")
+        return req
 
 
 def global_levels(scene: "Scene") -> tuple[tuple[int, int, int], ...]:
@@ -116,7 +123,7 @@ def global_levels(scene: "Scene") -> tuple[tuple[int, int, int], ...]:
     return tuple(coarse_level_counts([tuple(c.resolution) for c in scene.cloths]))
 
 
-STICK_FORMS = ("auto", "explicit", "implicit")
+STICK_FORMS = ("auto", "explicit", "implicit", "tiled")
 MAX_UNIFORM_MASS_PINS = 8
 """Implicit grid sticks find a particle's weight without reading it (0 for a pin, the free particles' for any
 other) when the cloth sets no particle masses and has at most this many pins, which each projection checks."""
@@ -156,8 +163,8 @@ def grid_counts(scene: "Scene", sticks: str) -> dict:
     if sticks not in STICK_FORMS:
         raise ArgumentError(f"sticks must be one of {', '.join(STICK_FORMS)}, got {sticks!r}")
     obstacle = implicit_grid_obstacle(scene)
-    if sticks == "implicit" and obstacle is not None:
-        raise ArgumentError(f"sticks = 'implicit' needs one grid cloth that cannot tear and the coloured solver, "
+    if sticks in ("implicit", "tiled") and obstacle is not None:
+        raise ArgumentError(f"sticks = {sticks!r} needs one grid cloth that cannot tear and the coloured solver, "
                             f"but {obstacle}")
     if sticks == "explicit" or obstacle is not None:
         return {}
@@ -171,7 +178,11 @@ def grid_counts(scene: "Scene", sticks: str) -> dict:
     pins = cloth.pin_count if (sticks == "implicit" and cloth.uses_tethers
                                and 0 < cloth.pin_count <= MAX_GRID_TETHER_PINS) else 0
     weight_pins = cloth.pin_count if not cloth.particle_masses and 0 < cloth.pin_count <= MAX_UNIFORM_MASS_PINS else 0
-    return {"grid_rows": r, "grid_cols": c, "soft_sticks": soft, "grid_pins": pins, "weight_pins": weight_pins}
+    if sticks == "tiled" and soft:
+        raise ArgumentError("sticks = 'tiled' projects rigid sticks only, but the cloth gives a stick family a "
+                            "compliance")
+    return {"grid_rows": r, "grid_cols": c, "soft_sticks": soft, "grid_pins": pins, "weight_pins": weight_pins,
+            "grid_tiles": sticks == "tiled"}
 
 
 

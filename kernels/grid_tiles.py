@@ -1,0 +1,163 @@
+"""Tiled sweeps over implicit grid sticks: block Gauss-Seidel, each block holding a tile of the cloth in shared
+memory while it runs every colour of its sticks, so that a sweep reads and writes each position about once
+instead of once per colour.
+
+A tile owns the sticks anchored in its TILE x TILE cells (a stick's anchor is its first particle, (r, c); its
+other end is (r + dr, c + dc), dr in 0..2, dc in -1..2). A block loads the tile's region, its cells and the
+halo those sticks reach (rows r0 .. r0 + TILE + 1, columns c0 - 1 .. c0 + TILE + 1), projects the tile's
+sticks colour by colour in the analytic grid colouring's order (a colour's sticks share no particle, so its
+threads write disjoint cells; a barrier separates the colours), and writes the region back.
+
+Tiles are themselves coloured 2 x 2 by the parity of their tile row and column: the launch of one tile colour
+runs tiles two apart, whose regions (TILE + 2 rows, TILE + 3 columns, starting TILE x 2 apart) share no
+particle for any TILE >= 3, so the blocks of a launch neither read nor write each other's particles. A sweep is
+four launches, Gauss-Seidel across them.
+
+The projection is ``stick_correction`` with the rest lengths and weights the implicit grid sticks use
+(kernels/grid_relax.py), so every stick sees exactly the arithmetic of the other forms; only the order of the
+projections differs. That order is a fixed sequence (tile colour, tile, stick colour, cell), which the CPU
+runs literally (one lane per block) and a GPU runs with the independent projections of one step at once.
+"""
+
+import warp as wp
+
+from .grid_relax import GridColour, particle_weight
+from .positions import scaled
+from .relax import stick_correction
+
+TILE = 16
+"""Cells per side of a tile by default; a block has TILE x TILE threads, one per cell."""
+
+
+@wp.func
+def anchor_rank(index: int, q: int, parity: int):
+    """The inverse of grid_relax.anchor_index: k with anchor_index(k, q, parity) == index, or -1 where ``index``
+    (>= 0) is not one of the colour's anchors along that axis."""
+    if q == 0:
+        return index
+    s = q - 1
+    if ((index >> s) & 1) != parity:
+        return -1
+    return ((index >> (s + 1)) << s) + (index & s)
+
+
+_KERNELS: dict = {}
+
+
+def relax_grid_tiles(tile: int = TILE):
+    """The tiled sweep's kernel for tiles of ``tile`` x ``tile`` cells (one kernel per size: the shared tile's
+    shape is a compile-time constant)."""
+    if tile < 3:
+        raise ValueError(f"a tile needs at least 3 cells per side (so that two tiles apart share no particle), "
+                         f"got {tile}")
+    if tile not in _KERNELS:
+        _KERNELS[tile] = _make_kernel(tile)
+    return _KERNELS[tile]
+
+
+def _make_kernel(tile: int):
+    TILE_SIDE = tile
+    REGION_ROWS = tile + 2
+    REGION_COLS = tile + 3
+    REGION = REGION_ROWS * REGION_COLS
+    TILE_CELLS = tile * tile
+
+    @wp.func
+    def region_cell(e: int):
+        """Row and column, in the tile's region, of the region's e-th cell (row-major), clamped into the region."""
+        f = wp.min(e, REGION - 1)
+        return f // REGION_COLS, f % REGION_COLS
+
+
+    @wp.kernel(module="unique")
+    def relax_grid_tiles(
+        x: wp.array(dtype=wp.vec3),
+        inv_mass: wp.array(dtype=float),
+        colours: wp.array(dtype=GridColour),
+        colour_rows: wp.array(dtype=int),
+        colour_count: int,
+        pins: wp.array(dtype=int),
+        col_rest1: wp.array(dtype=float),
+        col_rest2: wp.array(dtype=float),
+        row_rest1: wp.array(dtype=float),
+        row_rest2: wp.array(dtype=float),
+        col_sq: wp.array(dtype=wp.float64),
+        row_sq: wp.array(dtype=wp.float64),
+        grid_rows: int,
+        tile_row_parity: int,
+        tile_col_parity: int,
+        tiles_across: int,
+    ):
+        """One sweep of every colour over the tiles of one tile colour (tile row parity, tile column parity):
+        block k takes tile (parity_row + 2 (k // tiles_across), parity_col + 2 (k % tiles_across))."""
+        block, lane = wp.tid()
+        threads = wp.block_dim()
+        first = colours[0].first_particle
+        grid_cols = colours[0].grid_cols
+        r0 = (tile_row_parity + 2 * (block // tiles_across)) * TILE_SIDE
+        c0 = (tile_col_parity + 2 * (block % tiles_across)) * TILE_SIDE
+        region = wp.tile_zeros(shape=(REGION_ROWS, REGION_COLS), dtype=wp.vec3, storage="shared")
+
+        for e0 in range(0, REGION, threads):
+            rr, rc = region_cell(e0 + lane)
+            gr = r0 + rr
+            gc = c0 - 1 + rc
+            inside = e0 + lane < REGION and gr < grid_rows and gc >= 0 and gc < grid_cols
+            v = wp.vec3(0.0)
+            if inside:
+                v = x[first + gr * grid_cols + gc]
+            wp.tile_scatter_masked(region, rr, rc, v, inside)
+
+        for n in range(colour_count):
+            g = colours[n]
+            for e0 in range(0, TILE_CELLS, threads):
+                e = wp.min(e0 + lane, TILE_CELLS - 1)
+                lr = e // TILE_SIDE
+                lc = e % TILE_SIDE
+                r = r0 + lr
+                c = c0 + lc
+                kr = anchor_rank(r - g.row_first, g.row_q, g.parity)
+                kc = int(-1)
+                if c >= g.col_first:
+                    kc = anchor_rank(c - g.col_first, g.col_q, g.parity)
+                active = e0 + lane < TILE_CELLS and kr >= 0 and kr < colour_rows[n] and kc >= 0 and kc < g.cols
+                ir = lr
+                ic = lc + 1
+                jr = lr + g.dr
+                jc = lc + 1 + g.dc
+                xi = wp.vec3(0.0)
+                xj = wp.vec3(0.0)
+                if active:
+                    i = first + r * grid_cols + c
+                    j = i + g.dr * grid_cols + g.dc
+                    rest = float(0.0)
+                    if g.use_row == 0:
+                        if g.dc == 2 or g.dc == -2:
+                            rest = col_rest2[c + g.col_shift]
+                        else:
+                            rest = col_rest1[c + g.col_shift]
+                    elif g.use_col == 0:
+                        if g.dr == 2:
+                            rest = row_rest2[r]
+                        else:
+                            rest = row_rest1[r]
+                    else:
+                        rest = wp.float32(wp.sqrt(col_sq[c + g.col_shift] + row_sq[r]))
+                    wi = particle_weight(g, i, inv_mass, pins)
+                    wj = particle_weight(g, j, inv_mass, pins)
+                    xi = region[ir, ic]
+                    xj = region[jr, jc]
+                    d = stick_correction(xi, xj, wi, wj, rest, 1.0)
+                    xi = xi + scaled(d, wi)
+                    xj = xj - scaled(d, wj)
+                wp.tile_scatter_masked(region, ir, ic, xi, active)
+                wp.tile_scatter_masked(region, jr, jc, xj, active)
+
+        for e0 in range(0, REGION, threads):
+            rr, rc = region_cell(e0 + lane)
+            gr = r0 + rr
+            gc = c0 - 1 + rc
+            if e0 + lane < REGION and gr < grid_rows and gc >= 0 and gc < grid_cols:
+                x[first + gr * grid_cols + gc] = region[rr, rc]
+
+    return relax_grid_tiles
