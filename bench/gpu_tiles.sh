@@ -2,7 +2,9 @@
 # Tiled sweeps (kernels/grid_tiles.py) on the lent GPU machine (../shared/tools/gpu-warp/README.md installs Warp
 # there first): PART=tests runs the CUDA tests of the sticks' forms; PART=bench times every form's kernels at
 # 1024^2 (4 x 8) and runs bench.implicit_grid at 1024^2 and 2048^2 with the copy rate in the same run, then the
-# tiled form alone with other tile sizes. Results under $OUT (default bench/results/grid_tiles).
+# tiled form alone with other tile sizes; PART=profile runs Nsight Compute's launch, occupancy and warp-state
+# sections on two tiled launches and one implicit colour of the second frame at 1024^2. Results under $OUT
+# (default bench/results/grid_tiles).
 set -uo pipefail
 out=${OUT:-bench/results/grid_tiles}
 mkdir -p "$out"
@@ -20,7 +22,16 @@ case "${PART:-bench}" in
     timeout 330 python3 -m bench.implicit_grid --device cuda --sizes 1024 2048 --forms explicit auto tiled \
       --target-size 0 --out "$out" 2>&1 | grep "^|"
     for tile in ${TILES:-8 32}; do
-      timeout 100 python3 -m bench.implicit_grid --device cuda --sizes 1024 --forms tiled --tile "$tile" \
+      timeout 200 python3 -m bench.implicit_grid --device cuda --sizes 1024 --forms tiled --tile "$tile" \
         --target-size 0 --out "$out/tile-$tile" 2>&1 | grep "^| 1024"
+    done ;;
+  profile)
+    ncu=$(command -v ncu || ls /usr/local/cuda*/bin/ncu /opt/nvidia/nsight-compute/*/ncu 2>/dev/null | head -1)
+    for sticks in tiled auto; do
+      timeout 250 "$ncu" --cache-control none --kernel-name regex:relax_grid --launch-skip 200 --launch-count 2 \
+        --section LaunchStats --section Occupancy --section WarpStateStats --section SchedulerStats \
+        --section MemoryWorkloadAnalysis --section SpeedOfLight \
+        python3 -m bench.l2_profile --size 1024 --budget 4x8 --sticks "$sticks" > "$out/ncu-$sticks.txt" 2>&1
+      echo "$sticks: rc=$?"; grep -E "Duration|Achieved Occupancy|Theoretical Occupancy|Block Limit|Stall|Warp Cycles Per Issued|Shared Memory Configuration|Dynamic Shared|Registers Per" "$out/ncu-$sticks.txt" | head -40
     done ;;
 esac

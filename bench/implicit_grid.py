@@ -159,9 +159,9 @@ def main(argv=None) -> int:
 
         sticks.GRID_TILE = args.tile
     if args.block_dim:
-        from warp_verlet.core import stages
+        from warp_verlet.constraints import sticks
 
-        stages.GRID_BLOCK_DIM = args.block_dim
+        sticks.GRID_BLOCK_DIM = args.block_dim
     device = wp.get_device(args.device)
     copy_gbs = copy_bandwidth(device) if device.is_cuda else None
 

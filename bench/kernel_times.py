@@ -42,24 +42,24 @@ def main(argv=None) -> int:
     p.add_argument("--size", type=int, default=1024)
     p.add_argument("--budget", default="4x8")
     p.add_argument("--block-dims", type=int, nargs="*", default=[],
-                   help="also time the implicit sticks ('auto') with these threads per block (stages.GRID_BLOCK_DIM)")
+                   help="also time the implicit sticks ('auto') with these threads per block (sticks.GRID_BLOCK_DIM)")
     args = p.parse_args(argv)
     quiet_warp()
     substeps, iterations = (int(v) for v in args.budget.split("x"))
-    from warp_verlet.core import stages
+    from warp_verlet.constraints import sticks
 
-    chosen = stages.GRID_BLOCK_DIM
+    chosen = sticks.GRID_BLOCK_DIM
     for block in args.block_dims:
-        stages.GRID_BLOCK_DIM = block
+        sticks.GRID_BLOCK_DIM = block
         times, _ = kernel_times(args.size, substeps, iterations, args.device, "auto")
         colour = [k for k in times if k.startswith("relax_grid_colour")]
         if colour:  # CUDA only: the CPU has no activity timing
             ms, n = times[colour[0]]
             print(f"{args.size}^2 {args.budget} auto, {block} threads per block: a colour {ms / n * 1e3:.1f} us")
-    stages.GRID_BLOCK_DIM = chosen  # the table below is of the block size the simulator uses
-    for sticks in ("explicit", "auto", "implicit", "tiled"):
-        times, first = kernel_times(args.size, substeps, iterations, args.device, sticks)
-        print(f"{args.size}^2 {args.budget} {sticks}: {sum(t for t, _ in times.values()):.3f} ms of kernels per frame")
+    sticks.GRID_BLOCK_DIM = chosen  # the table below is of the block size the simulator uses
+    for form in ("explicit", "auto", "implicit", "tiled"):
+        times, first = kernel_times(args.size, substeps, iterations, args.device, form)
+        print(f"{args.size}^2 {args.budget} {form}: {sum(t for t, _ in times.values()):.3f} ms of kernels per frame")
         for name, (ms, n) in sorted(times.items(), key=lambda kv: -kv[1][0]):
             print(f"  {name:60s} {ms:8.3f} ms  {n:5d} launches  {ms / n * 1e3:8.1f} us each")
         print("  the first launches, in order: " + ", ".join(f"{n} {t * 1e3:.0f} us" for n, t in first))

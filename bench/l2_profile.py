@@ -24,7 +24,7 @@ def main(argv=None) -> int:
     p = arg_parser("bench.l2_profile", __doc__)
     p.add_argument("--size", type=int, default=1024)
     p.add_argument("--budget", default="4x8")
-    p.add_argument("--sticks", default="auto", choices=("explicit", "auto", "implicit"))
+    p.add_argument("--sticks", default="auto", choices=("explicit", "auto", "implicit", "tiled"))
     p.add_argument("--frames", type=int, default=3)
     p.add_argument("--device", default="cuda")
     args = p.parse_args(argv)

@@ -68,7 +68,6 @@ def _make_kernel(tile: int):
         f = wp.min(e, REGION - 1)
         return f // REGION_COLS, f % REGION_COLS
 
-
     @wp.kernel(module="unique")
     def relax_grid_tiles(
         x: wp.array(dtype=wp.vec3),
@@ -92,11 +91,20 @@ def _make_kernel(tile: int):
         block k takes tile (parity_row + 2 (k // tiles_across), parity_col + 2 (k % tiles_across))."""
         block, lane = wp.tid()
         threads = wp.block_dim()
-        first = colours[0].first_particle
-        grid_cols = colours[0].grid_cols
+        layout = colours[0]
+        first = layout.first_particle
+        grid_cols = layout.grid_cols
         r0 = (tile_row_parity + 2 * (block // tiles_across)) * TILE_SIDE
         c0 = (tile_col_parity + 2 * (block % tiles_across)) * TILE_SIDE
+        # Everything a projection reads is staged in shared memory first: the region's positions and weights,
+        # and the rest-length tables over its columns and rows, so that the colours' steps, which a barrier
+        # separates, wait on no global load.
         region = wp.tile_zeros(shape=(REGION_ROWS, REGION_COLS), dtype=wp.vec3, storage="shared")
+        weight = wp.tile_zeros(shape=(REGION_ROWS, REGION_COLS), dtype=float, storage="shared")
+        col_rest = wp.tile_zeros(shape=(2, REGION_COLS), dtype=float, storage="shared")  # 1 and 2 columns apart
+        col_step = wp.tile_zeros(shape=REGION_COLS, dtype=wp.float64, storage="shared")  # squared, 1 apart
+        row_rest = wp.tile_zeros(shape=(2, REGION_ROWS), dtype=float, storage="shared")
+        row_step = wp.tile_zeros(shape=REGION_ROWS, dtype=wp.float64, storage="shared")
 
         for e0 in range(0, REGION, threads):
             rr, rc = region_cell(e0 + lane)
@@ -104,53 +112,83 @@ def _make_kernel(tile: int):
             gc = c0 - 1 + rc
             inside = e0 + lane < REGION and gr < grid_rows and gc >= 0 and gc < grid_cols
             v = wp.vec3(0.0)
+            w = float(0.0)
             if inside:
                 v = x[first + gr * grid_cols + gc]
+                w = particle_weight(layout, first + gr * grid_cols + gc, inv_mass, pins)
             wp.tile_scatter_masked(region, rr, rc, v, inside)
+            wp.tile_scatter_masked(weight, rr, rc, w, inside)
+        for e0 in range(0, REGION_COLS, threads):
+            k = wp.min(e0 + lane, REGION_COLS - 1)
+            gc = c0 - 1 + k
+            ok = e0 + lane < REGION_COLS and gc >= 0
+            one = ok and gc < col_rest1.shape[0]
+            two = ok and gc < col_rest2.shape[0]
+            r1 = float(0.0)
+            r2 = float(0.0)
+            sq = wp.float64(0.0)
+            if one:
+                r1 = col_rest1[gc]
+                sq = col_sq[gc]
+            if two:
+                r2 = col_rest2[gc]
+            wp.tile_scatter_masked(col_rest, 0, k, r1, one)
+            wp.tile_scatter_masked(col_rest, 1, k, r2, two)
+            wp.tile_scatter_masked(col_step, k, sq, one)
+        for e0 in range(0, REGION_ROWS, threads):
+            k = wp.min(e0 + lane, REGION_ROWS - 1)
+            gr = r0 + k
+            ok = e0 + lane < REGION_ROWS
+            one = ok and gr < row_rest1.shape[0]
+            two = ok and gr < row_rest2.shape[0]
+            r1 = float(0.0)
+            r2 = float(0.0)
+            sq = wp.float64(0.0)
+            if one:
+                r1 = row_rest1[gr]
+                sq = row_sq[gr]
+            if two:
+                r2 = row_rest2[gr]
+            wp.tile_scatter_masked(row_rest, 0, k, r1, one)
+            wp.tile_scatter_masked(row_rest, 1, k, r2, two)
+            wp.tile_scatter_masked(row_step, k, sq, one)
 
         for n in range(colour_count):
             g = colours[n]
+            rows = colour_rows[n]
             for e0 in range(0, TILE_CELLS, threads):
                 e = wp.min(e0 + lane, TILE_CELLS - 1)
                 lr = e // TILE_SIDE
                 lc = e % TILE_SIDE
-                r = r0 + lr
                 c = c0 + lc
-                kr = anchor_rank(r - g.row_first, g.row_q, g.parity)
+                kr = anchor_rank(r0 + lr - g.row_first, g.row_q, g.parity)
                 kc = int(-1)
                 if c >= g.col_first:
                     kc = anchor_rank(c - g.col_first, g.col_q, g.parity)
-                active = e0 + lane < TILE_CELLS and kr >= 0 and kr < colour_rows[n] and kc >= 0 and kc < g.cols
-                ir = lr
+                active = e0 + lane < TILE_CELLS and kr >= 0 and kr < rows and kc >= 0 and kc < g.cols
                 ic = lc + 1
                 jr = lr + g.dr
-                jc = lc + 1 + g.dc
+                jc = ic + g.dc
                 xi = wp.vec3(0.0)
                 xj = wp.vec3(0.0)
                 if active:
-                    i = first + r * grid_cols + c
-                    j = i + g.dr * grid_cols + g.dc
+                    # The rest length as grid_relax.colour_stick finds it, from the staged tables (column
+                    # c + col_shift of the grid is the region's column ic + col_shift).
                     rest = float(0.0)
                     if g.use_row == 0:
-                        if g.dc == 2 or g.dc == -2:
-                            rest = col_rest2[c + g.col_shift]
-                        else:
-                            rest = col_rest1[c + g.col_shift]
+                        rest = col_rest[wp.where(g.dc == 2 or g.dc == -2, 1, 0), ic + g.col_shift]
                     elif g.use_col == 0:
-                        if g.dr == 2:
-                            rest = row_rest2[r]
-                        else:
-                            rest = row_rest1[r]
+                        rest = row_rest[wp.where(g.dr == 2, 1, 0), lr]
                     else:
-                        rest = wp.float32(wp.sqrt(col_sq[c + g.col_shift] + row_sq[r]))
-                    wi = particle_weight(g, i, inv_mass, pins)
-                    wj = particle_weight(g, j, inv_mass, pins)
-                    xi = region[ir, ic]
+                        rest = wp.float32(wp.sqrt(col_step[ic + g.col_shift] + row_step[lr]))
+                    wi = weight[lr, ic]
+                    wj = weight[jr, jc]
+                    xi = region[lr, ic]
                     xj = region[jr, jc]
                     d = stick_correction(xi, xj, wi, wj, rest, 1.0)
                     xi = xi + scaled(d, wi)
                     xj = xj - scaled(d, wj)
-                wp.tile_scatter_masked(region, ir, ic, xi, active)
+                wp.tile_scatter_masked(region, lr, ic, xi, active)
                 wp.tile_scatter_masked(region, jr, jc, xj, active)
 
         for e0 in range(0, REGION, threads):

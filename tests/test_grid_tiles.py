@@ -39,10 +39,15 @@ def perturbed(sim: Simulator, seed: int = 3) -> np.ndarray:
     return x.astype(np.float32)
 
 
-@pytest.mark.parametrize("tile", [3, 16])  # the smallest tile, and the default
-def test_a_tiled_sweep_is_the_sequential_sweep_in_tile_order_bit_for_bit(tile, monkeypatch):
+@pytest.mark.parametrize("tile, cloth", [
+    (3, {}),  # the smallest tile
+    (16, {}),  # the default
+    (16, {"particle_masses": [[4, 6, 0.05], [20, 17, 0.001]], "pins": ["top-left", [30, 40]]}),  # weights read
+    (8, {"sticks": ["structural", "bend"], "pins": ["top-edge"]}),  # no shear; more pins than the kernel checks
+])
+def test_a_tiled_sweep_is_the_sequential_sweep_in_tile_order_bit_for_bit(tile, cloth, monkeypatch):
     monkeypatch.setattr(sticks, "GRID_TILE", tile)
-    scene = sheet()
+    scene = sheet(**cloth)
     tiled = Simulator(scene, "cpu", threads=1, sticks="tiled")
     explicit = Simulator(scene, "cpu", threads=1, sticks="explicit")
     assert "grid tiles" in tiled.constraint_sets and "grid sticks" not in tiled.constraint_sets
