@@ -19,9 +19,9 @@ case "${PART:-bench}" in
   bench)
     timeout 120 python3 -m bench.kernel_times --device cuda --size 1024 --budget 4x8 2>&1 | grep -v "first launches" \
       | tee "$out/kernel-times.txt" | grep -v "^  " 
-    timeout 330 python3 -m bench.implicit_grid --device cuda --sizes 1024 2048 --forms explicit auto tiled \
+    timeout 330 python3 -m bench.implicit_grid --device cuda --sizes 1024 2048 --forms ${FORMS:-explicit auto tiled} \
       --target-size 0 --out "$out" 2>&1 | grep "^|"
-    for tile in ${TILES:-8 32}; do
+    for tile in ${TILES:-8 24 32}; do
       timeout 200 python3 -m bench.implicit_grid --device cuda --sizes 1024 --forms tiled --tile "$tile" \
         --target-size 0 --out "$out/tile-$tile" 2>&1 | grep "^| 1024"
     done ;;

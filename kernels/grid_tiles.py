@@ -21,46 +21,35 @@ runs literally (one lane per block) and a GPU runs with the independent projecti
 
 import warp as wp
 
-from .grid_relax import GridColour, particle_weight
+from .grid_relax import GridColour, anchor_index, particle_weight
 from .positions import scaled
 from .relax import stick_correction
-
-TILE = 16
-"""Cells per side of a tile by default; a block has TILE x TILE threads, one per cell."""
-
-
-@wp.func
-def anchor_rank(index: int, q: int, parity: int):
-    """The inverse of grid_relax.anchor_index: k with anchor_index(k, q, parity) == index, or -1 where ``index``
-    (>= 0) is not one of the colour's anchors along that axis."""
-    if q == 0:
-        return index
-    s = q - 1
-    if ((index >> s) & 1) != parity:
-        return -1
-    return ((index >> (s + 1)) << s) + (index & s)
-
 
 _KERNELS: dict = {}
 
 
-def relax_grid_tiles(tile: int = TILE):
-    """The tiled sweep's kernel for tiles of ``tile`` x ``tile`` cells (one kernel per size: the shared tile's
-    shape is a compile-time constant)."""
-    if tile < 3:
-        raise ValueError(f"a tile needs at least 3 cells per side (so that two tiles apart share no particle), "
-                         f"got {tile}")
-    if tile not in _KERNELS:
-        _KERNELS[tile] = _make_kernel(tile)
-    return _KERNELS[tile]
+def relax_grid_tiles(tile: int, colours: tuple):
+    """The tiled sweep's kernel for tiles of ``tile`` x ``tile`` cells and the given colours, each
+    ``(dr, dc, col_first, parity_axis, q, parity)`` (parity_axis 0: rows, 1: columns), in sweep order. One
+    kernel per (tile, colours): the shared tiles' shapes and each colour's geometry are compile-time constants,
+    so a colour's step unrolls to its own index arithmetic."""
+    if tile < 4 or tile % 4:
+        raise ValueError(f"a tile's side must be a multiple of 4 (a bend colour's parity repeats every 4 rows or "
+                         f"columns, and two tiles apart must share no particle), got {tile}")
+    key = (tile, tuple(colours))
+    if key not in _KERNELS:
+        _KERNELS[key] = _make_kernel(tile, tuple(colours))
+    return _KERNELS[key]
 
 
-def _make_kernel(tile: int):
+def _make_kernel(tile: int, colours: tuple):
     TILE_SIDE = tile
+    HALF = tile // 2
     REGION_ROWS = tile + 2
     REGION_COLS = tile + 3
     REGION = REGION_ROWS * REGION_COLS
-    TILE_CELLS = tile * tile
+    STICKS = tile * tile // 2  # a colour's sticks in a tile: one axis keeps half its anchors
+    COLOURS = colours
 
     @wp.func
     def region_cell(e: int):
@@ -72,9 +61,7 @@ def _make_kernel(tile: int):
     def relax_grid_tiles(
         x: wp.array(dtype=wp.vec3),
         inv_mass: wp.array(dtype=float),
-        colours: wp.array(dtype=GridColour),
-        colour_rows: wp.array(dtype=int),
-        colour_count: int,
+        layout: GridColour,
         pins: wp.array(dtype=int),
         col_rest1: wp.array(dtype=float),
         col_rest2: wp.array(dtype=float),
@@ -88,10 +75,10 @@ def _make_kernel(tile: int):
         tiles_across: int,
     ):
         """One sweep of every colour over the tiles of one tile colour (tile row parity, tile column parity):
-        block k takes tile (parity_row + 2 (k // tiles_across), parity_col + 2 (k % tiles_across))."""
+        block k takes tile (parity_row + 2 (k // tiles_across), parity_col + 2 (k % tiles_across)). ``layout``
+        is any colour's (the kernel reads the cloth's first particle, row length and weights from it)."""
         block, lane = wp.tid()
         threads = wp.block_dim()
-        layout = colours[0]
         first = layout.first_particle
         grid_cols = layout.grid_cols
         r0 = (tile_row_parity + 2 * (block // tiles_across)) * TILE_SIDE
@@ -153,34 +140,43 @@ def _make_kernel(tile: int):
             wp.tile_scatter_masked(row_rest, 1, k, r2, two)
             wp.tile_scatter_masked(row_step, k, sq, one)
 
-        for n in range(colour_count):
-            g = colours[n]
-            rows = colour_rows[n]
-            for e0 in range(0, TILE_CELLS, threads):
-                e = wp.min(e0 + lane, TILE_CELLS - 1)
-                lr = e // TILE_SIDE
-                lc = e % TILE_SIDE
+        for n in range(wp.static(len(COLOURS))):
+            dr = wp.static(COLOURS[n][0])
+            dc = wp.static(COLOURS[n][1])
+            col_first = wp.static(COLOURS[n][2])
+            q = wp.static(COLOURS[n][4])
+            parity = wp.static(COLOURS[n][5])
+            for e0 in range(0, STICKS, threads):
+                k = wp.min(e0 + lane, STICKS - 1)
+                # The colour's k-th anchor in the tile: half the rows (or columns) keep anchors, those whose
+                # (index // q) % 2 is the colour's parity (a tile starts on a multiple of 4, so the pattern is
+                # the grid's), all of the other axis.
+                lr = int(0)
+                lc = int(0)
+                if wp.static(COLOURS[n][3] == 0):
+                    lr = anchor_index(k // TILE_SIDE, q, parity)
+                    lc = k % TILE_SIDE
+                else:
+                    lr = k // HALF
+                    lc = anchor_index(k % HALF, q, parity)
+                r = r0 + lr
                 c = c0 + lc
-                kr = anchor_rank(r0 + lr - g.row_first, g.row_q, g.parity)
-                kc = int(-1)
-                if c >= g.col_first:
-                    kc = anchor_rank(c - g.col_first, g.col_q, g.parity)
-                active = e0 + lane < TILE_CELLS and kr >= 0 and kr < rows and kc >= 0 and kc < g.cols
+                active = e0 + lane < STICKS and r + dr < grid_rows and c >= col_first and c + wp.max(dc, 0) < grid_cols
                 ic = lc + 1
-                jr = lr + g.dr
-                jc = ic + g.dc
+                jr = lr + dr
+                jc = ic + dc
                 xi = wp.vec3(0.0)
                 xj = wp.vec3(0.0)
                 if active:
                     # The rest length as grid_relax.colour_stick finds it, from the staged tables (column
-                    # c + col_shift of the grid is the region's column ic + col_shift).
+                    # c - 1 of the grid is the region's column ic - 1).
                     rest = float(0.0)
-                    if g.use_row == 0:
-                        rest = col_rest[wp.where(g.dc == 2 or g.dc == -2, 1, 0), ic + g.col_shift]
-                    elif g.use_col == 0:
-                        rest = row_rest[wp.where(g.dr == 2, 1, 0), lr]
+                    if wp.static(dr == 0):
+                        rest = col_rest[wp.static(1 if abs(dc) == 2 else 0), ic + wp.static(-1 if dc < 0 else 0)]
+                    elif wp.static(dc == 0):
+                        rest = row_rest[wp.static(1 if dr == 2 else 0), lr]
                     else:
-                        rest = wp.float32(wp.sqrt(col_step[ic + g.col_shift] + row_step[lr]))
+                        rest = wp.float32(wp.sqrt(col_step[ic + wp.static(-1 if dc < 0 else 0)] + row_step[lr]))
                     wi = weight[lr, ic]
                     wj = weight[jr, jc]
                     xi = region[lr, ic]

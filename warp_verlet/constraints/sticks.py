@@ -126,7 +126,8 @@ class GridSticks(ConstraintSet):
 
 
 GRID_TILE = 16
-"""Cells per side of a tiled sweep's tile (kernels/grid_tiles.py); a block runs one thread per cell."""
+"""Cells per side of a tiled sweep's tile (kernels/grid_tiles.py), a multiple of 4; a block runs one thread per
+stick of a colour in the tile (half its cells)."""
 
 
 class GridTiles(ConstraintSet):
@@ -141,12 +142,7 @@ class GridTiles(ConstraintSet):
         return req.sticks > 0 and req.grid_tiles
 
     def device_bytes(self, req) -> int:
-        from warp_verlet.kernels.grid_relax import GridColour
-        import warp as wp
-
-        from warp_verlet.core.model import GRID_COLOURS
-
-        return grid_table_bytes(req) + GRID_COLOURS * (wp.types.type_size_in_bytes(GridColour) + INT)
+        return grid_table_bytes(req)
 
     def bind(self, model, state, solver) -> BoundStage:
         import warp as wp
@@ -154,7 +150,9 @@ class GridTiles(ConstraintSet):
         from warp_verlet.kernels.grid_tiles import relax_grid_tiles
 
         g, x, tile = model.grid, state.particle_q, GRID_TILE
-        kernel = relax_grid_tiles(tile)
+        geometry = tuple((c.layout.dr, c.layout.dc, c.layout.col_first, int(c.layout.row_q == 0),
+                          c.layout.row_q or c.layout.col_q, c.layout.parity) for c in g.colours)
+        kernel = relax_grid_tiles(tile, geometry)
         tiles_down, tiles_across = -(-g.rows // tile), -(-g.cols // tile)
         tasks = []
         for row_parity in (0, 1):
@@ -163,9 +161,8 @@ class GridTiles(ConstraintSet):
                 if down * across == 0:
                     continue
                 launch = wp.launch_tiled(
-                    kernel, dim=[down * across], block_dim=tile * tile, record_cmd=True,
-                    inputs=[x, model.inv_mass, g.tile_colours, g.tile_colour_rows, len(g.colours), g.colours[0].pins, g.col_rest1,
-                            g.col_rest2, g.row_rest1, g.row_rest2, g.col_sq1, g.row_sq1, g.rows, row_parity,
-                            col_parity, across])
+                    kernel, dim=[down * across], block_dim=tile * tile // 2, record_cmd=True,
+                    inputs=[x, model.inv_mass, g.colours[0].layout, g.colours[0].pins, g.col_rest1, g.col_rest2,
+                            g.row_rest1, g.row_rest2, g.col_sq1, g.row_sq1, g.rows, row_parity, col_parity, across])
                 tasks.append(PhaseTask(kernel.key, launch.launch, launch))
         return BoundStage(None, [[task] for task in tasks])

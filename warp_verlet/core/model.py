@@ -116,9 +116,6 @@ class GridColourDevice:
         return self.rows * self.cols
 
 
-GRID_COLOURS = 12
-"""The most colours a grid cloth's implicit sticks take: six directions, two parities each."""
-
 # Per grid class (topology's order): (dr, dc, first column, parity along "row" or "col", q).
 GRID_DIRECTIONS = {
     STRUCT_H: (0, 1, 0, "col", 1), STRUCT_V: (1, 0, 0, "row", 1),
@@ -133,7 +130,7 @@ class GridDevice:
     and 2 columns apart and per row for 1 and 2 rows apart, the squared steps (float64) and their roots (the
     rest lengths of sticks along one axis, float32)."""
 
-    def __init__(self, slot: "ClothSlot", spec, device, uniform: bool, tiles: bool = False):
+    def __init__(self, slot: "ClothSlot", spec, device, uniform: bool):
         from warp_verlet.kernels.grid_relax import GridColour
 
         top = slot.topology
@@ -189,11 +186,6 @@ class GridDevice:
         self.colours: tuple[GridColourDevice, ...] = tuple(colours)
         self.soft_sticks = soft
         self.rows, self.cols = rows, cols
-        if tiles:  # the tiled sweep (kernels/grid_tiles.py) reads every colour's layout in one launch
-            spare = GRID_COLOURS - len(colours)
-            self.tile_colours = wp.array([c.layout for c in colours] + [GridColour()] * spare, dtype=GridColour,
-                                         device=device)
-            self.tile_colour_rows = wp.array([c.rows for c in colours] + [0] * spare, dtype=int, device=device)
 
 
 class GridTethersDevice:
@@ -310,8 +302,7 @@ class Model:
             sizes = self.colouring.sizes
             self.colour_ranges = [(int(a), int(n)) for a, n in zip(np.r_[0, np.cumsum(sizes)[:-1]], sizes) if n > 0]
             if req.implicit_grid:  # the sticks are computed from the grid: no stick arrays on the device
-                self.grid = GridDevice(self.cloths[0], scene.cloths[0], device, uniform=req.weight_pins > 0,
-                                       tiles=req.grid_tiles)
+                self.grid = GridDevice(self.cloths[0], scene.cloths[0], device, uniform=req.weight_pins > 0)
                 self._hold(self.grid, "grid")
                 if [c.count for c in self.grid.colours] != [n for _, n in self.colour_ranges]:
                     raise AssertionError("implicit grid colours differ from the analytic colouring")
