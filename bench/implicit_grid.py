@@ -84,7 +84,7 @@ def budget_rows(device: str, sizes: list[int], budgets: list[tuple[int, int]], r
                 projections = sim.model.stick_count * sweeps
                 data = explicit_bytes_per_sweep(sim) * sweeps
                 key = (substeps, iterations)
-                same = "" if form == "explicit" else ("yes" if np.array_equal(points, finals[key]) else "NO")
+                same = "" if key not in finals else ("yes" if np.array_equal(points, finals[key]) else "NO")
                 if form == "tiled":  # another order of the same projections: its own error, not the same bits
                     same = "(tile order)"
                 finals.setdefault(key, points)

@@ -120,21 +120,26 @@ def test_the_rule_picks_implicit_sticks_for_one_grid_cloth_that_cannot_tear(devi
         Simulator(grid, device, sticks="lazy")
 
 
-def test_auto_on_a_gpu_computes_the_sticks_and_keeps_the_tether_table(monkeypatch):
+@pytest.mark.parametrize("compliance, sets, same_as", [
+    ({}, ("tethers", "grid tiles"), "tiled"),  # rigid float32 sticks: swept tile by tile
+    ({"bend": 1e-3}, ("tethers", "grid sticks"), "explicit"),  # a soft family: a launch per colour
+])
+def test_auto_on_a_gpu_computes_the_sticks_and_keeps_the_tether_table(compliance, sets, same_as, monkeypatch):
     """What "auto" does on a GPU, on the CPU: the rule's device test answered as a GPU would."""
     import warp_verlet.core.model as model_module
 
     real = model_module.stick_form
     monkeypatch.setattr(model_module, "stick_form", lambda sticks, colouring, device: real(
         sticks, colouring, type("GPU", (), {"is_cpu": False})()))
-    scene = make_scene({"substeps": 2}, resolution=[7, 9], pins=["top-left", "top-right"])
+    scene = make_scene({"substeps": 2}, resolution=[7, 9], pins=["top-left", "top-right"],
+                       sticks=["structural", "shear", "bend"], compliance=compliance)
     sim = Simulator(scene, "cpu")
-    assert sim.constraint_sets == ("tethers", "grid sticks")
+    assert sim.constraint_sets == sets
     assert hasattr(sim.model, "tether_pin") and not hasattr(sim.model, "stick_ends")
     for _ in range(3):
         sim.step_frame()
-    explicit, _ = run_frames(scene, "cpu", "explicit", frames=3)
-    np.testing.assert_array_equal(sim.positions(), explicit)
+    reference, _ = run_frames(scene, "cpu", same_as, frames=3)
+    np.testing.assert_array_equal(sim.positions(), reference)
 
 
 def test_implicit_sticks_allocate_no_stick_arrays_and_issue_one_launch_per_colour(launches):

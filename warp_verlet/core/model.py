@@ -57,8 +57,8 @@ def stick_form(sticks: str, colouring: str, device) -> str:
     scene allows them on a GPU, where a sweep is bound by memory traffic and they save it; on the CPU it means
     stick arrays, which measured faster there (the arrays stay in its caches, and the computed ends and rest
     lengths cost integer divisions and a square root per stick; bench/results/implicit_grid). Implicit sticks
-    follow the analytic colouring's order, so Warp's graph colouring makes "auto" explicit (and "implicit" an
-    error)."""
+    follow the analytic colouring's order, so Warp's graph colouring makes "auto" explicit (and "implicit" or
+    "tiled" an error). Where "auto" sweeps tile by tile is Requirements.of's choice (core/stages.py)."""
     if colouring == "graph" and sticks in ("implicit", "tiled"):
         raise ArgumentError(f"sticks={sticks!r} projects in the analytic grid colouring's order; "
                             "colouring='graph' needs sticks='explicit' or 'auto'")

@@ -177,8 +177,10 @@ class Simulator:
                  threads: int | None = None, sticks: str = "auto"):
         """``sticks``: "auto" computes a grid cloth's sticks in the kernels on a GPU where the scene allows it
         (one grid cloth that cannot tear, the coloured solver: stages.implicit_grid_obstacle) and keeps stick
-        arrays otherwise and on the CPU (model.stick_form says why); "explicit" always keeps them; "implicit"
-        insists. ``constraint_sets`` says what was chosen."""
+        arrays otherwise and on the CPU (model.stick_form says why), and sweeps rigid float32 ones tile by tile in
+        shared memory (kernels/grid_tiles.py); "explicit" always keeps them; "implicit" insists on a launch per
+        colour, in the explicit sticks' order and with their positions bit for bit; "tiled" insists on tiles.
+        ``constraint_sets`` says what was chosen."""
         self.scene = scene
         self.settings = scene.simulation
         self.device = resolve_device(device)
