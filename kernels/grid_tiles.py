@@ -10,16 +10,13 @@ threads write disjoint cells; a barrier separates the colours), and writes the r
 
 Tiles are themselves coloured 2 x 2 by the parity of their tile row and column: the launch of one tile colour
 runs tiles two apart, whose regions (TILE + 2 rows, TILE + 3 columns, starting TILE x 2 apart) share no
-particle for any TILE >= 3 (TILE is a multiple of 4, so that a bend colour's parity pattern, which repeats
-every 4 rows or columns, is the same in every tile), so the blocks of a launch neither read nor write each
-other's particles. A sweep is four launches, Gauss-Seidel across them. A tethered cloth's tether pass is fused
-in: a block pulls its tile's own particles toward their pins (which never move) before its sticks.
+particle for any TILE >= 3, so the blocks of a launch neither read nor write each other's particles. A sweep is
+four launches, Gauss-Seidel across them.
 
 The projection is ``stick_correction`` with the rest lengths and weights the implicit grid sticks use
 (kernels/grid_relax.py), so every stick sees exactly the arithmetic of the other forms; only the order of the
-projections differs. That order is a fixed sequence (tile colour, tile, then the tile's tethers by cell and its
-sticks by colour), which the CPU runs literally (one lane per block) and a GPU runs with the independent
-projections of one step at once.
+projections differs. That order is a fixed sequence (tile colour, tile, stick colour, cell), which the CPU
+runs literally (one lane per block) and a GPU runs with the independent projections of one step at once.
 """
 
 import warp as wp
@@ -27,36 +24,32 @@ import warp as wp
 from .grid_relax import GridColour, anchor_index, particle_weight
 from .positions import scaled
 from .relax import stick_correction
-from .tether import tethered
 
 _KERNELS: dict = {}
 
 
-def relax_grid_tiles(tile: int, colours: tuple, tethers: bool = False):
+def relax_grid_tiles(tile: int, colours: tuple):
     """The tiled sweep's kernel for tiles of ``tile`` x ``tile`` cells and the given colours, each
-    ``(dr, dc, col_first, parity_axis, q, parity)`` (parity_axis 0: rows, 1: columns), in sweep order; with
-    ``tethers``, a block first pulls its tile's tethered particles back toward their pins (the tether table's
-    projection, kernels/tether.py). One kernel per (tile, colours, tethers): the shared tiles' shapes and each
-    colour's geometry are compile-time constants, so a colour's step unrolls to its own index arithmetic."""
+    ``(dr, dc, col_first, parity_axis, q, parity)`` (parity_axis 0: rows, 1: columns), in sweep order. One
+    kernel per (tile, colours): the shared tiles' shapes and each colour's geometry are compile-time constants,
+    so a colour's step unrolls to its own index arithmetic."""
     if tile < 4 or tile % 4:
         raise ValueError(f"a tile's side must be a multiple of 4 (a bend colour's parity repeats every 4 rows or "
                          f"columns, and two tiles apart must share no particle), got {tile}")
-    key = (tile, tuple(colours), bool(tethers))
+    key = (tile, tuple(colours))
     if key not in _KERNELS:
-        _KERNELS[key] = _make_kernel(*key)
+        _KERNELS[key] = _make_kernel(tile, tuple(colours))
     return _KERNELS[key]
 
 
-def _make_kernel(tile: int, colours: tuple, tethers: bool):
+def _make_kernel(tile: int, colours: tuple):
     TILE_SIDE = tile
-    TILE_CELLS = tile * tile
     HALF = tile // 2
     REGION_ROWS = tile + 2
     REGION_COLS = tile + 3
     REGION = REGION_ROWS * REGION_COLS
     STICKS = tile * tile // 2  # a colour's sticks in a tile: one axis keeps half its anchors
     COLOURS = colours
-    TETHERS = tethers
 
     @wp.func
     def region_cell(e: int):
@@ -76,9 +69,6 @@ def _make_kernel(tile: int, colours: tuple, tethers: bool):
         row_rest2: wp.array(dtype=float),
         col_sq: wp.array(dtype=wp.float64),
         row_sq: wp.array(dtype=wp.float64),
-        tether_row: wp.array(dtype=int),
-        tether_pin: wp.array2d(dtype=int),
-        tether_length: wp.array2d(dtype=float),
         grid_rows: int,
         tile_row_parity: int,
         tile_col_parity: int,
@@ -86,8 +76,7 @@ def _make_kernel(tile: int, colours: tuple, tethers: bool):
     ):
         """One sweep of every colour over the tiles of one tile colour (tile row parity, tile column parity):
         block k takes tile (parity_row + 2 (k // tiles_across), parity_col + 2 (k % tiles_across)). ``layout``
-        is any colour's (the kernel reads the cloth's first particle, row length and weights from it);
-        ``tether_row`` gives each particle's row of the tether table (-1: none)."""
+        is any colour's (the kernel reads the cloth's first particle, row length and weights from it)."""
         block, lane = wp.tid()
         threads = wp.block_dim()
         first = layout.first_particle
@@ -150,23 +139,6 @@ def _make_kernel(tile: int, colours: tuple, tethers: bool):
             wp.tile_scatter_masked(row_rest, 0, k, r1, one)
             wp.tile_scatter_masked(row_rest, 1, k, r2, two)
             wp.tile_scatter_masked(row_step, k, sq, one)
-
-        if wp.static(TETHERS):
-            # The tile's own particles only: a pin never moves, so reading it from ``x`` is safe while other
-            # blocks write their regions.
-            for e0 in range(0, TILE_CELLS, threads):
-                e = wp.min(e0 + lane, TILE_CELLS - 1)
-                lr = e // TILE_SIDE
-                lc = e % TILE_SIDE
-                gr = r0 + lr
-                gc = c0 + lc
-                row = int(-1)
-                if e0 + lane < TILE_CELLS and gr < grid_rows and gc < grid_cols:
-                    row = tether_row[first + gr * grid_cols + gc]
-                xp = wp.vec3(0.0)
-                if row >= 0:
-                    xp = tethered(region[lr, lc + 1], x, tether_pin, tether_length, row)
-                wp.tile_scatter_masked(region, lr, lc + 1, xp, row >= 0)
 
         for n in range(wp.static(len(COLOURS))):
             dr = wp.static(COLOURS[n][0])

@@ -16,21 +16,6 @@ import warp as wp
 from .positions import for_positions
 
 
-@wp.func
-def tethered(xp: Any, x: wp.array(dtype=Any), pin: wp.array2d(dtype=int), length: wp.array2d(dtype=float), t: int):
-    """Position ``xp`` of tether row t's particle moved back within length[t, k] of each pin[t, k] (pin -1: no
-    tether there), pins read from ``x``."""
-    for k in range(pin.shape[1]):
-        a = pin[t, k]
-        if a >= 0:
-            d = xp - x[a]
-            distance = wp.length(d)
-            limit = type(distance)(length[t, k])
-            if distance > limit:
-                xp = x[a] + d * (limit / distance)
-    return xp
-
-
 @wp.kernel
 def pull_tethers(
     x: wp.array(dtype=Any),
@@ -41,7 +26,16 @@ def pull_tethers(
     """Thread t moves particle[t] back within length[t, k] of each pin[t, k] (pin -1: no tether there)."""
     t = wp.tid()
     p = particle[t]
-    x[p] = tethered(x[p], x, pin, length, t)
+    xp = x[p]
+    for k in range(pin.shape[1]):
+        a = pin[t, k]
+        if a >= 0:
+            d = xp - x[a]
+            distance = wp.length(d)
+            limit = type(distance)(length[t, k])
+            if distance > limit:
+                xp = x[a] + d * (limit / distance)
+    x[p] = xp
 
 
 for_positions(pull_tethers, arrays=("x",))

@@ -15,7 +15,6 @@ from warp_verlet.core.simulator import Simulator
 from warp_verlet.errors import ArgumentError
 from warp_verlet.constraints import sticks
 from warp_verlet.kernels.relax import relax_colour
-from warp_verlet.kernels.tether import pull_tethers
 
 ROWS, COLS = 37, 45  # several tiles each way, neither a multiple of the tile
 
@@ -25,43 +24,13 @@ def sheet(**cloth):
     return make_scene({"substeps": 2, "iterations": 4}, **spec)
 
 
-def tile_key(particle: np.ndarray, cols: int, tile: int) -> np.ndarray:
-    """The order in which the tiled sweep visits the tile that owns each (anchor) particle: by tile colour (tile
-    row parity, then column parity), then row-major among that colour's tiles."""
-    r, c = np.divmod(particle, cols)
+def tile_order(ends: np.ndarray, colour_of: np.ndarray, cols: int, tile: int) -> np.ndarray:
+    """The order in which the tiled sweep projects the sticks: by tile colour (tile row parity, then column
+    parity), tile (row-major among that colour's tiles), stick colour, then cell (row-major in the tile)."""
+    r, c = np.divmod(ends[:, 0], cols)  # a stick's first end is its anchor
     tr, tc = r // tile, c // tile
-    return ((tr % 2) * 2 + tc % 2) * 10**6 + (tr // 2) * 10**3 + tc // 2
-
-
-def cell(particle: np.ndarray, cols: int, tile: int) -> np.ndarray:
-    r, c = np.divmod(particle, cols)
-    return (r % tile) * tile + c % tile
-
-
-def sequential_tiled_sweep(x, m, cols: int, tile: int) -> None:
-    """The tiled sweep as one sequence on the CPU, from the stick arrays and the tether table of an explicit
-    model ``m``: tile by tile, the tile's tethered particles by cell, then its sticks by colour and cell (a
-    stick belongs to the tile of its first end, its anchor)."""
-    ends = m.stick_ends.numpy()
-    colour_of = np.repeat(np.arange(len(m.colour_ranges)), [n for _, n in m.colour_ranges])
-    stick_tile = tile_key(ends[:, 0], cols, tile)
-    tethered = m.tether_particle.numpy() if hasattr(m, "tether_particle") else np.zeros(0, np.int32)
-    tether_tile = tile_key(tethered, cols, tile)
-    for key in np.unique(np.concatenate([stick_tile, tether_tile])):
-        rows = np.flatnonzero(tether_tile == key)
-        rows = rows[np.argsort(cell(tethered[rows], cols, tile), kind="stable")]
-        if len(rows):
-            wp.launch(pull_tethers, len(rows), device="cpu",
-                      inputs=[x, wp.array(tethered[rows], dtype=int, device="cpu"),
-                              wp.array(m.tether_pin.numpy()[rows], dtype=int, device="cpu"),
-                              wp.array(m.tether_length.numpy()[rows], dtype=float, device="cpu")])
-        mine = np.flatnonzero(stick_tile == key)
-        order = mine[np.lexsort((cell(ends[mine, 0], cols, tile), colour_of[mine]))]
-        if len(order):
-            wp.launch(relax_colour, len(order), device="cpu",
-                      inputs=[x, m.inv_mass, wp.array(ends[order], dtype=wp.vec2i, device="cpu"),
-                              wp.array(m.stick_rest.numpy()[order], dtype=float, device="cpu"),
-                              wp.array(m.stick_weight.numpy()[order], dtype=float, device="cpu"), 0])
+    cell = (r % tile) * tile + c % tile
+    return np.lexsort((cell, colour_of, tc // 2, tr // 2, tc % 2, tr % 2))
 
 
 def perturbed(sim: Simulator, seed: int = 3) -> np.ndarray:
@@ -71,11 +40,10 @@ def perturbed(sim: Simulator, seed: int = 3) -> np.ndarray:
 
 
 @pytest.mark.parametrize("tile, cloth", [
-    (4, {}),  # the smallest tile (pinned cloth is tethered by default: the tether pass fused in)
-    (16, {"tethers": False}),  # the default tile, no tethers
+    (4, {}),  # the smallest tile
+    (16, {}),  # the default
     (16, {"particle_masses": [[4, 6, 0.05], [20, 17, 0.001]], "pins": ["top-left", [30, 40]]}),  # weights read
     (8, {"sticks": ["structural", "bend"], "pins": ["top-edge"]}),  # no shear; more pins than the kernel checks
-    (8, {"tethers": True, "pins": ["top-left", [0, 20], [10, 44], [36, 0]], "tether_scale": 1.05}),
 ])
 def test_a_tiled_sweep_is_the_sequential_sweep_in_tile_order_bit_for_bit(tile, cloth, monkeypatch):
     monkeypatch.setattr(sticks, "GRID_TILE", tile)
@@ -83,7 +51,6 @@ def test_a_tiled_sweep_is_the_sequential_sweep_in_tile_order_bit_for_bit(tile, c
     tiled = Simulator(scene, "cpu", threads=1, sticks="tiled")
     explicit = Simulator(scene, "cpu", threads=1, sticks="explicit")
     assert "grid tiles" in tiled.constraint_sets and "grid sticks" not in tiled.constraint_sets
-    assert "tethers" not in tiled.constraint_sets  # pulled inside the tiles
     start = perturbed(tiled)
 
     tiled.state.set_positions(start)
@@ -93,8 +60,15 @@ def test_a_tiled_sweep_is_the_sequential_sweep_in_tile_order_bit_for_bit(tile, c
         for task in phase:
             task.run()
 
+    m = explicit.model
+    ends = m.stick_ends.numpy()
+    colour_of = np.repeat(np.arange(len(m.colour_ranges)), [n for _, n in m.colour_ranges])
+    order = tile_order(ends, colour_of, COLS, tile)
     x = wp.array(start, dtype=wp.vec3, device="cpu")
-    sequential_tiled_sweep(x, explicit.model, COLS, tile)
+    wp.launch(relax_colour, len(order), device="cpu",
+              inputs=[x, m.inv_mass, wp.array(ends[order], dtype=wp.vec2i, device="cpu"),
+                      wp.array(m.stick_rest.numpy()[order], dtype=float, device="cpu"),
+                      wp.array(m.stick_weight.numpy()[order], dtype=float, device="cpu"), 0])
     moved = np.abs(x.numpy() - start).max()
     assert moved > 1e-4  # the sweep did something
     np.testing.assert_array_equal(tiled.state.positions(), x.numpy())

@@ -121,7 +121,7 @@ def test_the_rule_picks_implicit_sticks_for_one_grid_cloth_that_cannot_tear(devi
 
 
 @pytest.mark.parametrize("compliance, sets, same_as", [
-    ({}, ("grid tiles",), "tiled"),  # rigid float32 sticks: swept tile by tile, the tethers pulled in the tiles
+    ({}, ("tethers", "grid tiles"), "tiled"),  # rigid float32 sticks: swept tile by tile
     ({"bend": 1e-3}, ("tethers", "grid sticks"), "explicit"),  # a soft family: a launch per colour
 ])
 def test_auto_on_a_gpu_computes_the_sticks_and_keeps_the_tether_table(compliance, sets, same_as, monkeypatch):

@@ -133,9 +133,8 @@ stick of a colour in the tile (half its cells)."""
 class GridTiles(ConstraintSet):
     """Implicit grid sticks swept tile by tile (kernels/grid_tiles.py): a block holds a tile of the cloth and
     its halo in shared memory and projects every colour of the tile's sticks there; four launches a sweep, one
-    per tile colour. Rigid sticks, float32 positions. A tethered cloth's tether pass is fused in (the Tethers set
-    then does not run). The same projections as GridSticks and Tethers in another order (block Gauss-Seidel), so
-    not the same positions bit for bit."""
+    per tile colour. Rigid sticks, float32 positions. The same projections as GridSticks in another order
+    (block Gauss-Seidel), so not the same positions bit for bit."""
 
     name = "grid tiles"
 
@@ -143,11 +142,7 @@ class GridTiles(ConstraintSet):
         return req.sticks > 0 and req.grid_tiles
 
     def device_bytes(self, req) -> int:
-        from .tethers import Tethers
-
-        # A tethered cloth's tether table, and each particle's row in it (the tiled sweep pulls the tethers).
-        tethers = Tethers.table_bytes(req) + req.particles * INT if req.tethered and not req.grid_pins else 0
-        return grid_table_bytes(req) + tethers
+        return grid_table_bytes(req)
 
     def bind(self, model, state, solver) -> BoundStage:
         import warp as wp
@@ -157,13 +152,7 @@ class GridTiles(ConstraintSet):
         g, x, tile = model.grid, state.particle_q, GRID_TILE
         geometry = tuple((c.layout.dr, c.layout.dc, c.layout.col_first, int(c.layout.row_q == 0),
                           c.layout.row_q or c.layout.col_q, c.layout.parity) for c in g.colours)
-        tethers = hasattr(model, "tether_row")
-        kernel = relax_grid_tiles(tile, geometry, tethers)
-        if tethers:
-            tables = [model.tether_row, model.tether_pin, model.tether_length]
-        else:
-            tables = [wp.empty(0, dtype=int, device=model.device), wp.empty((0, 0), dtype=int, device=model.device),
-                      wp.empty((0, 0), dtype=float, device=model.device)]
+        kernel = relax_grid_tiles(tile, geometry)
         tiles_down, tiles_across = -(-g.rows // tile), -(-g.cols // tile)
         tasks = []
         for row_parity in (0, 1):
@@ -174,7 +163,6 @@ class GridTiles(ConstraintSet):
                 launch = wp.launch_tiled(
                     kernel, dim=[down * across], block_dim=tile * tile // 2, record_cmd=True,
                     inputs=[x, model.inv_mass, g.colours[0].layout, g.colours[0].pins, g.col_rest1, g.col_rest2,
-                            g.row_rest1, g.row_rest2, g.col_sq1, g.row_sq1, *tables, g.rows, row_parity, col_parity,
-                            across])
+                            g.row_rest1, g.row_rest2, g.col_sq1, g.row_sq1, g.rows, row_parity, col_parity, across])
                 tasks.append(PhaseTask(kernel.key, launch.launch, launch))
         return BoundStage(None, [[task] for task in tasks])

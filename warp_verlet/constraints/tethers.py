@@ -94,16 +94,12 @@ class Tethers(ConstraintSet):
     name = "tethers"
 
     def needed(self, req) -> bool:
-        return req.tethered > 0 and req.grid_pins == 0 and not req.grid_tiles  # tiled sweeps pull them themselves
-
-    @staticmethod
-    def table_bytes(req) -> int:
-        """The tether table: per tethered particle its index, and a pin and a length per tether."""
-        return req.tethered * (INT + req.tethers_per_particle * (INT + FLOAT))
+        return req.tethered > 0 and req.grid_pins == 0
 
     def device_bytes(self, req) -> int:
+        per_particle = INT + req.tethers_per_particle * (INT + FLOAT)  # particle; pin and length per tether
         live = req.tethers_per_particle * FLOAT if req.tears else 0  # the State's lengths, cut by tears
-        return self.table_bytes(req) + req.tethered * live
+        return req.tethered * (per_particle + live)
 
     def bind(self, model, state, solver) -> BoundStage:
         from warp_verlet.kernels.tether import pull_tethers

@@ -338,10 +338,6 @@ class Model:
             self.tether_particle = wp.array(table.particle, dtype=int, device=device)
             self.tether_pin = wp.array2d(table.pin, dtype=int, device=device)
             self.tether_length = wp.array2d(table.length, dtype=float, device=device)
-            if req.grid_tiles:  # the tiled sweep finds a particle's tethers from the particle
-                row = np.full(self.particle_count, -1, np.int32)
-                row[table.particle] = np.arange(table.count, dtype=np.int32)
-                self.tether_row = wp.array(row, dtype=int, device=device)
         self.air = None  # [simulation.air]'s device data (core/aerodynamics.AirModel), where a face feels air
         if AERODYNAMICS.needed(req):
             from .aerodynamics import AirModel
