@@ -8,8 +8,8 @@ tearing and the stretch metrics share); this module binds their sweeps.
 from __future__ import annotations
 
 from .kind import ConstraintSet
-from ..launches import (FLOAT, FLOAT64, INT, VEC2I, BoundStage, copy_back_phase, recorded, split_tasks,
-                        start_compliant_substep)
+from ..launches import (FLOAT, FLOAT64, INT, VEC2I, BoundStage, copy_back_phase, elements_per_thread, recorded,
+                        split_tasks, start_compliant_substep)
 
 
 class Sticks(ConstraintSet):
@@ -33,26 +33,33 @@ class Sticks(ConstraintSet):
 
         m, x, threads = model, state.particle_q, solver.threads
         if m.relaxation == "coloured":
+            def per_thread(n):  # (threads, sticks per thread) of a colour's piece of n sticks
+                k = elements_per_thread(n, m.device)
+                return n // k, k
+
             weight = state.stick_weight if m.tears else m.stick_weight
             if m.tension_tears and not m.compliant:  # rigid sticks that keep their tension for the tear stage
                 tension = solver.scratch("stick_tension", m.stick_count, float)
 
                 def make_rigid(f, n):
-                    return recorded(relax_colour_tension, n, [x, m.inv_mass, m.stick_ends, m.stick_rest, weight, f],
-                                    [tension])
+                    dim, k = per_thread(n)
+                    return recorded(relax_colour_tension, dim,
+                                    [x, m.inv_mass, m.stick_ends, m.stick_rest, weight, f, k], [tension])
                 phases = [split_tasks(make_rigid, first, count, threads) for first, count in m.colour_ranges]
                 if solver.req.global_iterations:  # the global correction starts the tension (kernels/global_solve.py)
                     return BoundStage(None, phases)
                 return BoundStage(lambda state, dt: tension.zero_(), phases)
             if not m.compliant:
                 def make(f, n):
-                    return recorded(relax_colour, n, [x, m.inv_mass, m.stick_ends, m.stick_rest, weight, f])
+                    dim, k = per_thread(n)
+                    return recorded(relax_colour, dim, [x, m.inv_mass, m.stick_ends, m.stick_rest, weight, f, k])
                 return BoundStage(None, [split_tasks(make, first, count, threads) for first, count in m.colour_ranges])
             tension = solver.scratch("stick_tension", m.stick_count, float)
 
             def make_soft(f, n):
-                return recorded(relax_colour_compliant, n, [x, m.inv_mass, m.stick_ends, m.stick_rest, weight,
-                                                            m.stick_compliance, 0.0, f], [tension])
+                dim, k = per_thread(n)
+                return recorded(relax_colour_compliant, dim, [x, m.inv_mass, m.stick_ends, m.stick_rest, weight,
+                                                              m.stick_compliance, 0.0, f, k], [tension])
             phases = [split_tasks(make_soft, first, count, threads) for first, count in m.colour_ranges]
             launches = [task.launch for phase in phases for task in phase if task is not None]
 
