@@ -15,7 +15,7 @@ def relax_one_stick(xi, xj, wi, wj, rest, device, k=1.0):
     ends = wp.array(np.array([[0, 1]], np.int32), dtype=wp.vec2i, device=device)
     rest_a = wp.array(np.array([rest], np.float32), dtype=float, device=device)
     k_a = wp.array(np.array([k], np.float32), dtype=float, device=device)
-    wp.launch(relax_colour, 1, inputs=[x, inv_mass, ends, rest_a, k_a, 0], device=device)
+    wp.launch(relax_colour, 1, inputs=[x, inv_mass, ends, rest_a, k_a, 0, 1], device=device)
     return x.numpy()
 
 
