@@ -17,8 +17,9 @@ numpy rounds them) and takes the root: an addition, a square root and a rounding
 fused multiply-add to change a bit. The projection is ``stick_correction`` (kernels/relax.py), the explicit
 kernels' own arithmetic, so the two paths give the same positions bit for bit.
 
-Each kernel runs a power of two of threads per row of anchors, so that a thread finds its row and column with a
-shift and a mask, not a division (the threads past the row's last anchor return at once).
+On a GPU each kernel runs a power of two of threads per row of anchors, so that a thread finds its row and column
+with a shift and a mask, not a division (the threads past the row's last anchor return at once). On the CPU a
+thread takes whole rows of anchors in one loop (kernels/relax.py says why).
 """
 
 from typing import Any
@@ -71,9 +72,12 @@ def particle_weight(g: GridColour, p: int, inv_mass: wp.array(dtype=float), pins
     of the few pins, else the free particles' (the same float32 the array holds)."""
     if g.uniform_mass == 0:
         return inv_mass[p]
-    for n in range(pins.shape[0]):
+    # A while loop, not range(): Warp's range() loop handles either sign of step, which measured slower on the CPU.
+    n = int(0)
+    while n < pins.shape[0]:
         if pins[n] == p:
             return float(0.0)
+        n += 1
     return g.free_weight
 
 
@@ -95,6 +99,40 @@ def colour_stick(g: GridColour, kr: int, kc: int, col_rest: wp.array(dtype=float
     return i, j, rest
 
 
+@wp.func
+def signs_known(g: GridColour):
+    """Whether the layout's offsets give no negative index, which they never do (col_shift is -1 only where
+    col_first is 1); testing it lets the compiler drop Warp's negative-index adjustment from the indices
+    computed from them (kernels/relax.py says more)."""
+    return g.first_particle >= 0 and g.row_first >= 0 and g.col_first >= 0 and g.col_first + g.col_shift >= 0
+
+
+@wp.func
+def project_grid_stick(
+    x: wp.array(dtype=Any),
+    inv_mass: wp.array(dtype=float),
+    g: GridColour,
+    pins: wp.array(dtype=int),
+    col_rest: wp.array(dtype=float),
+    row_rest: wp.array(dtype=float),
+    col_sq: wp.array(dtype=wp.float64),
+    row_sq: wp.array(dtype=wp.float64),
+    kr: int,
+    kc: int,
+):
+    """The rigid projection of the colour's stick (kr, kc) (relax_colour's, with ends and rest computed)."""
+    i, j, rest = colour_stick(g, kr, kc, col_rest, row_rest, col_sq, row_sq)
+    if i < 0 or j < 0:  # never true (see signs_known)
+        return
+    wi = particle_weight(g, i, inv_mass, pins)
+    wj = particle_weight(g, j, inv_mass, pins)
+    xi = x[i]
+    xj = x[j]
+    c = stick_correction(xi, xj, wi, wj, rest, 1.0)
+    x[i] = xi + scaled(c, wi)
+    x[j] = xj - scaled(c, wj)
+
+
 @wp.kernel
 def relax_grid_colour(
     x: wp.array(dtype=Any),
@@ -106,20 +144,62 @@ def relax_grid_colour(
     col_sq: wp.array(dtype=wp.float64),
     row_sq: wp.array(dtype=wp.float64),
     first_row: int,
+    rows_per_thread: int,
 ):
-    """Gauss-Seidel over one colour of implicit grid sticks (relax_colour with ends and rest computed); a
-    thread per anchor, 2^col_bits threads per row of anchors from ``first_row``."""
+    """Gauss-Seidel over one colour of implicit grid sticks (relax_colour with ends and rest computed), from the
+    row of anchors ``first_row``. ``rows_per_thread`` 0 (a GPU): a thread per anchor, 2^col_bits threads per row
+    of anchors. Else (the CPU, where Warp runs a launch's threads one after another): thread t takes
+    ``rows_per_thread`` whole rows of anchors from first_row + t * rows_per_thread, in row-major order, in one
+    loop (kernels/relax.py says why)."""
     t = wp.tid()
-    kr = first_row + (t >> g.col_bits)
-    kc = t & ((1 << g.col_bits) - 1)
-    if kc >= g.cols:
+    if rows_per_thread == 0:
+        kr = first_row + (t >> g.col_bits)
+        kc = t & ((1 << g.col_bits) - 1)
+        if kc < g.cols:
+            project_grid_stick(x, inv_mass, g, pins, col_rest, row_rest, col_sq, row_sq, kr, kc)
         return
+    kr = first_row + t * rows_per_thread
+    if kr < 0 or not signs_known(g):  # never true (see signs_known)
+        return
+    stop = kr + rows_per_thread
+    while kr < stop:
+        kc = int(0)
+        while kc < g.cols:
+            project_grid_stick(x, inv_mass, g, pins, col_rest, row_rest, col_sq, row_sq, kr, kc)
+            kc += 1
+        kr += 1
+
+
+@wp.func
+def project_grid_stick_compliant(
+    x: wp.array(dtype=Any),
+    inv_mass: wp.array(dtype=float),
+    g: GridColour,
+    pins: wp.array(dtype=int),
+    col_rest: wp.array(dtype=float),
+    row_rest: wp.array(dtype=float),
+    col_sq: wp.array(dtype=wp.float64),
+    row_sq: wp.array(dtype=wp.float64),
+    compliance: float,
+    inv_dt2: float,
+    tension_first: int,
+    tension: wp.array(dtype=float),
+    kr: int,
+    kc: int,
+):
+    """The XPBD projection of the colour's stick (kr, kc) (relax_colour_compliant's, with ends and rest computed);
+    its tension is tension[tension_first + kr * cols + kc]."""
     i, j, rest = colour_stick(g, kr, kc, col_rest, row_rest, col_sq, row_sq)
+    k = tension_first + kr * g.cols + kc
+    if i < 0 or j < 0 or k < 0:  # never true (see signs_known)
+        return
     wi = particle_weight(g, i, inv_mass, pins)
     wj = particle_weight(g, j, inv_mass, pins)
     xi = x[i]
     xj = x[j]
-    c = stick_correction(xi, xj, wi, wj, rest, 1.0)
+    # Weight 1: a cloth that tears keeps stick arrays.
+    c, mu = compliant_correction(xi, xj, wi, wj, rest, 1.0, compliance, inv_dt2, tension[k])
+    tension[k] = mu
     x[i] = xi + scaled(c, wi)
     x[j] = xj - scaled(c, wj)
 
@@ -138,27 +218,31 @@ def relax_grid_colour_compliant(
     inv_dt2: float,
     first_row: int,
     tension_first: int,
+    rows_per_thread: int,
     tension: wp.array(dtype=float),
 ):
     """XPBD over one colour of implicit grid sticks (relax_colour_compliant with ends and rest computed, one
-    compliance for the colour's family); ``tension`` holds the soft colours' sticks from ``tension_first``, a
-    row of anchors after another."""
+    compliance for the colour's family), threads as relax_grid_colour's; ``tension`` holds the soft colours'
+    sticks from ``tension_first``, a row of anchors after another."""
     t = wp.tid()
-    kr = first_row + (t >> g.col_bits)
-    kc = t & ((1 << g.col_bits) - 1)
-    if kc >= g.cols:
+    if rows_per_thread == 0:
+        kr = first_row + (t >> g.col_bits)
+        kc = t & ((1 << g.col_bits) - 1)
+        if kc < g.cols:
+            project_grid_stick_compliant(x, inv_mass, g, pins, col_rest, row_rest, col_sq, row_sq, compliance,
+                                         inv_dt2, tension_first, tension, kr, kc)
         return
-    i, j, rest = colour_stick(g, kr, kc, col_rest, row_rest, col_sq, row_sq)
-    k = tension_first + kr * g.cols + kc
-    wi = particle_weight(g, i, inv_mass, pins)
-    wj = particle_weight(g, j, inv_mass, pins)
-    xi = x[i]
-    xj = x[j]
-    # Weight 1: a cloth that tears keeps stick arrays.
-    c, mu = compliant_correction(xi, xj, wi, wj, rest, 1.0, compliance, inv_dt2, tension[k])
-    tension[k] = mu
-    x[i] = xi + scaled(c, wi)
-    x[j] = xj - scaled(c, wj)
+    kr = first_row + t * rows_per_thread
+    if kr < 0 or not signs_known(g):  # never true (see signs_known)
+        return
+    stop = kr + rows_per_thread
+    while kr < stop:
+        kc = int(0)
+        while kc < g.cols:
+            project_grid_stick_compliant(x, inv_mass, g, pins, col_rest, row_rest, col_sq, row_sq, compliance,
+                                         inv_dt2, tension_first, tension, kr, kc)
+            kc += 1
+        kr += 1
 
 
 @wp.kernel

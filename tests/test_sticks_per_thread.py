@@ -2,7 +2,8 @@
 the kernel (kernels/relax.py, warp_verlet/launches.elements_per_thread); on a GPU each thread takes one stick.
 The sticks of a colour share no particle, so the order cannot change a bit: the positions must equal those of
 one stick a thread, with pins, tethers, soft sticks, colliders and both kinds of tearing, on one thread and cut
-over a thread team."""
+over a thread team. Implicit grid sticks (kernels/grid_relax.py) take whole rows of anchors a thread on the CPU,
+and must give the stick arrays' positions, as tests/test_implicit_grid.py asks of them in general."""
 
 from __future__ import annotations
 
@@ -108,3 +109,71 @@ def test_whole_pieces_give_the_positions_of_one_stick_a_thread_bit_for_bit(monke
         differ = (points != expected).any(axis=1)
         assert not differ.any(), (f"{name}, {threads} threads: whole pieces moved {differ.sum()} particles off the "
                                   f"one-stick-a-thread positions (by up to {np.abs(points - expected).max():.2e} m)")
+
+
+# ---------------------------------------------------------------------------------------------- implicit grid sticks
+GRID_KERNELS = ("relax_grid_colour", "relax_grid_colour_compliant")
+GRID_CLOTHS = {
+    "rigid, two pins": {"pins": ["top-left", "top-right"]},
+    "soft shear and bend, horizontal": {"pins": ["top-left"], "orientation": "horizontal",
+                                        "compliance": {"shear": 1e-4, "bend": 1e-2}},
+    "particle masses, tethers": {"pins": ["top-left", "top-right"], "particle_masses": [[4, 6, 0.05], [9, 0, 0.001]],
+                                 "tethers": True},
+    "soft bend, float64": {"pins": ["top-edge"], "compliance": {"bend": 1e-3}},
+}
+
+
+def grid_scene(name: str):
+    cloth = {"resolution": [13, 19], "size": [1.0, 1.3], "sticks": ["structural", "shear", "bend"],
+             **GRID_CLOTHS[name]}
+    simulation = {"fps": 60, "substeps": 3, "iterations": 5, "wind": [8.0, 0.0, 3.0]}
+    if name.endswith("float64"):
+        simulation["precision"] = "float64"
+    return parse_scene({"simulation": simulation, "cloth": [cloth]}, file=f"<{name}>")
+
+
+@pytest.fixture
+def grid_launches(monkeypatch):
+    """The implicit grid stick launches bound from now on, as (kernel, threads, rows of anchors a thread)."""
+    seen = []
+    real = sticks_module.recorded
+
+    def spy(kernel, dim, inputs, outputs=None, **kwargs):
+        if kernel.key in GRID_KERNELS:
+            seen.append((kernel.key, dim, inputs[-1]))
+        return real(kernel, dim, inputs, outputs, **kwargs)
+
+    monkeypatch.setattr(sticks_module, "recorded", spy)
+    return seen
+
+
+@pytest.mark.parametrize("name", list(GRID_CLOTHS))
+def test_implicit_grid_rows_a_thread_give_the_stick_arrays_positions_bit_for_bit(monkeypatch, grid_launches, name):
+    # On the CPU a thread takes its piece's whole rows of anchors; with one row a thread (elements_per_thread
+    # made 1) the rows of a piece go to several threads of one launch. Both must give the stick arrays' positions.
+    scene = grid_scene(name)
+    expected = {}
+    for threads in (1, 3):
+        sim = Simulator(scene, "cpu", threads=threads, sticks="explicit")
+        for _ in range(8):
+            sim.step_frame()
+        expected[threads] = sim.positions()
+        assert np.abs(expected[threads] - sim.model.rest_positions).max() > 1e-3  # the cloth moved
+    for rows_a_thread in ("whole piece", "one row"):
+        if rows_a_thread == "one row":
+            monkeypatch.setattr(sticks_module, "elements_per_thread", lambda count, device: 1)
+        for threads in (1, 3):
+            grid_launches.clear()
+            sim = Simulator(scene, "cpu", threads=threads, sticks="implicit")
+            for _ in range(8):
+                sim.step_frame()
+            assert "grid sticks" in sim.constraint_sets and grid_launches
+            if rows_a_thread == "whole piece":
+                assert all(dim == 1 and per_thread >= 1 for _, dim, per_thread in grid_launches)
+            else:
+                assert all(per_thread == 1 for *_, per_thread in grid_launches)
+                assert any(dim > 1 for _, dim, _ in grid_launches)
+            points = sim.positions()
+            differ = (points != expected[threads]).any(axis=1)
+            assert not differ.any(), (f"{name}, {rows_a_thread}, {threads} threads: {differ.sum()} particles off the "
+                                      f"stick arrays' positions (by up to {np.abs(points - expected[threads]).max():.2e} m)")

@@ -8,8 +8,9 @@ tearing and the stretch metrics share); this module binds their sweeps.
 from __future__ import annotations
 
 from .kind import ConstraintSet
-from ..launches import (FLOAT, FLOAT64, INT, VEC2I, BoundStage, copy_back_phase, elements_per_thread, recorded,
-                        split_tasks, start_compliant_substep)
+from ..launches import (FLOAT, FLOAT64, INT, VEC2I, BoundStage, copy_back_phase, recorded, split_tasks,
+                        start_compliant_substep)
+from ..launches import elements_per_thread
 
 
 class Sticks(ConstraintSet):
@@ -106,18 +107,29 @@ class GridSticks(ConstraintSet):
 
         g, x, threads = model.grid, state.particle_q, solver.threads
         tension = solver.scratch("grid_tension", g.soft_sticks, float) if g.soft_sticks else None
+
+        def grid_threads(rows, col_bits):
+            """(threads, rows of anchors a thread) for a piece of ``rows`` rows: on the CPU whole rows a thread
+            (elements_per_thread), on a GPU a thread an anchor (0), 2^col_bits threads a row."""
+            if model.device.is_cpu:
+                per_thread = elements_per_thread(rows, model.device)
+                return rows // per_thread, per_thread
+            return rows << col_bits, 0
+
         phases, soft_launches = [], []
         for colour in g.colours:
             tables = [colour.pins, colour.col_rest, colour.row_rest, colour.col_sq, colour.row_sq]
             if colour.compliance > 0.0:
                 def make(f, rows, colour=colour, tables=tables):
-                    return recorded(relax_grid_colour_compliant, rows << colour.layout.col_bits,
+                    dim, per_thread = grid_threads(rows, colour.layout.col_bits)
+                    return recorded(relax_grid_colour_compliant, dim,
                                     [x, model.inv_mass, colour.layout, *tables, colour.compliance, 0.0, f,
-                                     colour.tension_first], [tension], block_dim=GRID_BLOCK_DIM)
+                                     colour.tension_first, per_thread], [tension], block_dim=GRID_BLOCK_DIM)
             else:
                 def make(f, rows, colour=colour, tables=tables):
-                    return recorded(relax_grid_colour, rows << colour.layout.col_bits,
-                                    [x, model.inv_mass, colour.layout, *tables, f], block_dim=GRID_BLOCK_DIM)
+                    dim, per_thread = grid_threads(rows, colour.layout.col_bits)
+                    return recorded(relax_grid_colour, dim, [x, model.inv_mass, colour.layout, *tables, f, per_thread],
+                                    block_dim=GRID_BLOCK_DIM)
             phase = split_tasks(make, 0, colour.rows, threads)  # the CPU thread team cuts a colour by rows
             if colour.compliance > 0.0:
                 soft_launches += [task.launch for task in phase if task is not None]
