@@ -19,7 +19,9 @@ kernels' own arithmetic, so the two paths give the same positions bit for bit.
 
 On a GPU each kernel runs a power of two of threads per row of anchors, so that a thread finds its row and column
 with a shift and a mask, not a division (the threads past the row's last anchor return at once). On the CPU a
-thread takes whole rows of anchors in one loop (kernels/relax.py says why).
+thread takes whole rows of anchors in one loop and reads the weights from the inverse masses, which stay in its
+caches (kernels/relax.py says why a loop). Indices are tested for a sign they never have, so that the compiler
+drops Warp's negative-index adjustment from them (kernels/relax.py says more).
 """
 
 from typing import Any
@@ -72,12 +74,9 @@ def particle_weight(g: GridColour, p: int, inv_mass: wp.array(dtype=float), pins
     of the few pins, else the free particles' (the same float32 the array holds)."""
     if g.uniform_mass == 0:
         return inv_mass[p]
-    # A while loop, not range(): Warp's range() loop handles either sign of step, which measured slower on the CPU.
-    n = int(0)
-    while n < pins.shape[0]:
+    for n in range(pins.shape[0]):
         if pins[n] == p:
             return float(0.0)
-        n += 1
     return g.free_weight
 
 
@@ -89,22 +88,17 @@ def colour_stick(g: GridColour, kr: int, kc: int, col_rest: wp.array(dtype=float
     c = anchor_index(kc, g.col_q, g.parity) + g.col_first
     i = g.first_particle + r * g.grid_cols + c
     j = i + g.dr * g.grid_cols + g.dc
+    column = c + g.col_shift
     rest = float(0.0)
+    if r < 0 or column < 0:  # never true: see the module docstring
+        return -1, -1, rest
     if g.use_row == 0:
-        rest = col_rest[c + g.col_shift]
+        rest = col_rest[column]
     elif g.use_col == 0:
         rest = row_rest[r]
     else:
-        rest = wp.float32(wp.sqrt(col_sq[c + g.col_shift] + row_sq[r]))
+        rest = wp.float32(wp.sqrt(col_sq[column] + row_sq[r]))
     return i, j, rest
-
-
-@wp.func
-def signs_known(g: GridColour):
-    """Whether the layout's offsets give no negative index, which they never do (col_shift is -1 only where
-    col_first is 1); testing it lets the compiler drop Warp's negative-index adjustment from the indices
-    computed from them (kernels/relax.py says more)."""
-    return g.first_particle >= 0 and g.row_first >= 0 and g.col_first >= 0 and g.col_first + g.col_shift >= 0
 
 
 @wp.func
@@ -119,13 +113,23 @@ def project_grid_stick(
     row_sq: wp.array(dtype=wp.float64),
     kr: int,
     kc: int,
+    read_weights: int,
 ):
-    """The rigid projection of the colour's stick (kr, kc) (relax_colour's, with ends and rest computed)."""
+    """The rigid projection of the colour's stick (kr, kc) (relax_colour's, with ends and rest computed). The
+    weights are read from ``inv_mass`` where ``read_weights`` is 1 (the CPU: the array stays in its caches, and
+    reading it is cheaper than searching the pins), else found by particle_weight (a GPU, where it saves memory
+    traffic); both give the same float32."""
     i, j, rest = colour_stick(g, kr, kc, col_rest, row_rest, col_sq, row_sq)
-    if i < 0 or j < 0:  # never true (see signs_known)
+    if i < 0 or j < 0:  # never true (see colour_stick)
         return
-    wi = particle_weight(g, i, inv_mass, pins)
-    wj = particle_weight(g, j, inv_mass, pins)
+    wi = float(0.0)
+    wj = float(0.0)
+    if read_weights != 0:
+        wi = inv_mass[i]
+        wj = inv_mass[j]
+    else:
+        wi = particle_weight(g, i, inv_mass, pins)
+        wj = particle_weight(g, j, inv_mass, pins)
     xi = x[i]
     xj = x[j]
     c = stick_correction(xi, xj, wi, wj, rest, 1.0)
@@ -156,16 +160,16 @@ def relax_grid_colour(
         kr = first_row + (t >> g.col_bits)
         kc = t & ((1 << g.col_bits) - 1)
         if kc < g.cols:
-            project_grid_stick(x, inv_mass, g, pins, col_rest, row_rest, col_sq, row_sq, kr, kc)
+            project_grid_stick(x, inv_mass, g, pins, col_rest, row_rest, col_sq, row_sq, kr, kc, 0)
         return
     kr = first_row + t * rows_per_thread
-    if kr < 0 or not signs_known(g):  # never true (see signs_known)
+    if kr < 0:  # never true (see colour_stick)
         return
     stop = kr + rows_per_thread
     while kr < stop:
         kc = int(0)
         while kc < g.cols:
-            project_grid_stick(x, inv_mass, g, pins, col_rest, row_rest, col_sq, row_sq, kr, kc)
+            project_grid_stick(x, inv_mass, g, pins, col_rest, row_rest, col_sq, row_sq, kr, kc, 1)
             kc += 1
         kr += 1
 
@@ -186,15 +190,22 @@ def project_grid_stick_compliant(
     tension: wp.array(dtype=float),
     kr: int,
     kc: int,
+    read_weights: int,
 ):
     """The XPBD projection of the colour's stick (kr, kc) (relax_colour_compliant's, with ends and rest computed);
-    its tension is tension[tension_first + kr * cols + kc]."""
+    its tension is tension[tension_first + kr * cols + kc]; ``read_weights`` as project_grid_stick's."""
     i, j, rest = colour_stick(g, kr, kc, col_rest, row_rest, col_sq, row_sq)
     k = tension_first + kr * g.cols + kc
-    if i < 0 or j < 0 or k < 0:  # never true (see signs_known)
+    if i < 0 or j < 0 or k < 0:  # never true (see colour_stick)
         return
-    wi = particle_weight(g, i, inv_mass, pins)
-    wj = particle_weight(g, j, inv_mass, pins)
+    wi = float(0.0)
+    wj = float(0.0)
+    if read_weights != 0:
+        wi = inv_mass[i]
+        wj = inv_mass[j]
+    else:
+        wi = particle_weight(g, i, inv_mass, pins)
+        wj = particle_weight(g, j, inv_mass, pins)
     xi = x[i]
     xj = x[j]
     # Weight 1: a cloth that tears keeps stick arrays.
@@ -230,17 +241,17 @@ def relax_grid_colour_compliant(
         kc = t & ((1 << g.col_bits) - 1)
         if kc < g.cols:
             project_grid_stick_compliant(x, inv_mass, g, pins, col_rest, row_rest, col_sq, row_sq, compliance,
-                                         inv_dt2, tension_first, tension, kr, kc)
+                                         inv_dt2, tension_first, tension, kr, kc, 0)
         return
     kr = first_row + t * rows_per_thread
-    if kr < 0 or not signs_known(g):  # never true (see signs_known)
+    if kr < 0:  # never true (see colour_stick)
         return
     stop = kr + rows_per_thread
     while kr < stop:
         kc = int(0)
         while kc < g.cols:
             project_grid_stick_compliant(x, inv_mass, g, pins, col_rest, row_rest, col_sq, row_sq, compliance,
-                                         inv_dt2, tension_first, tension, kr, kc)
+                                         inv_dt2, tension_first, tension, kr, kc, 1)
             kc += 1
         kr += 1
 
