@@ -16,10 +16,11 @@ would make the cloth softer with fewer sweeps. With alpha = 0 it is the rigid pr
 A coloured launch gives each thread ``per_thread`` consecutive sticks of the colour, projected in order: 1 on a GPU,
 and on the CPU a thread team's whole piece (warp_verlet/launches.elements_per_thread), where Warp runs a launch's
 threads one after another and a loop inside the kernel keeps its arguments and indices in registers. Within a
-colour the order of the sticks cannot change a bit. The kernels also test that a stick's index and its ends are
-not negative, which they never are: Warp indexes arrays the Python way (a negative index counts from the end),
-and knowing the sign lets the compiler drop that adjustment from every index after the test, a few integer
-operations per index that measured a large share of a CPU projection (bench/results/code_choices.md).
+colour the order of the sticks cannot change a bit (a Jacobi gather takes its particles the same way: each
+writes only its own). The kernels also test that a stick's index and its ends are not negative, which they never
+are: Warp indexes arrays the Python way (a negative index counts from the end), and knowing the sign lets the
+compiler drop that adjustment from every index after the test, a few integer operations per index that measured
+a large share of a CPU projection (bench/results/code_choices.md).
 """
 
 from typing import Any
@@ -184,6 +185,40 @@ def relax_colour_tension(
         s += 1
 
 
+@wp.func
+def gather_particle(
+    i: int,
+    x_in: wp.array(dtype=Any),
+    inv_mass: wp.array(dtype=float),
+    neighbour_start: wp.array(dtype=int),
+    neighbour: wp.array(dtype=int),
+    neighbour_rest: wp.array(dtype=float),
+    neighbour_weight: wp.array(dtype=float),
+    x_out: wp.array(dtype=Any),
+):
+    """Particle i's Jacobi update (relax_jacobi), its sticks' corrections summed in their order."""
+    xi = x_in[i]
+    wi = inv_mass[i]
+    if wi == 0.0:
+        x_out[i] = xi
+        return
+    total = type(xi)(0.0)
+    start = neighbour_start[i]
+    end = neighbour_start[i + 1]
+    if start < 0:  # never true (the module docstring says why it is here)
+        return
+    n = start
+    while n < end:  # not range(), whose loop handles either sign of step: slower on the CPU
+        j = neighbour[n]
+        if j >= 0:  # never false (the module docstring)
+            total += stick_correction(xi, x_in[j], wi, inv_mass[j], neighbour_rest[n], neighbour_weight[n])
+        n += 1
+    count = end - start
+    if count > 0:
+        xi = xi + total * (type(xi[0])(wi) / type(xi[0])(float(count)))
+    x_out[i] = xi
+
+
 @wp.kernel
 def relax_jacobi(
     x_in: wp.array(dtype=Any),
@@ -193,28 +228,22 @@ def relax_jacobi(
     neighbour_rest: wp.array(dtype=float),
     neighbour_weight: wp.array(dtype=float),
     first: int,
+    per_thread: int,
     x_out: wp.array(dtype=Any),
 ):
     """Jacobi: every particle gathers the corrections of all its sticks from the same old positions and
     applies their average (Mueller et al. 2007, section 3.5). The gather form needs no atomics, so the
     sum order is fixed and the result is bit-for-bit repeatable on every device. Threads cover particles
-    first .. first + dim - 1 (a CPU thread team takes one piece each, warp_verlet/core/cpu_team.py)."""
-    i = first + wp.tid()
-    xi = x_in[i]
-    wi = inv_mass[i]
-    if wi == 0.0:
-        x_out[i] = xi
+    first .. first + dim * per_thread - 1, ``per_thread`` each in order (a CPU thread team takes one piece each,
+    warp_verlet/core/cpu_team.py; warp_verlet/launches.elements_per_thread: all of a piece's particles in one
+    thread on the CPU, one a thread on a GPU)."""
+    i = first + wp.tid() * per_thread
+    if i < 0:  # never true (the module docstring says why it is here)
         return
-    total = type(xi)(0.0)
-    start = neighbour_start[i]
-    end = neighbour_start[i + 1]
-    for n in range(start, end):
-        j = neighbour[n]
-        total += stick_correction(xi, x_in[j], wi, inv_mass[j], neighbour_rest[n], neighbour_weight[n])
-    count = end - start
-    if count > 0:
-        xi = xi + total * (type(xi[0])(wi) / type(xi[0])(float(count)))
-    x_out[i] = xi
+    stop = i + per_thread
+    while i < stop:
+        gather_particle(i, x_in, inv_mass, neighbour_start, neighbour, neighbour_rest, neighbour_weight, x_out)
+        i += 1
 
 
 for_positions(relax_colour, arrays=("x",))

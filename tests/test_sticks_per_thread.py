@@ -2,7 +2,7 @@
 the kernel (kernels/relax.py, warp_verlet/launches.elements_per_thread); on a GPU each thread takes one stick.
 The sticks of a colour share no particle, so the order cannot change a bit: the positions must equal those of
 one stick a thread, with pins, tethers, soft sticks, colliders and both kinds of tearing, on one thread and cut
-over a thread team. Implicit grid sticks (kernels/grid_relax.py) take whole rows of anchors a thread on the CPU,
+over a thread team; a Jacobi gather takes its piece's particles the same way. Implicit grid sticks (kernels/grid_relax.py) take whole rows of anchors a thread on the CPU,
 and must give the stick arrays' positions, as tests/test_implicit_grid.py asks of them in general."""
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from warp_verlet.input.scene import parse_scene
 from warp_verlet.launches import elements_per_thread
 from warp_verlet.core.simulator import Simulator
 
-RELAX_KERNELS = ("relax_colour", "relax_colour_compliant", "relax_colour_tension")
+RELAX_KERNELS = ("relax_colour", "relax_colour_compliant", "relax_colour_tension", "relax_jacobi")
 
 
 def scene_with(name: str):
@@ -33,28 +33,35 @@ def scene_with(name: str):
         cloth.update(pins=["top-edge"], tear_tension=1.0)
     elif name == "soft, tearing by tension, float64":
         cloth.update(pins=["top-edge"], tear_tension=1.0, compliance={"bend": 1e-3})
+    elif name == "jacobi, tethers, tearing, colliders":
+        cloth.update(tethers=True, tether_scale=1.5, tear_threshold=1.2)
+        colliders = [{"type": "sphere", "radius": 0.2, "path": [[0.0, 0.0, 0.3, 1.0], [0.5, 0.0, 0.3, -1.0]]}]
     simulation = {"fps": 60, "substeps": 3, "iterations": 5, "wind": [8.0, 0.0, 3.0]}
+    if name.startswith("jacobi"):
+        simulation["relaxation"] = "jacobi"
     if name.endswith("float64"):
         simulation["precision"] = "float64"
     return parse_scene({"simulation": simulation, "cloth": [cloth], "collider": colliders}, file=f"<{name}>")
 
 
 SCENES = ["rigid, tethers, masses", "soft, tethers, tearing, colliders", "rigid, tearing by tension",
-          "soft, tearing by tension, float64"]
+          "soft, tearing by tension, float64", "jacobi, tethers, tearing, colliders"]
 KERNEL_OF = {"rigid, tethers, masses": "relax_colour", "soft, tethers, tearing, colliders": "relax_colour_compliant",
              "rigid, tearing by tension": "relax_colour_tension",
-             "soft, tearing by tension, float64": "relax_colour_compliant"}
+             "soft, tearing by tension, float64": "relax_colour_compliant",
+             "jacobi, tethers, tearing, colliders": "relax_jacobi"}
 
 
 @pytest.fixture
 def stick_launches(monkeypatch):
-    """The coloured stick launches bound from now on, as (kernel, threads, first, sticks per thread)."""
+    """The stick launches bound from now on, as (kernel, threads, first, sticks or particles per thread)."""
     seen = []
     real = sticks_module.recorded
 
     def spy(kernel, dim, inputs, outputs=None, **kwargs):
         if kernel.key in RELAX_KERNELS:
-            seen.append((kernel.key, dim, inputs[-2], inputs[-1]))
+            first, per_thread = inputs[-3:-1] if kernel.key == "relax_jacobi" else inputs[-2:]  # jacobi: then x_out
+            seen.append((kernel.key, dim, first, per_thread))
         return real(kernel, dim, inputs, outputs, **kwargs)
 
     monkeypatch.setattr(sticks_module, "recorded", spy)
@@ -90,7 +97,7 @@ def test_a_cpu_launch_gives_one_thread_a_whole_piece_and_a_gpu_launch_one_stick_
 
 
 @pytest.mark.parametrize("name", SCENES)
-def test_whole_pieces_give_the_positions_of_one_stick_a_thread_bit_for_bit(monkeypatch, stick_launches, name):
+def test_whole_pieces_give_the_positions_of_one_element_a_thread_bit_for_bit(monkeypatch, stick_launches, name):
     scene = scene_with(name)
     whole = {threads: run(scene, 12, threads) for threads in (1, 2)}
     assert {kernel for kernel, *_ in stick_launches} == {KERNEL_OF[name]}

@@ -72,8 +72,9 @@ class Sticks(ConstraintSet):
         scratch = solver.scratch("jacobi_positions", m.particle_count, m.position_dtype)
 
         def gather(f, n):
-            return recorded(relax_jacobi, n, [x, m.inv_mass, m.neighbour_start, m.neighbour, m.neighbour_rest,
-                                              weight, f, scratch])
+            k = elements_per_thread(n, m.device)
+            return recorded(relax_jacobi, n // k, [x, m.inv_mass, m.neighbour_start, m.neighbour, m.neighbour_rest,
+                                                   weight, f, k, scratch])
 
         return BoundStage(None, [split_tasks(gather, 0, m.particle_count, threads),
                             copy_back_phase(x, scratch, m.particle_count, threads)])
