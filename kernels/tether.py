@@ -16,18 +16,22 @@ import warp as wp
 from .positions import for_positions
 
 
-@wp.kernel
-def pull_tethers(
+@wp.func
+def pull_particle(
+    t: int,
     x: wp.array(dtype=Any),
     particle: wp.array(dtype=int),
     pin: wp.array2d(dtype=int),
     length: wp.array2d(dtype=float),
 ):
-    """Thread t moves particle[t] back within length[t, k] of each pin[t, k] (pin -1: no tether there)."""
-    t = wp.tid()
+    """Tethered particle t's pull back within length[t, k] of each pin[t, k] (pin -1: no tether there), in k's
+    order."""
     p = particle[t]
+    if p < 0:  # never true (kernels/relax.py says why the signs are tested)
+        return
     xp = x[p]
-    for k in range(pin.shape[1]):
+    k = int(0)
+    while k < pin.shape[1]:  # not range(), whose loop handles either sign of step: slower on the CPU
         a = pin[t, k]
         if a >= 0:
             d = xp - x[a]
@@ -35,7 +39,28 @@ def pull_tethers(
             limit = type(distance)(length[t, k])
             if distance > limit:
                 xp = x[a] + d * (limit / distance)
+        k += 1
     x[p] = xp
+
+
+@wp.kernel
+def pull_tethers(
+    x: wp.array(dtype=Any),
+    particle: wp.array(dtype=int),
+    pin: wp.array2d(dtype=int),
+    length: wp.array2d(dtype=float),
+    per_thread: int,
+):
+    """Thread t pulls tethered particles t * per_thread .. (t + 1) * per_thread - 1 in order (pull_particle):
+    one a thread on a GPU, a CPU piece's all in one loop (warp_verlet/launches.elements_per_thread; kernels/relax.py
+    says why). Each moves only its own particle and reads only pins, so the order changes no bit."""
+    t = wp.tid() * per_thread
+    if t < 0:  # never true (kernels/relax.py says why the signs are tested)
+        return
+    stop = t + per_thread
+    while t < stop:
+        pull_particle(t, x, particle, pin, length)
+        t += 1
 
 
 for_positions(pull_tethers, arrays=("x",))

@@ -2,7 +2,7 @@
 the kernel (kernels/relax.py, warp_verlet/launches.elements_per_thread); on a GPU each thread takes one stick.
 The sticks of a colour share no particle, so the order cannot change a bit: the positions must equal those of
 one stick a thread, with pins, tethers, soft sticks, colliders and both kinds of tearing, on one thread and cut
-over a thread team; a Jacobi gather takes its piece's particles the same way. Implicit grid sticks (kernels/grid_relax.py) take whole rows of anchors a thread on the CPU,
+over a thread team; a Jacobi gather and the tethers take their piece's particles the same way. Implicit grid sticks (kernels/grid_relax.py) take whole rows of anchors a thread on the CPU,
 and must give the stick arrays' positions, as tests/test_implicit_grid.py asks of them in general."""
 
 from __future__ import annotations
@@ -11,11 +11,12 @@ import numpy as np
 import pytest
 
 import warp_verlet.constraints.sticks as sticks_module
+import warp_verlet.constraints.tethers as tethers_module
 from warp_verlet.input.scene import parse_scene
 from warp_verlet.launches import elements_per_thread
 from warp_verlet.core.simulator import Simulator
 
-RELAX_KERNELS = ("relax_colour", "relax_colour_compliant", "relax_colour_tension", "relax_jacobi")
+RELAX_KERNELS = ("relax_colour", "relax_colour_compliant", "relax_colour_tension", "relax_jacobi", "pull_tethers")
 
 
 def scene_with(name: str):
@@ -60,11 +61,15 @@ def stick_launches(monkeypatch):
 
     def spy(kernel, dim, inputs, outputs=None, **kwargs):
         if kernel.key in RELAX_KERNELS:
-            first, per_thread = inputs[-3:-1] if kernel.key == "relax_jacobi" else inputs[-2:]  # jacobi: then x_out
+            if kernel.key == "pull_tethers":  # its piece is a slice of the tether table
+                first, per_thread = None, inputs[-1]
+            else:
+                first, per_thread = inputs[-3:-1] if kernel.key == "relax_jacobi" else inputs[-2:]  # jacobi: x_out
             seen.append((kernel.key, dim, first, per_thread))
         return real(kernel, dim, inputs, outputs, **kwargs)
 
     monkeypatch.setattr(sticks_module, "recorded", spy)
+    monkeypatch.setattr(tethers_module, "recorded", spy)
     return seen
 
 
@@ -87,9 +92,8 @@ def test_a_cpu_launch_gives_one_thread_a_whole_piece_and_a_gpu_launch_one_stick_
         stick_launches.clear()
         sim = Simulator(scene, "cpu", threads=threads)
         sim.step()
-        pieces = [(first, per_thread) for kernel, dim, first, per_thread in stick_launches
-                  if kernel == "relax_colour" and dim == 1]
-        assert len(pieces) == len(stick_launches), "a CPU stick launch ran more than one thread"
+        assert all(dim == 1 for _, dim, _, _ in stick_launches), "a CPU launch ran more than one thread"
+        pieces = [(first, per_thread) for kernel, dim, first, per_thread in stick_launches if kernel == "relax_colour"]
         # The pieces tile every colour: threads pieces a colour, in order, covering its sticks exactly once.
         assert len(pieces) == threads * len(sim.model.colour_ranges)
         covered = [s for first, per_thread in pieces for s in range(first, first + per_thread)]
@@ -100,10 +104,12 @@ def test_a_cpu_launch_gives_one_thread_a_whole_piece_and_a_gpu_launch_one_stick_
 def test_whole_pieces_give_the_positions_of_one_element_a_thread_bit_for_bit(monkeypatch, stick_launches, name):
     scene = scene_with(name)
     whole = {threads: run(scene, 12, threads) for threads in (1, 2)}
-    assert {kernel for kernel, *_ in stick_launches} == {KERNEL_OF[name]}
+    tethered = "tethers" in name
+    assert {kernel for kernel, *_ in stick_launches} == {KERNEL_OF[name]} | ({"pull_tethers"} if tethered else set())
     assert all(dim == 1 for _, dim, _, _ in stick_launches)
     stick_launches.clear()
-    monkeypatch.setattr(sticks_module, "elements_per_thread", lambda count, device: 1)
+    for module in (sticks_module, tethers_module):
+        monkeypatch.setattr(module, "elements_per_thread", lambda count, device: 1)
     one = {threads: run(scene, 12, threads) for threads in (1, 2)}
     assert stick_launches and all(per_thread == 1 for *_, per_thread in stick_launches)
     assert any(dim > 1 for _, dim, _, _ in stick_launches)
