@@ -17,19 +17,9 @@ from .positions import for_positions
 
 
 @wp.func
-def pull_particle(
-    t: int,
-    x: wp.array(dtype=Any),
-    particle: wp.array(dtype=int),
-    pin: wp.array2d(dtype=int),
-    length: wp.array2d(dtype=float),
-):
-    """Tethered particle t's pull back within length[t, k] of each pin[t, k] (pin -1: no tether there), in k's
-    order."""
-    p = particle[t]
-    if p < 0:  # never true (kernels/relax.py says why the signs are tested)
-        return
-    xp = x[p]
+def tethered(xp: Any, x: wp.array(dtype=Any), pin: wp.array2d(dtype=int), length: wp.array2d(dtype=float), t: int):
+    """Position ``xp`` of tether row t's particle moved back within length[t, k] of each pin[t, k] (pin -1: no
+    tether there), pins read from ``x``."""
     k = int(0)
     while k < pin.shape[1]:  # not range(), whose loop handles either sign of step: slower on the CPU
         a = pin[t, k]
@@ -40,7 +30,7 @@ def pull_particle(
             if distance > limit:
                 xp = x[a] + d * (limit / distance)
         k += 1
-    x[p] = xp
+    return xp
 
 
 @wp.kernel
@@ -51,15 +41,18 @@ def pull_tethers(
     length: wp.array2d(dtype=float),
     per_thread: int,
 ):
-    """Thread t pulls tethered particles t * per_thread .. (t + 1) * per_thread - 1 in order (pull_particle):
-    one a thread on a GPU, a CPU piece's all in one loop (warp_verlet/launches.elements_per_thread; kernels/relax.py
-    says why). Each moves only its own particle and reads only pins, so the order changes no bit."""
+    """Thread t moves particles particle[t * per_thread] .. particle[(t + 1) * per_thread - 1] in order
+    (``tethered``): one a thread on a GPU, a CPU piece's all in one loop (warp_verlet/launches.elements_per_thread;
+    kernels/relax.py says why). Each moves only its own particle and reads only pins, so the order changes no
+    bit."""
     t = wp.tid() * per_thread
     if t < 0:  # never true (kernels/relax.py says why the signs are tested)
         return
     stop = t + per_thread
     while t < stop:
-        pull_particle(t, x, particle, pin, length)
+        p = particle[t]
+        if p >= 0:  # never false, as above
+            x[p] = tethered(x[p], x, pin, length, t)
         t += 1
 
 
