@@ -2,8 +2,9 @@
 the kernel (kernels/relax.py, warp_verlet/launches.elements_per_thread); on a GPU each thread takes one stick.
 The sticks of a colour share no particle, so the order cannot change a bit: the positions must equal those of
 one stick a thread, with pins, tethers, soft sticks, colliders and both kinds of tearing, on one thread and cut
-over a thread team; a Jacobi gather and the tethers take their piece's particles the same way. Implicit grid sticks (kernels/grid_relax.py) take whole rows of anchors a thread on the CPU,
-and must give the stick arrays' positions, as tests/test_implicit_grid.py asks of them in general."""
+over a thread team; a Jacobi gather and the tethers take their piece's particles the same way. Implicit grid
+sticks (kernels/grid_relax.py) take whole rows of anchors a thread on the CPU, and must give the stick arrays'
+positions, as tests/test_implicit_grid.py asks of them in general."""
 
 from __future__ import annotations
 
@@ -188,5 +189,6 @@ def test_implicit_grid_rows_a_thread_give_the_stick_arrays_positions_bit_for_bit
                 assert any(dim > 1 for _, dim, _ in grid_launches)
             points = sim.positions()
             differ = (points != expected[threads]).any(axis=1)
+            worst = np.abs(points - expected[threads]).max()
             assert not differ.any(), (f"{name}, {rows_a_thread}, {threads} threads: {differ.sum()} particles off the "
-                                      f"stick arrays' positions (by up to {np.abs(points - expected[threads]).max():.2e} m)")
+                                      f"stick arrays' positions (by up to {worst:.2e} m)")
