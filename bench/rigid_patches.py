@@ -50,7 +50,7 @@ import numpy as np
 from warp_verlet.geometry.colouring import check_partition, colour, colour_ranges
 from warp_verlet.constraints import ConstraintSet
 from warp_verlet.constraints.rigid_patches import RIGID_PATCHES, RigidPatches
-from warp_verlet.launches import FLOAT, VEC2I, BoundStage, recorded, split_tasks
+from warp_verlet.launches import FLOAT, VEC2I, BoundStage, elements_per_thread, recorded, split_tasks
 from warp_verlet.input.scene import Scene, parse_scene
 from warp_verlet.core.simulator import Simulator
 
@@ -123,8 +123,9 @@ class AllPairsSticks(ConstraintSet):
 
         data, x = model.constraints[self.name], state.particle_q
 
-        def make(first, count):
-            return recorded(relax_colour, count, [x, model.inv_mass, data.ends, data.rest, data.weight, first])
+        def make(first, count):  # on the CPU one thread, the sticks in order: the overflow colour's order too
+            k = elements_per_thread(count, model.device)
+            return recorded(relax_colour, count // k, [x, model.inv_mass, data.ends, data.rest, data.weight, first, k])
 
         phases = [[make(first, count)] if overflow else split_tasks(make, first, count, solver.threads)
                   for first, count, overflow in data.ranges]

@@ -17,8 +17,11 @@ numpy rounds them) and takes the root: an addition, a square root and a rounding
 fused multiply-add to change a bit. The projection is ``stick_correction`` (kernels/relax.py), the explicit
 kernels' own arithmetic, so the two paths give the same positions bit for bit.
 
-Each kernel runs a power of two of threads per row of anchors, so that a thread finds its row and column with a
-shift and a mask, not a division (the threads past the row's last anchor return at once).
+On a GPU each kernel runs a power of two of threads per row of anchors, so that a thread finds its row and column
+with a shift and a mask, not a division (the threads past the row's last anchor return at once). On the CPU a
+thread takes whole rows of anchors in one loop and reads the weights from the inverse masses, which stay in its
+caches (kernels/relax.py says why a loop). Indices are tested for a sign they never have, so that the compiler
+drops Warp's negative-index adjustment from them (kernels/relax.py says more).
 """
 
 from typing import Any
@@ -85,14 +88,53 @@ def colour_stick(g: GridColour, kr: int, kc: int, col_rest: wp.array(dtype=float
     c = anchor_index(kc, g.col_q, g.parity) + g.col_first
     i = g.first_particle + r * g.grid_cols + c
     j = i + g.dr * g.grid_cols + g.dc
+    column = c + g.col_shift
     rest = float(0.0)
+    if r < 0 or column < 0:  # never true: see the module docstring
+        return -1, -1, rest
     if g.use_row == 0:
-        rest = col_rest[c + g.col_shift]
+        rest = col_rest[column]
     elif g.use_col == 0:
         rest = row_rest[r]
     else:
-        rest = wp.float32(wp.sqrt(col_sq[c + g.col_shift] + row_sq[r]))
+        rest = wp.float32(wp.sqrt(col_sq[column] + row_sq[r]))
     return i, j, rest
+
+
+@wp.func
+def project_grid_stick(
+    x: wp.array(dtype=Any),
+    inv_mass: wp.array(dtype=float),
+    g: GridColour,
+    pins: wp.array(dtype=int),
+    col_rest: wp.array(dtype=float),
+    row_rest: wp.array(dtype=float),
+    col_sq: wp.array(dtype=wp.float64),
+    row_sq: wp.array(dtype=wp.float64),
+    kr: int,
+    kc: int,
+    read_weights: int,
+):
+    """The rigid projection of the colour's stick (kr, kc) (relax_colour's, with ends and rest computed). The
+    weights are read from ``inv_mass`` where ``read_weights`` is 1 (the CPU: the array stays in its caches, and
+    reading it is cheaper than searching the pins), else found by particle_weight (a GPU, where it saves memory
+    traffic); both give the same float32."""
+    i, j, rest = colour_stick(g, kr, kc, col_rest, row_rest, col_sq, row_sq)
+    if i < 0 or j < 0:  # never true (see colour_stick)
+        return
+    wi = float(0.0)
+    wj = float(0.0)
+    if read_weights != 0:
+        wi = inv_mass[i]
+        wj = inv_mass[j]
+    else:
+        wi = particle_weight(g, i, inv_mass, pins)
+        wj = particle_weight(g, j, inv_mass, pins)
+    xi = x[i]
+    xj = x[j]
+    c = stick_correction(xi, xj, wi, wj, rest, 1.0)
+    x[i] = xi + scaled(c, wi)
+    x[j] = xj - scaled(c, wj)
 
 
 @wp.kernel
@@ -106,20 +148,69 @@ def relax_grid_colour(
     col_sq: wp.array(dtype=wp.float64),
     row_sq: wp.array(dtype=wp.float64),
     first_row: int,
+    rows_per_thread: int,
 ):
-    """Gauss-Seidel over one colour of implicit grid sticks (relax_colour with ends and rest computed); a
-    thread per anchor, 2^col_bits threads per row of anchors from ``first_row``."""
+    """Gauss-Seidel over one colour of implicit grid sticks (relax_colour with ends and rest computed), from the
+    row of anchors ``first_row``. ``rows_per_thread`` 0 (a GPU): a thread per anchor, 2^col_bits threads per row
+    of anchors. Else (the CPU, where Warp runs a launch's threads one after another): thread t takes
+    ``rows_per_thread`` whole rows of anchors from first_row + t * rows_per_thread, in row-major order, in one
+    loop (kernels/relax.py says why)."""
     t = wp.tid()
-    kr = first_row + (t >> g.col_bits)
-    kc = t & ((1 << g.col_bits) - 1)
-    if kc >= g.cols:
+    if rows_per_thread == 0:
+        kr = first_row + (t >> g.col_bits)
+        kc = t & ((1 << g.col_bits) - 1)
+        if kc < g.cols:
+            project_grid_stick(x, inv_mass, g, pins, col_rest, row_rest, col_sq, row_sq, kr, kc, 0)
         return
+    kr = first_row + t * rows_per_thread
+    if kr < 0:  # never true (see colour_stick)
+        return
+    stop = kr + rows_per_thread
+    while kr < stop:
+        kc = int(0)
+        while kc < g.cols:
+            project_grid_stick(x, inv_mass, g, pins, col_rest, row_rest, col_sq, row_sq, kr, kc, 1)
+            kc += 1
+        kr += 1
+
+
+@wp.func
+def project_grid_stick_compliant(
+    x: wp.array(dtype=Any),
+    inv_mass: wp.array(dtype=float),
+    g: GridColour,
+    pins: wp.array(dtype=int),
+    col_rest: wp.array(dtype=float),
+    row_rest: wp.array(dtype=float),
+    col_sq: wp.array(dtype=wp.float64),
+    row_sq: wp.array(dtype=wp.float64),
+    compliance: float,
+    inv_dt2: float,
+    tension_first: int,
+    tension: wp.array(dtype=float),
+    kr: int,
+    kc: int,
+    read_weights: int,
+):
+    """The XPBD projection of the colour's stick (kr, kc) (relax_colour_compliant's, with ends and rest computed);
+    its tension is tension[tension_first + kr * cols + kc]; ``read_weights`` as project_grid_stick's."""
     i, j, rest = colour_stick(g, kr, kc, col_rest, row_rest, col_sq, row_sq)
-    wi = particle_weight(g, i, inv_mass, pins)
-    wj = particle_weight(g, j, inv_mass, pins)
+    k = tension_first + kr * g.cols + kc
+    if i < 0 or j < 0 or k < 0:  # never true (see colour_stick)
+        return
+    wi = float(0.0)
+    wj = float(0.0)
+    if read_weights != 0:
+        wi = inv_mass[i]
+        wj = inv_mass[j]
+    else:
+        wi = particle_weight(g, i, inv_mass, pins)
+        wj = particle_weight(g, j, inv_mass, pins)
     xi = x[i]
     xj = x[j]
-    c = stick_correction(xi, xj, wi, wj, rest, 1.0)
+    # Weight 1: a cloth that tears keeps stick arrays.
+    c, mu = compliant_correction(xi, xj, wi, wj, rest, 1.0, compliance, inv_dt2, tension[k])
+    tension[k] = mu
     x[i] = xi + scaled(c, wi)
     x[j] = xj - scaled(c, wj)
 
@@ -138,27 +229,31 @@ def relax_grid_colour_compliant(
     inv_dt2: float,
     first_row: int,
     tension_first: int,
+    rows_per_thread: int,
     tension: wp.array(dtype=float),
 ):
     """XPBD over one colour of implicit grid sticks (relax_colour_compliant with ends and rest computed, one
-    compliance for the colour's family); ``tension`` holds the soft colours' sticks from ``tension_first``, a
-    row of anchors after another."""
+    compliance for the colour's family), threads as relax_grid_colour's; ``tension`` holds the soft colours'
+    sticks from ``tension_first``, a row of anchors after another."""
     t = wp.tid()
-    kr = first_row + (t >> g.col_bits)
-    kc = t & ((1 << g.col_bits) - 1)
-    if kc >= g.cols:
+    if rows_per_thread == 0:
+        kr = first_row + (t >> g.col_bits)
+        kc = t & ((1 << g.col_bits) - 1)
+        if kc < g.cols:
+            project_grid_stick_compliant(x, inv_mass, g, pins, col_rest, row_rest, col_sq, row_sq, compliance,
+                                         inv_dt2, tension_first, tension, kr, kc, 0)
         return
-    i, j, rest = colour_stick(g, kr, kc, col_rest, row_rest, col_sq, row_sq)
-    k = tension_first + kr * g.cols + kc
-    wi = particle_weight(g, i, inv_mass, pins)
-    wj = particle_weight(g, j, inv_mass, pins)
-    xi = x[i]
-    xj = x[j]
-    # Weight 1: a cloth that tears keeps stick arrays.
-    c, mu = compliant_correction(xi, xj, wi, wj, rest, 1.0, compliance, inv_dt2, tension[k])
-    tension[k] = mu
-    x[i] = xi + scaled(c, wi)
-    x[j] = xj - scaled(c, wj)
+    kr = first_row + t * rows_per_thread
+    if kr < 0:  # never true (see colour_stick)
+        return
+    stop = kr + rows_per_thread
+    while kr < stop:
+        kc = int(0)
+        while kc < g.cols:
+            project_grid_stick_compliant(x, inv_mass, g, pins, col_rest, row_rest, col_sq, row_sq, compliance,
+                                         inv_dt2, tension_first, tension, kr, kc, 1)
+            kc += 1
+        kr += 1
 
 
 @wp.kernel

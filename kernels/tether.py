@@ -16,18 +16,12 @@ import warp as wp
 from .positions import for_positions
 
 
-@wp.kernel
-def pull_tethers(
-    x: wp.array(dtype=Any),
-    particle: wp.array(dtype=int),
-    pin: wp.array2d(dtype=int),
-    length: wp.array2d(dtype=float),
-):
-    """Thread t moves particle[t] back within length[t, k] of each pin[t, k] (pin -1: no tether there)."""
-    t = wp.tid()
-    p = particle[t]
-    xp = x[p]
-    for k in range(pin.shape[1]):
+@wp.func
+def tethered(xp: Any, x: wp.array(dtype=Any), pin: wp.array2d(dtype=int), length: wp.array2d(dtype=float), t: int):
+    """Position ``xp`` of tether row t's particle moved back within length[t, k] of each pin[t, k] (pin -1: no
+    tether there), pins read from ``x``."""
+    k = int(0)
+    while k < pin.shape[1]:  # not range(), whose loop handles either sign of step: slower on the CPU
         a = pin[t, k]
         if a >= 0:
             d = xp - x[a]
@@ -35,7 +29,31 @@ def pull_tethers(
             limit = type(distance)(length[t, k])
             if distance > limit:
                 xp = x[a] + d * (limit / distance)
-    x[p] = xp
+        k += 1
+    return xp
+
+
+@wp.kernel
+def pull_tethers(
+    x: wp.array(dtype=Any),
+    particle: wp.array(dtype=int),
+    pin: wp.array2d(dtype=int),
+    length: wp.array2d(dtype=float),
+    per_thread: int,
+):
+    """Thread t moves particles particle[t * per_thread] .. particle[(t + 1) * per_thread - 1] in order
+    (``tethered``): one a thread on a GPU, a CPU piece's all in one loop (warp_verlet/launches.elements_per_thread;
+    kernels/relax.py says why). Each moves only its own particle and reads only pins, so the order changes no
+    bit."""
+    t = wp.tid() * per_thread
+    if t < 0:  # never true (kernels/relax.py says why the signs are tested)
+        return
+    stop = t + per_thread
+    while t < stop:
+        p = particle[t]
+        if p >= 0:  # never false, as above
+            x[p] = tethered(x[p], x, pin, length, t)
+        t += 1
 
 
 for_positions(pull_tethers, arrays=("x",))

@@ -31,7 +31,7 @@ def project(x, inv_mass, rest, compliance, inv_dt2, device, tension=None, weight
     ]
     mu = wp.array(np.zeros(n, np.float32) if tension is None else np.asarray(tension, np.float32), dtype=float,
                   device=device)
-    wp.launch(relax_colour_compliant, n, inputs=[x, *args, inv_dt2, 0], outputs=[mu], device=device)
+    wp.launch(relax_colour_compliant, n, inputs=[x, *args, inv_dt2, 0, 1], outputs=[mu], device=device)
     return x.numpy(), mu.numpy()
 
 
@@ -77,12 +77,12 @@ def test_zero_compliance_is_the_rigid_projection_bit_for_bit():
 
     x, *sticks = rigid = arrays()
     for _ in range(3):
-        wp.launch(relax_colour, n, inputs=[*rigid, 0], device="cpu")
+        wp.launch(relax_colour, n, inputs=[*rigid, 0, 1], device="cpu")
     xs, *soft_sticks = soft = arrays()
     zero = wp.zeros(n, dtype=float, device="cpu")
     tension = wp.zeros(n, dtype=float, device="cpu")
     for _ in range(3):
-        wp.launch(relax_colour_compliant, n, inputs=[*soft, zero, 57600.0, 0], outputs=[tension], device="cpu")
+        wp.launch(relax_colour_compliant, n, inputs=[*soft, zero, 57600.0, 0, 1], outputs=[tension], device="cpu")
     a, b = x.numpy(), xs.numpy()
     differ = (a != b).any(axis=1)
     assert not differ.any(), (
@@ -105,7 +105,7 @@ def test_zero_compliance_agrees_with_the_rigid_projection_to_rounding():
     wp.launch(relax_colour, n, device="cpu", inputs=[
         x, wp.array(inv_mass, dtype=float, device="cpu"),
         wp.array(np.arange(2 * n, dtype=np.int32).reshape(n, 2), dtype=wp.vec2i, device="cpu"),
-        wp.array(rest, dtype=float, device="cpu"), wp.array(np.ones(n, np.float32), dtype=float, device="cpu"), 0])
+        wp.array(rest, dtype=float, device="cpu"), wp.array(np.ones(n, np.float32), dtype=float, device="cpu"), 0, 1])
     np.testing.assert_allclose(soft, x.numpy(), rtol=0, atol=4 * np.spacing(np.float32(np.abs(x0).max() * 2)))
 
 

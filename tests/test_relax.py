@@ -15,7 +15,7 @@ def relax_one_stick(xi, xj, wi, wj, rest, device, k=1.0):
     ends = wp.array(np.array([[0, 1]], np.int32), dtype=wp.vec2i, device=device)
     rest_a = wp.array(np.array([rest], np.float32), dtype=float, device=device)
     k_a = wp.array(np.array([k], np.float32), dtype=float, device=device)
-    wp.launch(relax_colour, 1, inputs=[x, inv_mass, ends, rest_a, k_a, 0], device=device)
+    wp.launch(relax_colour, 1, inputs=[x, inv_mass, ends, rest_a, k_a, 0, 1], device=device)
     return x.numpy()
 
 
@@ -51,7 +51,7 @@ def test_jacobi_gather_matches_analytic_average(device):
     start = wp.array(np.array([0, 1, 3, 4], np.int32), dtype=int, device=device)
     nbr = wp.array(np.array([1, 0, 2, 1], np.int32), dtype=int, device=device)
     ones = wp.array(np.ones(4, np.float32), dtype=float, device=device)
-    wp.launch(relax_jacobi, 3, inputs=[x, inv_mass, start, nbr, ones, ones, 0], outputs=[out], device=device)
+    wp.launch(relax_jacobi, 3, inputs=[x, inv_mass, start, nbr, ones, ones, 0, 1], outputs=[out], device=device)
     # to particle 0: move (-0.5, 0); to particle 2: D = 1.5 along +y, move (0, +0.5); average (-0.25, 0.25).
     np.testing.assert_allclose(out.numpy()[1], [1.25, 0.25, 0.0], atol=1e-6)
     np.testing.assert_array_equal(out.numpy()[[0, 2]], x.numpy()[[0, 2]])

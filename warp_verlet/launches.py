@@ -44,6 +44,13 @@ def recorded(kernel, dim: int, inputs: list, outputs: list | None = None, block_
     return PhaseTask(kernel.key, launch.launch, launch)
 
 
+def elements_per_thread(count: int, device) -> int:
+    """How many of a launch's ``count`` independent elements (a colour's piece) each thread takes, in order: one
+    on a GPU; on the CPU, where Warp runs a launch's threads one after another, all of them, so that one loop
+    inside the kernel runs the piece with its arguments and indices kept in registers (kernels/relax.py)."""
+    return max(count, 1) if device.is_cpu else 1
+
+
 def split_tasks(make: Callable[[int, int], PhaseTask], first: int, count: int, threads: int) -> list[PhaseTask | None]:
     """``count`` items from ``first`` cut into one piece per thread (None for an empty piece)."""
     return [make(f, n) if n else None for f, n in split(first, count, threads)]

@@ -10,6 +10,7 @@ from __future__ import annotations
 from .kind import ConstraintSet
 from ..launches import (FLOAT, FLOAT64, INT, VEC2I, BoundStage, PhaseTask, copy_back_phase, recorded, split_tasks,
                         start_compliant_substep)
+from ..launches import elements_per_thread
 
 
 class Sticks(ConstraintSet):
@@ -33,26 +34,33 @@ class Sticks(ConstraintSet):
 
         m, x, threads = model, state.particle_q, solver.threads
         if m.relaxation == "coloured":
+            def per_thread(n):  # (threads, sticks per thread) of a colour's piece of n sticks
+                k = elements_per_thread(n, m.device)
+                return n // k, k
+
             weight = state.stick_weight if m.tears else m.stick_weight
             if m.tension_tears and not m.compliant:  # rigid sticks that keep their tension for the tear stage
                 tension = solver.scratch("stick_tension", m.stick_count, float)
 
                 def make_rigid(f, n):
-                    return recorded(relax_colour_tension, n, [x, m.inv_mass, m.stick_ends, m.stick_rest, weight, f],
-                                    [tension])
+                    dim, k = per_thread(n)
+                    return recorded(relax_colour_tension, dim,
+                                    [x, m.inv_mass, m.stick_ends, m.stick_rest, weight, f, k], [tension])
                 phases = [split_tasks(make_rigid, first, count, threads) for first, count in m.colour_ranges]
                 if solver.req.global_iterations:  # the global correction starts the tension (kernels/global_solve.py)
                     return BoundStage(None, phases)
                 return BoundStage(lambda state, dt: tension.zero_(), phases)
             if not m.compliant:
                 def make(f, n):
-                    return recorded(relax_colour, n, [x, m.inv_mass, m.stick_ends, m.stick_rest, weight, f])
+                    dim, k = per_thread(n)
+                    return recorded(relax_colour, dim, [x, m.inv_mass, m.stick_ends, m.stick_rest, weight, f, k])
                 return BoundStage(None, [split_tasks(make, first, count, threads) for first, count in m.colour_ranges])
             tension = solver.scratch("stick_tension", m.stick_count, float)
 
             def make_soft(f, n):
-                return recorded(relax_colour_compliant, n, [x, m.inv_mass, m.stick_ends, m.stick_rest, weight,
-                                                            m.stick_compliance, 0.0, f], [tension])
+                dim, k = per_thread(n)
+                return recorded(relax_colour_compliant, dim, [x, m.inv_mass, m.stick_ends, m.stick_rest, weight,
+                                                              m.stick_compliance, 0.0, f, k], [tension])
             phases = [split_tasks(make_soft, first, count, threads) for first, count in m.colour_ranges]
             launches = [task.launch for phase in phases for task in phase if task is not None]
 
@@ -64,8 +72,9 @@ class Sticks(ConstraintSet):
         scratch = solver.scratch("jacobi_positions", m.particle_count, m.position_dtype)
 
         def gather(f, n):
-            return recorded(relax_jacobi, n, [x, m.inv_mass, m.neighbour_start, m.neighbour, m.neighbour_rest,
-                                              weight, f, scratch])
+            k = elements_per_thread(n, m.device)
+            return recorded(relax_jacobi, n // k, [x, m.inv_mass, m.neighbour_start, m.neighbour, m.neighbour_rest,
+                                                   weight, f, k, scratch])
 
         return BoundStage(None, [split_tasks(gather, 0, m.particle_count, threads),
                             copy_back_phase(x, scratch, m.particle_count, threads)])
@@ -103,18 +112,29 @@ class GridSticks(ConstraintSet):
 
         g, x, threads = model.grid, state.particle_q, solver.threads
         tension = solver.scratch("grid_tension", g.soft_sticks, float) if g.soft_sticks else None
+
+        def grid_threads(rows, col_bits):
+            """(threads, rows of anchors a thread) for a piece of ``rows`` rows: on the CPU whole rows a thread
+            (elements_per_thread), on a GPU a thread an anchor (0), 2^col_bits threads a row."""
+            if model.device.is_cpu:
+                per_thread = elements_per_thread(rows, model.device)
+                return rows // per_thread, per_thread
+            return rows << col_bits, 0
+
         phases, soft_launches = [], []
         for colour in g.colours:
             tables = [colour.pins, colour.col_rest, colour.row_rest, colour.col_sq, colour.row_sq]
             if colour.compliance > 0.0:
                 def make(f, rows, colour=colour, tables=tables):
-                    return recorded(relax_grid_colour_compliant, rows << colour.layout.col_bits,
+                    dim, per_thread = grid_threads(rows, colour.layout.col_bits)
+                    return recorded(relax_grid_colour_compliant, dim,
                                     [x, model.inv_mass, colour.layout, *tables, colour.compliance, 0.0, f,
-                                     colour.tension_first], [tension], block_dim=GRID_BLOCK_DIM)
+                                     colour.tension_first, per_thread], [tension], block_dim=GRID_BLOCK_DIM)
             else:
                 def make(f, rows, colour=colour, tables=tables):
-                    return recorded(relax_grid_colour, rows << colour.layout.col_bits,
-                                    [x, model.inv_mass, colour.layout, *tables, f], block_dim=GRID_BLOCK_DIM)
+                    dim, per_thread = grid_threads(rows, colour.layout.col_bits)
+                    return recorded(relax_grid_colour, dim, [x, model.inv_mass, colour.layout, *tables, f, per_thread],
+                                    block_dim=GRID_BLOCK_DIM)
             phase = split_tasks(make, 0, colour.rows, threads)  # the CPU thread team cuts a colour by rows
             if colour.compliance > 0.0:
                 soft_launches += [task.launch for task in phase if task is not None]

@@ -16,6 +16,7 @@ import numpy as np
 from .kind import ConstraintSet
 from ..geometry.mesh_cloth import connected_labels
 from ..launches import FLOAT, FLOAT64, INT, BoundStage, recorded, split_tasks
+from ..launches import elements_per_thread
 
 # Distances are computed for this many (particle, pin) pairs at a time, to bound the temporary memory.
 PAIRS_PER_CHUNK = 1 << 22
@@ -108,8 +109,9 @@ class Tethers(ConstraintSet):
         x, n = state.particle_q, model.tether_particle.shape[0]
 
         def make(f, count):
-            return recorded(pull_tethers, count, [x, model.tether_particle[f:f + count], model.tether_pin[f:f + count],
-                                                  length[f:f + count]])
+            k = elements_per_thread(count, model.device)
+            return recorded(pull_tethers, count // k, [x, model.tether_particle[f:f + count],
+                                                       model.tether_pin[f:f + count], length[f:f + count], k])
         return BoundStage(None, [split_tasks(make, 0, n, solver.threads)])
 
     def on_tear(self, model, state, torn: np.ndarray) -> None:
