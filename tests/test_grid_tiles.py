@@ -68,7 +68,7 @@ def test_a_tiled_sweep_is_the_sequential_sweep_in_tile_order_bit_for_bit(tile, c
     wp.launch(relax_colour, len(order), device="cpu",
               inputs=[x, m.inv_mass, wp.array(ends[order], dtype=wp.vec2i, device="cpu"),
                       wp.array(m.stick_rest.numpy()[order], dtype=float, device="cpu"),
-                      wp.array(m.stick_weight.numpy()[order], dtype=float, device="cpu"), 0])
+                      wp.array(m.stick_weight.numpy()[order], dtype=float, device="cpu"), 0, 1])
     moved = np.abs(x.numpy() - start).max()
     assert moved > 1e-4  # the sweep did something
     np.testing.assert_array_equal(tiled.state.positions(), x.numpy())

@@ -14,6 +14,7 @@ from conftest import make_scene
 from warp_verlet.errors import ArgumentError
 from warp_verlet.input.scene import parse_scene
 from warp_verlet.core.simulator import Simulator
+from warp_verlet.core import stages
 from warp_verlet.core.stages import MAX_GRID_TETHER_PINS, implicit_grid_obstacle
 
 SCENES = Path(__file__).resolve().parent.parent / "scenes"
@@ -120,15 +121,18 @@ def test_the_rule_picks_implicit_sticks_for_one_grid_cloth_that_cannot_tear(devi
         Simulator(grid, device, sticks="lazy")
 
 
-@pytest.mark.parametrize("compliance, sets, same_as", [
-    ({}, ("tethers", "grid tiles"), "tiled"),  # rigid float32 sticks: swept tile by tile
-    ({"bend": 1e-3}, ("tethers", "grid sticks"), "explicit"),  # a soft family: a launch per colour
+@pytest.mark.parametrize("compliance, smallest_tiled, sets, same_as", [
+    ({}, 0, ("tethers", "grid tiles"), "tiled"),  # rigid float32 sticks of a large grid: swept tile by tile
+    ({}, 64, ("tethers", "grid sticks"), "explicit"),  # a grid below the tiles' size: a launch per colour
+    ({"bend": 1e-3}, 0, ("tethers", "grid sticks"), "explicit"),  # a soft family: a launch per colour
 ])
-def test_auto_on_a_gpu_computes_the_sticks_and_keeps_the_tether_table(compliance, sets, same_as, monkeypatch):
+def test_auto_on_a_gpu_computes_the_sticks_and_keeps_the_tether_table(compliance, smallest_tiled, sets, same_as,
+                                                                      monkeypatch):
     """What "auto" does on a GPU, on the CPU: the rule's device test answered as a GPU would."""
     import warp_verlet.core.model as model_module
 
     real = model_module.stick_form
+    monkeypatch.setattr(stages, "MIN_TILED_PARTICLES", smallest_tiled)
     monkeypatch.setattr(model_module, "stick_form", lambda sticks, colouring, device: real(
         sticks, colouring, type("GPU", (), {"is_cpu": False})()))
     scene = make_scene({"substeps": 2}, resolution=[7, 9], pins=["top-left", "top-right"],

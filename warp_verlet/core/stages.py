@@ -103,9 +103,8 @@ class Requirements:
         )
         req = replace(req, **grid_counts(scene, sticks))
         req = replace(req, precision=resolve(scene, relaxes=RELAX.needed(req)))
-        if sticks == "auto" and req.implicit_grid and not req.soft_sticks and req.precision == "float32":
-            # Rigid float32 sticks sweep tile by tile: on an H100 that reached the same stretch as a launch per
-            # colour in less time at 1024^2 and 2048^2 (bench/results/grid_tiles).
+        if (sticks == "auto" and req.implicit_grid and not req.soft_sticks and req.precision == "float32"
+                and req.grid_rows * req.grid_cols >= MIN_TILED_PARTICLES):
             req = replace(req, grid_tiles=True)
         if req.grid_tiles and req.precision != "float32":
             from ..errors import ArgumentError
@@ -128,6 +127,11 @@ def global_levels(scene: "Scene") -> tuple[tuple[int, int, int], ...]:
 
 
 STICK_FORMS = ("auto", "explicit", "implicit", "tiled")
+MIN_TILED_PARTICLES = 512 * 512
+"""Where "auto" sweeps a grid's rigid float32 sticks tile by tile (kernels/grid_tiles.py) on a GPU: from this
+many particles on. On an H100 the tiles reached the same stretch as a launch per colour in less time at 1024^2
+and 2048^2, and took longer at 64^2 and 256^2, where a launch of a quarter of the tiles leaves most of the GPU
+idle (bench/results/grid_tiles)."""
 MAX_UNIFORM_MASS_PINS = 8
 """Implicit grid sticks find a particle's weight without reading it (0 for a pin, the free particles' for any
 other) when the cloth sets no particle masses and has at most this many pins, which each projection checks."""
