@@ -49,7 +49,7 @@ class State:
 
     The host methods (:meth:`positions`, :meth:`previous_positions`, :meth:`set_positions`,
     :meth:`set_velocity`) take and give particles in the scene's order, whatever order the device holds them in
-    (``Model.scene_particle``): this is the one place where they are converted.
+    (``Model.scene_particle``): positions cross between the device and the user here, and are converted here.
     """
 
     _ARRAYS = ("particle_q", "particle_q_inertial", "particle_dq", "stick_weight", "torn_entries",
