@@ -44,8 +44,9 @@ Setup at 1024^2 (1M particles), measured on a shared 2-core AMD EPYC: the quad .
 loads (parse_scene: read, weld, check) in 6 s; the triangle OBJ takes 7 s to write and 18 s to load, 11 s
 of it trimesh's OBJ reader (--triangles ply, a binary PLY: 0.2 s to write, 2 s to read). The larger cost
 is the Simulator's construction for a mesh: Warp's graph colouring needs the stick-conflict graph
-(warp_verlet.geometry.colouring.stick_conflict_edges), which takes about 3.5 minutes per mesh variant at 1024^2
-(1 s at 128^2, 27 s at 512^2; a grid, coloured analytically, builds in 12 s at 1024^2). On a machine
+(warp_verlet.geometry.colouring.stick_conflict_edges), which took about 3.5 minutes per mesh variant at 1024^2
+(1 s at 128^2, 27 s at 512^2; a grid, coloured analytically, builds in 12 s at 1024^2); --setup-only times it
+again (bench/results/mesh/setup-cpu-epyc.md: 28 s at 1024^2 since). On a machine
 with a 10-minute limit per command, run 1024 on its own. The files live in a temporary directory
 removed at the end.
 """
