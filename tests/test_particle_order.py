@@ -390,3 +390,19 @@ def test_a_mesh_moves_the_same_whatever_order_its_file_lists_its_vertices(tmp_pa
     # In the input order the two differ (other colours, another Gauss-Seidel order): the test is not vacuous.
     plain = {name: run(scene, 10, particle_order="input") for name, scene in scenes.items()}
     assert not np.array_equal(plain["shuffled"], plain["row-major"][order])
+
+
+def test_simulator_gathers_positions_on_the_device_as_the_state_does_on_the_host(tmp_path):
+    """Simulator.positions() puts a renumbered cloth back in the scene's order on the device; State.positions()
+    does it on the host: the same gather, the same bits, and a snapshot that later steps leave alone."""
+    scene, _ = curtain(tmp_path)
+    sim = Simulator(scene, "cpu", threads=1)
+    sim.step_frame()
+    first = sim.positions()
+    np.testing.assert_array_equal(first, sim.state.positions())
+    np.testing.assert_array_equal(first, sim.model.to_scene_order(sim.state.particle_q.numpy()))
+    kept = first.copy()
+    sim.step_frame()
+    np.testing.assert_array_equal(first, kept)
+    assert not np.array_equal(sim.positions(), kept)
+    sim.close()
