@@ -16,6 +16,19 @@ For each size n, three variants of the benchmark hanging cloth (bench.common.han
   opposite each interior edge (across a diagonal, that is the other diagonal). Its stretch is therefore
   not the same measure as the grid's: it includes the diagonals, and the cloth is stiffer in shear.
 
+Particle order (--orders): a mesh cloth's particles are held on the device in Morton order of their rest
+positions by default (Simulator's particle_order "auto": warp_verlet/geometry/particle_order.py); "input" holds
+them as the file numbers them. --orders input reordered gives each mesh variant a row per order in the same
+run; "reorder s" is the time the Model spends renumbering the cloth (its Morton order and the renumbered
+topology, timed apart from the Simulator). A grid's particles stay in row-major order either way. The mesh files
+list the grid's points in row-major order, already an order with locality; --shuffle writes them in a random
+order (seeded), as a mesh whose vertex numbering follows no path across the surface.
+
+--setup-only times the host-side setup of the reordering at each size instead of simulating: the quad mesh's
+topology built, its Morton order, the renumbered topology, the sticks sorted by colour then first and second
+particle (beside the stable sort by colour alone it replaces), and Warp's graph colouring of the sticks
+(--no-colouring leaves it out: minutes at 1024^2).
+
 Pins: hanging_cloth's (its two top corners) by default, each given to a mesh as a box around the pinned
 point (a quarter of the spacing on each side); --pins top-edge pins the whole top row instead, one box
 around it, and the grid by "top-edge".
@@ -31,8 +44,9 @@ Setup at 1024^2 (1M particles), measured on a shared 2-core AMD EPYC: the quad .
 loads (parse_scene: read, weld, check) in 6 s; the triangle OBJ takes 7 s to write and 18 s to load, 11 s
 of it trimesh's OBJ reader (--triangles ply, a binary PLY: 0.2 s to write, 2 s to read). The larger cost
 is the Simulator's construction for a mesh: Warp's graph colouring needs the stick-conflict graph
-(warp_verlet.geometry.colouring.stick_conflict_edges), which takes about 3.5 minutes per mesh variant at 1024^2
-(1 s at 128^2, 27 s at 512^2; a grid, coloured analytically, builds in 12 s at 1024^2). On a machine
+(warp_verlet.geometry.colouring.stick_conflict_edges), which took about 3.5 minutes per mesh variant at 1024^2
+(1 s at 128^2, 27 s at 512^2; a grid, coloured analytically, builds in 12 s at 1024^2); --setup-only times it
+again (bench/results/mesh/setup-cpu-epyc.md: 28 s at 1024^2 since). On a machine
 with a 10-minute limit per command, run 1024 on its own. The files live in a temporary directory
 removed at the end.
 """
@@ -58,6 +72,9 @@ from .common import (HANGING_DAMPING, arg_parser, hanging_cloth, hanging_sheet, 
 FRAMES, WARM_UP = 60, 2
 PRIM = "/Set/Cloth"
 VARIANTS = ("grid", "quad mesh", "triangle mesh")
+ORDERS = ("input", "reordered")  # --orders: Simulator's particle_order "input" and "auto"
+ORDER_NAMES = {"input": "input", "reordered": "Morton"}  # the table's "particle order" column
+SHUFFLE_SEED = 7
 
 
 # ---------------------------------------------------------------- mesh files
@@ -130,9 +147,18 @@ def pin_boxes(grid: Scene) -> list[dict]:
     return [{"min": (g.min(axis=0) - margin).tolist(), "max": (g.max(axis=0) + margin).tolist()} for g in groups]
 
 
-def grid_and_meshes(n: int, substeps: int, iterations: int, pins: str, triangles: str, folder: Path):
+def shuffled(points: np.ndarray, faces: Faces, seed: int = SHUFFLE_SEED) -> tuple[np.ndarray, Faces]:
+    """The same mesh with its vertices listed in a random order: the points permuted, the faces renumbered."""
+    order = np.random.default_rng(seed).permutation(len(points))
+    place = np.empty(len(points), np.int64)
+    place[order] = np.arange(len(points))
+    return points[order], Faces(faces.counts, place[faces.indices])
+
+
+def grid_and_meshes(n: int, substeps: int, iterations: int, pins: str, triangles: str, folder: Path,
+                    shuffle: bool = False):
     """The three variants' scenes, each with the seconds its parse_scene took (mesh files written into
-    ``folder`` first, not counted)."""
+    ``folder`` first, not counted). ``shuffle``: the mesh files list their vertices in a random order."""
     import trimesh  # noqa: F401  (imported now, so that "load s" times the reading and not the import)
 
     simulation = simulation_table(substeps, iterations)
@@ -146,9 +172,15 @@ def grid_and_meshes(n: int, substeps: int, iterations: int, pins: str, triangles
 
     spec = grid.cloths[0]
     points, quads = grid_positions(spec), grid_faces(*spec.resolution)
-    files = {"quad mesh": write_usd(folder / f"grid{n}.usdc", points, quads)}
+    triangle_faces = Faces.uniform(triangulate(quads))
+    if shuffle:
+        points_q, quads = shuffled(points, quads)
+        points_t, triangle_faces = shuffled(points, triangle_faces, SHUFFLE_SEED + 1)
+    else:
+        points_q = points_t = points
+    files = {"quad mesh": write_usd(folder / f"grid{n}.usdc", points_q, quads)}
     writer = write_ply if triangles == "ply" else write_obj
-    files["triangle mesh"] = writer(folder / f"grid{n}.{triangles}", points, triangulate(quads))
+    files["triangle mesh"] = writer(folder / f"grid{n}.{triangles}", points_t, triangle_faces.as_uniform())
     keep = {k: sheet[k] for k in ("name", "mass", "sticks", "tethers")}
     for variant, path in files.items():
         cloth = {**keep, "mesh": path.name, "pins": pin_boxes(grid), "mass_distribution": "even"}
@@ -168,10 +200,29 @@ def grid_and_meshes(n: int, substeps: int, iterations: int, pins: str, triangles
 
 # ---------------------------------------------------------------- measuring
 
+def reorder_seconds(the_scene: Scene) -> float:
+    """The host time the Model spends renumbering the scene's mesh cloths: each one's Morton order and its
+    renumbered topology (build_cloth itself, which either order needs, not counted)."""
+    from warp_verlet.geometry.particle_order import locality_order, reorder_topology
+    from warp_verlet.geometry.topology import build_cloth
+
+    total = 0.0
+    for spec in the_scene.cloths:
+        topology = build_cloth(spec)
+        if topology.is_grid:
+            continue
+        start = time.perf_counter()
+        reorder_topology(topology, locality_order(topology.positions))
+        total += time.perf_counter() - start
+    return total
+
+
 def measure(variant: str, n: int, the_scene: Scene, load_s: float, device: str, repeats: int, use_graph: bool,
-            threads: int | None, frames: int = FRAMES) -> dict:
+            threads: int | None, frames: int = FRAMES, order: str = "reordered") -> dict:
+    mesh = variant != "grid"
     start = time.perf_counter()
-    sim = Simulator(the_scene, device, use_graph=use_graph, threads=threads)
+    sim = Simulator(the_scene, device, use_graph=use_graph, threads=threads,
+                    particle_order="auto" if order == "reordered" else "input")
     build_s = time.perf_counter() - start
     try:
         sim.step_frame()  # warm-up: compiles kernels, initialises the Verlet state
@@ -187,6 +238,7 @@ def measure(variant: str, n: int, the_scene: Scene, load_s: float, device: str, 
         return {
             "size": f"{n}x{n}",
             "variant": variant,
+            "particle order": ORDER_NAMES[order] if mesh else "row-major",
             "particles": sim.model.particle_count,
             "sticks": sim.model.stick_count,
             "colours": sim.model.colour_count,
@@ -194,6 +246,7 @@ def measure(variant: str, n: int, the_scene: Scene, load_s: float, device: str, 
             "threads": sim.threads,
             "load s": f"{load_s:.2f}",
             "build s": f"{build_s:.2f}",
+            "reorder s": f"{reorder_seconds(the_scene):.3f}" if mesh and order == "reordered" else "",
             "ms/frame": f"{per_frame * 1e3:.3f}",
             "spread": f"±{spread * 100:.1f}%",
             "Mproj/s": f"{projections / per_frame / 1e6:.1f}",
@@ -206,14 +259,54 @@ def measure(variant: str, n: int, the_scene: Scene, load_s: float, device: str, 
 
 
 def notes(rows: list[dict]) -> str:
-    """Per size: the quad mesh's and triangle mesh's speed against the grid's."""
+    """Per size: each mesh row's speed against the grid's (naming its particle order where the run had both)."""
     out = []
+    both = len({r["particle order"] for r in rows if r["variant"] != "grid"}) > 1
     for size in dict.fromkeys(r["size"] for r in rows):
-        by = {r["variant"]: r for r in rows if r["size"] == size}
-        grid = float(by["grid"]["ms/frame"])
-        parts = [f"{v} {float(by[v]['ms/frame']) / grid:.2f}x the grid's time" for v in VARIANTS[1:] if v in by]
+        mine = [r for r in rows if r["size"] == size]
+        grid = float(next(r for r in mine if r["variant"] == "grid")["ms/frame"])
+        parts = [f"{r['variant']}{' (' + r['particle order'] + ' order)' if both else ''} "
+                 f"{float(r['ms/frame']) / grid:.2f}x the grid's time" for r in mine if r["variant"] != "grid"]
         out.append(f"- {size}: " + ", ".join(parts))
     return "\n".join(out)
+
+
+def setup_costs(n: int, folder: Path, colouring: bool) -> dict:
+    """Seconds of the host-side setup at n x n for the quad mesh: its topology (build_cloth), its Morton order,
+    the renumbered topology, the sticks sorted by colour then first and second particle and, for comparison, by
+    colour alone (a stable sort), and Warp's graph colouring (``colouring``)."""
+    from warp_verlet.geometry.colouring import graph_colouring, stick_order
+    from warp_verlet.geometry.particle_order import locality_order, reorder_topology
+    from warp_verlet.geometry.topology import build_cloth
+
+    the_scene, load_s = grid_and_meshes(n, 4, 8, "corners", "ply", folder)["quad mesh"]
+    clock = time.perf_counter
+    start = clock()
+    topology = build_cloth(the_scene.cloths[0])
+    built = clock()
+    order = locality_order(topology.positions)
+    ordered = clock()
+    reordered = reorder_topology(topology, order)
+    renumbered = clock()
+    row = {"size": f"{n}x{n}", "particles": topology.particle_count, "sticks": len(topology.sticks),
+           "load s": f"{load_s:.2f}", "build_cloth s": f"{built - start:.2f}", "Morton order s": f"{ordered - built:.3f}",
+           "renumber s": f"{renumbered - ordered:.3f}", "reorder s": f"{renumbered - built:.3f}"}
+    # A colouring to sort by; its sizes do not matter to the sort's time, so without Warp's one takes 12 colours.
+    sticks = reordered.sticks
+    if colouring:
+        start = clock()
+        colour = graph_colouring(sticks).colour
+        row["graph colouring s"] = f"{clock() - start:.1f}"
+    else:
+        colour = (np.arange(len(sticks)) % 12).astype(np.int32)
+        row["graph colouring s"] = ""
+    start = clock()
+    stick_order(colour, sticks)
+    sorted_by_particles = clock()
+    np.argsort(colour, kind="stable")
+    row["stick sort s"] = f"{sorted_by_particles - start:.3f}"
+    row["colour sort s"] = f"{clock() - sorted_by_particles:.3f}"
+    return row
 
 
 def main(argv=None) -> int:
@@ -230,6 +323,13 @@ def main(argv=None) -> int:
                    help="hanging_cloth's two top corners (default), or the whole top row")
     p.add_argument("--triangles", choices=("obj", "ply"), default="obj",
                    help="file format of the triangle mesh (default obj; ply loads ~5x faster at 1024^2)")
+    p.add_argument("--orders", choices=ORDERS, nargs="+", default=["reordered"],
+                   help="the mesh cloths' particle order on the device: reordered (Morton, the default) and/or input; "
+                        "each order given is one row per mesh variant")
+    p.add_argument("--shuffle", action="store_true", help="the mesh files list their vertices in a random order")
+    p.add_argument("--setup-only", action="store_true",
+                   help="time the reordering's host-side setup at each size instead of simulating")
+    p.add_argument("--no-colouring", action="store_true", help="with --setup-only: leave Warp's graph colouring out")
     p.add_argument("--out", type=Path, default=None, help="write STEM.md and STEM.csv here")
     p.add_argument("--stem", default="mesh_throughput", help="output names (default mesh_throughput)")
     args = p.parse_args(argv)
@@ -240,16 +340,21 @@ def main(argv=None) -> int:
     quiet_warp()
     device = wp.get_device(args.device)
     command = ["bench.mesh_throughput", *(argv if argv is not None else sys.argv[1:])]
+    if args.setup_only:
+        return setup_only(args, device, command)
     rows = []
+    orders = list(dict.fromkeys(args.orders))
     for n in args.sizes:
         with tempfile.TemporaryDirectory(prefix="mesh_throughput-") as tmp:
-            scenes = grid_and_meshes(n, args.substeps, args.iterations, args.pins, args.triangles, Path(tmp))
+            scenes = grid_and_meshes(n, args.substeps, args.iterations, args.pins, args.triangles, Path(tmp),
+                                     args.shuffle)
             for variant in VARIANTS:
                 the_scene, load_s = scenes[variant]
-                row = measure(variant, n, the_scene, load_s, str(device), args.repeats, not args.no_graph,
-                              args.threads, args.frames)
-                rows.append(row)
-                print(row, flush=True)
+                for order in orders if variant != "grid" else orders[:1]:
+                    row = measure(variant, n, the_scene, load_s, str(device), args.repeats, not args.no_graph,
+                                  args.threads, args.frames, order)
+                    rows.append(row)
+                    print(row, flush=True)
     where = machine(device)
     pins = "its two top corners" if args.pins == "corners" else "its top row"
     title = (f"Mesh cloth beside the grid: hanging cloth pinned at {pins}, {args.frames} frames, "
@@ -258,7 +363,11 @@ def main(argv=None) -> int:
              f"{where}\n\n" + "\n".join(where.lines(command)) + "\n\n"
              "- grid: the grid cloth (analytic colouring). quad mesh: its exact points and quads from a .usdc, "
              "mass_distribution \"even\": the same particles, sticks and masses, graph colouring. triangle mesh: "
-             f"the quads split along one diagonal, from {args.triangles.upper()} via trimesh.\n"
+             f"the quads split along one diagonal, from {args.triangles.upper()} via trimesh. The mesh files list "
+             f"their vertices {'in a random order (--shuffle)' if args.shuffle else 'in the grid' + chr(39) + 's row-major order'}.\n"
+             "- particle order: how the device holds a mesh cloth's particles (Simulator's particle_order: Morton is "
+             "\"auto\", input is \"input\"); reorder s: the host time of the Morton order and the renumbered "
+             "topology, part of build s.\n"
              "- The triangle mesh has different sticks: its diagonals are structural (face sides), it has no "
              "shear sticks, and its bend sticks join the corners opposite each edge. Its stretch is over those "
              "structural sticks, diagonals included, so it is not the same measure as the grid's and quad "
@@ -267,6 +376,25 @@ def main(argv=None) -> int:
              "files written beforehand, not counted). build s: the Simulator's construction (colouring "
              "included). Mproj/s: sticks x substeps x iterations per second. Stretch |D - L|/L over the "
              f"structural sticks at frame {args.frames}.\n" + notes(rows))
+    write_table(rows, args.out, args.stem, title)
+    return 0
+
+
+def setup_only(args, device, command) -> int:
+    rows = []
+    for n in args.sizes:
+        with tempfile.TemporaryDirectory(prefix="mesh_throughput-") as tmp:
+            rows.append(setup_costs(n, Path(tmp), not args.no_colouring))
+            print(rows[-1], flush=True)
+    where = machine(device)
+    title = (f"Mesh cloth particle reordering, host-side setup of the quad mesh: {where}\n\n"
+             + "\n".join(where.lines(command)) + "\n\n"
+             "- load s: parse_scene (the .usdc read, welded, checked). build_cloth s: its topology (sticks from the "
+             "faces). Morton order s: the particles' Morton order. renumber s: the topology renumbered "
+             "(particle_order.reorder_topology). reorder s: the two together, what particle_order \"auto\" adds to "
+             "a mesh cloth's build. stick sort s: the sticks sorted by colour, then first and second particle "
+             "(colouring.stick_order); colour sort s: the stable sort by colour alone it replaced. graph colouring "
+             "s: Warp's graph colouring of the sticks, the bulk of a mesh cloth's build.\n")
     write_table(rows, args.out, args.stem, title)
     return 0
 

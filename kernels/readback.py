@@ -24,6 +24,14 @@ def gather_drawn(x: wp.array(dtype=Any), x_inertial: wp.array(dtype=Any), dq: wp
 
 
 @wp.kernel
+def gather_positions(x: wp.array(dtype=Any), index: wp.array(dtype=int), out: wp.array(dtype=Any)):
+    """out[i] = x[index[i]]: every position put in another order (a renumbered cloth's back in the scene's), on
+    the device, so that the host copies them once and gathers nothing."""
+    i = wp.tid()
+    out[i] = x[index[i]]
+
+
+@wp.kernel
 def structural_stretch(x: wp.array(dtype=Any), ends: wp.array(dtype=wp.vec2i), rest: wp.array(dtype=float),
                        weight_entry: wp.array(dtype=int), weight: wp.array(dtype=float),
                        sum_squares: wp.array(dtype=wp.float64), largest: wp.array(dtype=float),
@@ -49,6 +57,7 @@ def structural_stretch(x: wp.array(dtype=Any), ends: wp.array(dtype=wp.vec2i), r
 
 
 for_positions(gather_drawn, arrays=("x", "x_inertial", "dq"))
+for_positions(gather_positions, arrays=("x", "out"))
 for_positions(structural_stretch, arrays=("x",))
 
 

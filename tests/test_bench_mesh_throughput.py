@@ -43,3 +43,21 @@ def test_mesh_pins_are_the_grids(tmp_path):
         assert len(expected) == count
         for variant in ("quad mesh", "triangle mesh"):
             assert list(scenes[variant][0].cloths[0].mesh.pins) == expected, (pins, variant)
+
+
+def test_orders_give_a_row_each_and_setup_only_times_the_reordering(tmp_path):
+    args = ["--device", "cpu", "--sizes", "6", "--frames", "3", "--repeats", "1", "--threads", "1", "--shuffle",
+            "--orders", "input", "reordered", "--out", str(tmp_path)]
+    assert mesh_throughput.main(args) == 0
+    rows = read(tmp_path / "mesh_throughput.csv")
+    assert [(r["variant"], r["particle order"]) for r in rows] == [
+        ("grid", "row-major"), ("quad mesh", "input"), ("quad mesh", "Morton"), ("triangle mesh", "input"),
+        ("triangle mesh", "Morton")]
+    assert [r["reorder s"] == "" for r in rows] == [True, True, False, True, False]
+    assert all(float(r["reorder s"]) >= 0 for r in rows if r["reorder s"])
+    assert rows[1]["sticks"] == rows[2]["sticks"] == rows[0]["sticks"]  # the same cloth in either order
+    assert "(Morton order)" in (tmp_path / "mesh_throughput.md").read_text()
+    assert mesh_throughput.main(["--device", "cpu", "--sizes", "6", "--setup-only", "--no-colouring",
+                                 "--out", str(tmp_path), "--stem", "setup"]) == 0
+    (row,) = read(tmp_path / "setup.csv")
+    assert int(row["particles"]) == 36 and float(row["reorder s"]) >= 0 and row["graph colouring s"] == ""

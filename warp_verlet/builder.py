@@ -192,13 +192,15 @@ class SceneBuilder:
         check_scene(scene)
         return scene
 
-    def finalize(self, device: str | None = None, colouring: str = "auto", sticks: str = "auto") -> "Model":
+    def finalize(self, device: str | None = None, colouring: str = "auto", sticks: str = "auto",
+                 particle_order: str = "auto") -> "Model":
         """The immutable Model of :meth:`scene` on ``device`` (as ``Simulator``: "cpu", "cuda", "cuda:1"; default
-        CUDA when a GPU is present), its memory need checked first as ``Simulator`` checks it. ``colouring`` and
-        ``sticks`` are ``Simulator``'s arguments of the same names. A State of it is ``state.State(model)``."""
+        CUDA when a GPU is present), its memory need checked first as ``Simulator`` checks it. ``colouring``,
+        ``sticks`` and ``particle_order`` are ``Simulator``'s arguments of the same names. A State of it is
+        ``state.State(model)``."""
         from .core.simulator import build_model, resolve_device
 
-        return build_model(self.scene(), resolve_device(device), colouring, sticks)[0]
+        return build_model(self.scene(), resolve_device(device), colouring, sticks, particle_order)[0]
 
 
 def _mesh_arrays(where: str, points: Any, faces: Any) -> tuple:

@@ -85,14 +85,14 @@ class Readout:
 @dataclass(frozen=True)
 class RecordedFrame:
     frame: int
-    positions: "warp.array"  # every particle's position at the frame, a copy on the simulation's device
+    positions: "warp.array"  # every particle's position at the frame, a copy on the simulation's device (its order)
     to_cache: CacheVertices  # positions -> each cloth's cache vertices, for the simulator that made them
     centres: np.ndarray  # every collider's sample (each sphere's centre), as a cache of dragged colliders takes them
     hidden: list[np.ndarray] | None  # per cloth, faces beside torn sticks, when they changed this frame
 
     def points(self) -> list[np.ndarray]:
         """Per cloth, its cache vertices, float32, on the host."""
-        return self.to_cache(self.positions.numpy())
+        return self.to_cache(self.to_cache.model.to_scene_order(self.positions.numpy()))
 
 
 class _Stalls:

@@ -258,9 +258,9 @@ def check_initial_state(scene: Scene, sim) -> None:
 
 
 class CacheVertices:
-    """All particles' positions -> each cloth's cache vertices, float32: a mesh's welded particles gathered
-    to its vertices and, for an override layer, moved back into its prim's own space. A grid in float32
-    costs nothing: views of the one array."""
+    """All particles' positions, in the scene's order (Simulator.positions), -> each cloth's cache vertices,
+    float32: a mesh's welded particles gathered to its vertices and, for an override layer, moved back into its
+    prim's own space. A grid in float32 costs nothing: views of the one array."""
 
     def __init__(self, model, scene, override: bool):
         self.model = model

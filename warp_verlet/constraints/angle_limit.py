@@ -179,7 +179,7 @@ class AngleHinges(ConstraintSet):
     def build(self, model, scene, device):
         import warp as wp
 
-        parts = [(mesh_hinges(slot.topology.faces) + slot.first, limit_of(spec))
+        parts = [(mesh_hinges(slot.device_topology.faces) + slot.first, limit_of(spec))
                  for slot, spec in zip(model.cloths, scene.cloths)
                  if spec.mesh is not None and limit_of(spec) is not None]
         elements = np.concatenate([e for e, _ in parts])

@@ -177,7 +177,7 @@ class PatchData:
         inv_mass = model.host_inv_mass
         for slot, spec in zip(model.cloths, scene.cloths):
             for patch in spec.options[RIGID_PATCHES.name]:
-                index = np.asarray(patch, np.int64) + slot.first
+                index = model.device_particles(np.asarray(patch, np.int64) + slot.first)  # scene -> device
                 w = inv_mass[index].astype(np.float64)
                 free = w > 0
                 mass = np.where(free, 1.0 / np.where(free, w, 1.0), 0.0)

@@ -58,7 +58,7 @@ def build_tethers(cloths, specs, k: int) -> TetherTable | None:
     for slot, spec in zip(cloths, specs):
         if not spec.uses_tethers:
             continue
-        top = slot.topology
+        top = slot.device_topology  # device indices, as the Model holds the particles
         pinned = np.asarray(top.pinned, np.int64)
         free = np.flatnonzero(top.inv_mass > 0)
         mine = min(k, len(pinned))

@@ -137,7 +137,7 @@ class AirModel:
         self.clock = counts.clock
         face_counts, corners, params = [], [], []
         for slot, spec in zip(model.cloths, scene.cloths):
-            faces = slot.topology.faces
+            faces = slot.device_topology.faces
             if not feels_air(spec) or len(faces) == 0:
                 continue
             face_counts.append(faces.counts)

@@ -20,7 +20,7 @@ import numpy as np
 import warp as wp
 
 from ..colliders import ColliderModel
-from ..geometry.colouring import Colouring, check_partition, graph_colouring, grid_colouring
+from ..geometry.colouring import Colouring, check_partition, graph_colouring, grid_colouring, stick_order
 from ..errors import ArgumentError
 from ..constraints import kinds as constraint_kinds
 from ..constraints.tethers import TetherTable, build_tethers
@@ -28,16 +28,30 @@ from ..input.scene import Scene
 from .stages import AERODYNAMICS, MAX_UNIFORM_MASS_PINS, Requirements
 from ..geometry.faces import edge_faces
 from ..geometry.mesh_cloth import STRUCTURAL
+from ..geometry.particle_order import inverse_order, locality_order, reorder_topology
 from ..geometry.topology import (BEND_H, BEND_V, FAMILY_OF_CLASS, SHEAR_ANTI, SHEAR_DIAG, STRUCT_H, STRUCT_V,
                                  ClothTopology, build_cloth)
 
 
+PARTICLE_ORDERS = ("auto", "input")
+
+
 @dataclass(frozen=True)
 class ClothSlot:
-    """Where one cloth lives in the shared particle array."""
+    """Where one cloth lives in the shared particle array.
+
+    ``topology`` is the cloth as the scene numbers its particles: what the cache, the views and the user see.
+    ``reordered`` is the same cloth with its particles in the order the device holds them, where the Model
+    renumbered them (a mesh cloth, warp_verlet/geometry/particle_order.py), else None; ``device_topology`` is
+    whichever of the two the device holds, the one the Model and the constraint kinds build from."""
 
     topology: ClothTopology
     first: int  # index of its first particle
+    reordered: ClothTopology | None = None
+
+    @property
+    def device_topology(self) -> ClothTopology:
+        return self.topology if self.reordered is None else self.reordered
 
     @property
     def name(self) -> str:
@@ -210,7 +224,15 @@ class GridTethersDevice:
 class Model:
     """Device arrays (read by the kernels, never written) and the host copies the metrics need.
 
-    Particles (N): ``inv_mass`` (N,) float32, 1/kg, 0 for a pin; ``rest_positions`` (N, 3) float32, m (host).
+    Particles (N), in the order the device holds them: ``inv_mass`` (N,) float32, 1/kg, 0 for a pin;
+    ``rest_positions`` (N, 3) float32, m (host). A mesh cloth's particles are held in Morton order of their rest
+    positions unless ``particle_order`` is "input" (warp_verlet/geometry/particle_order.py: a launch then reads
+    memory forward); a grid's stay in row-major order. ``scene_particle`` (N,) int32: the scene's index (cloth
+    after cloth, each cloth's particles as its ``ClothSlot.topology`` numbers them) of each device particle, and
+    ``device_particle`` (N,) int32 the inverse, the device index of each scene particle; both None when the two
+    orders are the same. Every index a Model holds (sticks, tethers, faces, the constraint kinds' data) is a
+    device index; ``to_scene_order`` and ``to_device_order`` convert per-particle arrays, and the State's host
+    readbacks (positions, set_positions, set_velocity) speak the scene's order.
     Precision: ``precision`` ("float32" or "float64", the scene's ``simulation.precision`` resolved), and the
     State's position types ``position_dtype`` (``wp.vec3`` or ``wp.vec3d``), ``position_scalar``
     (``wp.float32`` or ``wp.float64``) and ``host_position_dtype`` (numpy's). Only positions change type:
@@ -218,7 +240,8 @@ class Model:
     Coloured solver, per stick in colour order (M): ``stick_ends`` (M,) vec2i particle indices,
     ``stick_rest`` (M,) float32 m, ``stick_weight`` (M,) float32 (all 1: the intact weights a State starts
     from), ``stick_compliance`` (M,) float32 m/N or None when every stick is rigid; ``colour_ranges`` the
-    (first, count) of each colour. Jacobi solver: the per-particle CSR ``neighbour_start`` (N + 1,),
+    (first, count) of each colour, whose sticks are sorted by first particle, then second (colouring.stick_order).
+    Jacobi solver: the per-particle CSR ``neighbour_start`` (N + 1,),
     ``neighbour``, ``neighbour_rest`` and ``neighbour_weight`` (2M,) instead. Tearing (only when a cloth can
     tear): ``tear_ends`` and ``tear_length`` (E,), one entry per stick (coloured) or per stick end (Jacobi);
     where a cloth tears by tension (coloured only), ``tear_force`` (M,) float32 N (+inf: never by tension).
@@ -231,13 +254,17 @@ class Model:
     """
 
     def __init__(self, scene: Scene, device, colouring: str = "auto", sticks: str = "auto",
-                 requirements: Requirements | None = None):
+                 requirements: Requirements | None = None, particle_order: str = "auto"):
         """``colouring``: "auto" (analytic when every cloth is a grid, else Warp's graph colouring), "grid"
         (grids only) or "graph". ``sticks``: "auto" (implicit grid sticks on a GPU where the scene allows
         them: stages.implicit_grid_obstacle, :func:`stick_form`), "explicit" or "implicit". ``requirements``: the
-        scene's Requirements for that stick form, where the caller has computed them already."""
+        scene's Requirements for that stick form, where the caller has computed them already.
+        ``particle_order``: "auto" (mesh cloths' particles in Morton order on the device, grids' in row-major
+        order) or "input" (every cloth's as the scene numbers them)."""
         if colouring not in ("auto", "grid", "graph"):
             raise ArgumentError(f"colouring must be 'auto', 'grid' or 'graph', got {colouring!r}")
+        if particle_order not in PARTICLE_ORDERS:
+            raise ArgumentError(f"particle_order must be 'auto' or 'input', got {particle_order!r}")
         sticks = stick_form(sticks, colouring, device)
         self.device = device
         self.relaxation = scene.simulation.relaxation
@@ -249,36 +276,45 @@ class Model:
         self.position_dtype = wp.vec3d if double else wp.vec3
         self.position_scalar = wp.float64 if double else wp.float32
         self.host_position_dtype = np.float64 if double else np.float32
-        slots, first = [], 0
+        slots, orders, first = [], [], 0
         for spec in scene.cloths:
-            slots.append(ClothSlot(build_cloth(spec), first))
+            topology = build_cloth(spec)
+            order = None
+            if particle_order == "auto" and not topology.is_grid:
+                order = locality_order(topology.positions)
+            slots.append(ClothSlot(topology, first, None if order is None else reorder_topology(topology, order)))
+            orders.append(np.arange(first, first + spec.particle_count, dtype=np.int32) if order is None
+                          else order + np.int32(first))
             first += spec.particle_count
         self.cloths: tuple[ClothSlot, ...] = tuple(slots)
         self.particle_count = first
+        reordered = any(s.reordered is not None for s in slots)
+        self.scene_particle = np.concatenate(orders).astype(np.int32) if reordered else None
+        self.device_particle = inverse_order(self.scene_particle) if reordered else None
 
-        # Host copies of everything, concatenated with particle indices made global.
-        self.rest_positions = np.concatenate([s.topology.positions for s in slots])
-        self.host_inv_mass = np.concatenate([s.topology.inv_mass for s in slots])
-        sticks = np.concatenate([s.topology.sticks + s.first for s in slots]).astype(np.int32)
-        rest = np.concatenate([s.topology.rest_length for s in slots])
-        compliance = np.concatenate([s.topology.compliance for s in slots])
-        family = np.concatenate([s.topology.family for s in slots])
+        # Host copies of everything, concatenated with particle indices made global (device order).
+        self.rest_positions = np.concatenate([s.device_topology.positions for s in slots])
+        self.host_inv_mass = np.concatenate([s.device_topology.inv_mass for s in slots])
+        sticks = np.concatenate([s.device_topology.sticks + s.first for s in slots]).astype(np.int32)
+        rest = np.concatenate([s.device_topology.rest_length for s in slots])
+        compliance = np.concatenate([s.device_topology.compliance for s in slots])
+        family = np.concatenate([s.device_topology.family for s in slots])
         all_grids = all(s.topology.is_grid for s in slots)
         if colouring == "grid" and not all_grids:
             raise ArgumentError("colouring='grid' needs every cloth to be a grid; a mesh cloth takes 'graph' or 'auto'")
-        owner = np.repeat(np.arange(len(slots), dtype=np.int32), [len(s.topology.sticks) for s in slots])
+        owner = np.repeat(np.arange(len(slots), dtype=np.int32), [len(s.device_topology.sticks) for s in slots])
         # A stick of a cloth that cannot tear gets an infinite tear length: one kernel serves every cloth.
         tear_length = np.concatenate([
-            s.topology.rest_length * np.float32(spec.tear_threshold) if spec.tear_threshold
-            else np.full(len(s.topology.rest_length), np.inf, np.float32)
+            s.device_topology.rest_length * np.float32(spec.tear_threshold) if spec.tear_threshold
+            else np.full(len(s.device_topology.rest_length), np.inf, np.float32)
             for s, spec in zip(slots, scene.cloths)
         ]).astype(np.float32)
         # Tearing by tension: a stick's tear force is its cloth's tear_tension (N/m) times the width of cloth it
         # carries, taken as its rest length (the spacing across a structural stick of a square grid); +inf where
         # its cloth sets none.
         tear_force = np.concatenate([
-            s.topology.rest_length * np.float32(spec.tear_tension) if spec.tear_tension
-            else np.full(len(s.topology.rest_length), np.inf, np.float32)
+            s.device_topology.rest_length * np.float32(spec.tear_tension) if spec.tear_tension
+            else np.full(len(s.device_topology.rest_length), np.inf, np.float32)
             for s, spec in zip(slots, scene.cloths)
         ]).astype(np.float32)
         self.stick_count = len(sticks)
@@ -296,7 +332,7 @@ class Model:
                 self.colouring = grid_colouring(np.concatenate([s.topology.grid_class for s in slots]),
                                                 np.concatenate([s.topology.anchor for s in slots]))
             check_partition(sticks, self.colouring.colour)  # cheap, and a wrong colouring is a silent race
-            order = np.argsort(self.colouring.colour, kind="stable")
+            order = stick_order(self.colouring.colour, sticks)  # by colour, then first and second particle
             sticks, rest, compliance = sticks[order], rest[order], compliance[order]
             family, owner, tear_length, tear_force = family[order], owner[order], tear_length[order], tear_force[order]
             sizes = self.colouring.sizes
@@ -390,7 +426,7 @@ class Model:
         for k, slot in enumerate(self.cloths):
             mine = owner == k
             # Only a face's sides have faces beside them: shear and bend sticks get -1 from edge_faces.
-            self.stick_faces[mine] = edge_faces(slot.topology.faces, self.host_sticks[mine] - slot.first)
+            self.stick_faces[mine] = edge_faces(slot.device_topology.faces, self.host_sticks[mine] - slot.first)
 
     def _build_neighbours(self, sticks, rest, device) -> tuple[np.ndarray, np.ndarray]:
         """CSR list of (neighbour, rest, weight) per particle for the gather-form Jacobi solver. Returns,
@@ -398,7 +434,9 @@ class Model:
         n = self.particle_count
         a = np.concatenate([sticks[:, 0], sticks[:, 1]])
         b = np.concatenate([sticks[:, 1], sticks[:, 0]])
-        order = np.lexsort((b, a))  # by particle, then neighbour: a fixed summation order
+        # By particle, then neighbour in the scene's order: a fixed summation order, the same whatever order the
+        # device holds the particles in, so a reordered cloth moves bit for bit as one held in the scene's order.
+        order = np.lexsort((self.scene_particles(b), a))
         counts = np.bincount(a, minlength=n)
         start = np.zeros(n + 1, np.int32)
         np.cumsum(counts, out=start[1:])
@@ -413,8 +451,26 @@ class Model:
         return len(self.colour_ranges)
 
     def split(self, points: np.ndarray) -> list[np.ndarray]:
-        """Per-cloth views of a (particle_count, 3) array."""
+        """Per-cloth views of a (particle_count, 3) array (a cloth's particles are its slice in either order)."""
         return [points[s.particles] for s in self.cloths]
+
+    def to_scene_order(self, values: np.ndarray) -> np.ndarray:
+        """A per-particle array (N, ...) held in device order, in the scene's order (itself when they agree)."""
+        return values if self.device_particle is None else values[self.device_particle]
+
+    def to_device_order(self, values: np.ndarray) -> np.ndarray:
+        """A per-particle array (N, ...) given in the scene's order, in device order (itself when they agree)."""
+        return values if self.scene_particle is None else values[self.scene_particle]
+
+    def device_particles(self, scene_indices) -> np.ndarray:
+        """The device indices of particles given by their scene indices (global: ``slot.first`` + local)."""
+        scene_indices = np.asarray(scene_indices)
+        return scene_indices if self.device_particle is None else self.device_particle[scene_indices]
+
+    def scene_particles(self, device_indices) -> np.ndarray:
+        """The scene indices of particles given by their device indices."""
+        device_indices = np.asarray(device_indices)
+        return device_indices if self.scene_particle is None else self.scene_particle[device_indices]
 
     def torn_sticks(self, stick_weight: np.ndarray) -> np.ndarray:
         """Which sticks (in ``host_sticks`` order) are torn, from a host copy of a State's ``stick_weight``."""
@@ -423,13 +479,13 @@ class Model:
         return torn
 
     def restore_tears(self, state, torn_pairs: np.ndarray) -> None:
-        """Mark the sticks between the particle pairs ``torn_pairs`` (K, 2) torn in ``state``: tears carried
-        over from a simulator of the same particles whose model was rebuilt (another stick order). Pairs that
-        are no stick here are ignored."""
+        """Mark the sticks between the particle pairs ``torn_pairs`` (K, 2, scene indices) torn in ``state``:
+        tears carried over from a simulator of the same particles whose model was rebuilt (another stick or
+        particle order). Pairs that are no stick here are ignored."""
         def key(pairs):
             pairs = np.sort(np.asarray(pairs, np.int64).reshape(-1, 2), axis=1)
             return pairs[:, 0] * self.particle_count + pairs[:, 1]
-        torn = np.isin(key(self.host_sticks), key(torn_pairs))
+        torn = np.isin(key(self.host_sticks), key(self.device_particles(np.asarray(torn_pairs, np.int64))))
         weight = np.where(torn[self._tear_entry_stick], 0.0, 1.0).astype(np.float32)
         state.stick_weight.assign(weight)
         state.torn_entries.assign(np.array([int((weight == 0.0).sum())], np.int32))
@@ -446,10 +502,10 @@ class Model:
 
     def structural_stretch(self, points: np.ndarray, torn: np.ndarray | None = None) -> np.ndarray:
         """|D - L| / L for every structural stick (the cloth's stretch; bend sticks measure bending) that is
-        not torn."""
+        not torn (``torn`` in ``host_sticks`` order), from ``points`` in the scene's order (State.positions)."""
         keep = self.structural if torn is None else self.structural & ~torn
         s = self.host_sticks[keep]
         rest = self.host_rest[keep].astype(np.float64)
-        p = points.astype(np.float64)
+        p = self.to_device_order(points).astype(np.float64)
         length = np.linalg.norm(p[s[:, 1]] - p[s[:, 0]], axis=1)
         return np.abs(length - rest) / rest

@@ -147,11 +147,11 @@ class StretchReadback:
         return float(self._host.numpy()[0])
 
 
-def build_model(scene: Scene, device, colouring: str = "auto", sticks: str = "auto"):
+def build_model(scene: Scene, device, colouring: str = "auto", sticks: str = "auto", particle_order: str = "auto"):
     """The immutable Model of ``scene`` on ``device`` (a resolved Warp device), its memory need checked first:
     (model, the scene's Requirements, the MemoryNeed). The requirements are derived once, here: the memory check,
     the model and the solver all read them, and a scene that cannot fit is refused before any of it is
-    allocated. ``colouring`` and ``sticks`` as for :class:`Simulator`."""
+    allocated. ``colouring``, ``sticks`` and ``particle_order`` as for :class:`Simulator`."""
     from .model import stick_form
 
     form = stick_form(sticks, colouring, device)
@@ -159,7 +159,7 @@ def build_model(scene: Scene, device, colouring: str = "auto", sticks: str = "au
     memory = check_fits(scene, str(device), device.free_memory if device.is_cuda else None, available_host_bytes(),
                         form, req)
     with wp.ScopedDevice(device):
-        model = Model(scene, device, colouring, sticks, req)
+        model = Model(scene, device, colouring, sticks, req, particle_order)
     return model, req, memory
 
 
@@ -174,17 +174,20 @@ class Simulator:
     """
 
     def __init__(self, scene: Scene, device: str | None = None, colouring: str = "auto", use_graph: bool = True,
-                 threads: int | None = None, sticks: str = "auto"):
+                 threads: int | None = None, sticks: str = "auto", particle_order: str = "auto"):
         """``sticks``: "auto" computes a grid cloth's sticks in the kernels on a GPU where the scene allows it
         (one grid cloth that cannot tear, the coloured solver: stages.implicit_grid_obstacle) and keeps stick
-        arrays otherwise and on the CPU (model.stick_form says why), and sweeps rigid float32 ones tile by tile in
-        shared memory (kernels/grid_tiles.py); "explicit" always keeps them; "implicit" insists on a launch per
-        colour, in the explicit sticks' order and with their positions bit for bit; "tiled" insists on tiles.
-        ``constraint_sets`` says what was chosen."""
+        arrays otherwise and on the CPU (model.stick_form says why), and sweeps rigid float32 ones of a large grid
+        tile by tile in shared memory (kernels/grid_tiles.py); "explicit" always keeps them; "implicit" insists on
+        a launch per colour, in the explicit sticks' order and with their positions bit for bit; "tiled" insists
+        on tiles. ``constraint_sets`` says what was chosen. ``particle_order``: "auto" holds a mesh cloth's
+        particles in Morton order on the device, so that a launch reads memory forward
+        (warp_verlet/geometry/particle_order.py); "input" holds them as the scene numbers them. Either way every
+        method here takes and gives particles in the scene's order: only the Gauss-Seidel order differs."""
         self.scene = scene
         self.settings = scene.simulation
         self.device = resolve_device(device)
-        self.model, req, self.memory = build_model(scene, self.device, colouring, sticks)
+        self.model, req, self.memory = build_model(scene, self.device, colouring, sticks, particle_order)
         self._sticks = self.model.stick_request
         with wp.ScopedDevice(self.device):
             self.state = State(self.model)
@@ -196,6 +199,7 @@ class Simulator:
         self._accumulator = 0.0
         self._first_diverged = None  # allocated by the first divergence check
         self._gather = None  # render_points: (the particles asked for, their device copy, the output)
+        self._scene_order = None  # positions() of a renumbered cloth: (each scene particle's device index, output)
         self._stretch_arrays = None  # device_stretch: structural sticks and the sums, made at its first call
         self._frame_graphs: dict[int, object] = {}  # substeps -> the captured frame
         self._substep_in_frame = 0  # substeps advance() has taken since the last frame boundary
@@ -437,24 +441,38 @@ class Simulator:
         if not other.at_frame_boundary:
             raise StateError("take_state() continues from a frame boundary; the other simulator is mid-frame")
         mine, theirs = self.state, other.state
-        for name in ("particle_q", "particle_q_inertial", "particle_dq"):
-            getattr(mine, name).assign(getattr(theirs, name).numpy().astype(self.model.host_position_dtype))
+        for name in ("particle_q", "particle_q_inertial", "particle_dq"):  # through the scene's order
+            values = other.model.to_scene_order(getattr(theirs, name).numpy())
+            getattr(mine, name).assign(self.model.to_device_order(values).astype(self.model.host_position_dtype))
         for name in mine.collider_array_names:  # each collider kind's moving part (sphere centres, the clock)
             if getattr(theirs, name, None) is not None and getattr(mine, name) is not None:
                 wp.copy(getattr(mine, name), getattr(theirs, name))
         if self.model.tears and other.model.tears and other.torn_count():
-            self.model.restore_tears(mine, other.model.host_sticks[other.torn_sticks()])
+            self.model.restore_tears(mine, other.model.scene_particles(other.model.host_sticks[other.torn_sticks()]))
             self.sync_tears()
         mine.time, mine.steps, mine.dt_prev = theirs.time, theirs.steps, theirs.dt_prev
-        mine.start_velocity = None if theirs.start_velocity is None else theirs.start_velocity.astype(
-            self.model.host_position_dtype)
+        mine.start_velocity = None if theirs.start_velocity is None else self.model.to_device_order(
+            other.model.to_scene_order(theirs.start_velocity)).astype(self.model.host_position_dtype)
         self._accumulator = other._accumulator
 
     # ------------------------------------------------------------------ reading state
     def positions(self) -> np.ndarray:
-        """All particle positions, (particle_count, 3) float32 (float64 where ``model.precision`` is): a snapshot
-        on the host."""
-        return self.state.positions()
+        """All particle positions in the scene's order, (particle_count, 3) float32 (float64 where
+        ``model.precision`` is): a snapshot on the host (``state.positions()``, gathered on the device where the
+        Model renumbered a cloth: a host gather of a million points costs tens of milliseconds a frame)."""
+        if self.model.device_particle is None:
+            return self.state.positions()
+        from warp_verlet.kernels.positions import instance
+        from warp_verlet.kernels.readback import gather_positions
+
+        if self._scene_order is None:
+            with wp.ScopedDevice(self.device):
+                self._scene_order = (wp.array(self.model.device_particle, dtype=int),
+                                     wp.empty(self.model.particle_count, dtype=self.model.position_dtype))
+        index, out = self._scene_order
+        wp.launch(instance(gather_positions, self.model.position_dtype), len(index), device=self.device,
+                  inputs=[self.state.particle_q, index], outputs=[out])
+        return out.numpy().copy() if self.device.is_cpu else out.numpy()
 
     def previous_positions(self) -> np.ndarray:
         """Positions at the end of the previous substep (x_prev of the textbook form)."""
@@ -471,13 +489,14 @@ class Simulator:
     def render_points(self, particles: np.ndarray, alpha: float) -> np.ndarray:
         """``render_positions(alpha)[particles]`` as float32 (K, 3), gathered on the device, so that only the K
         points cross to the host (a viewer drawing a 1024 x 1024 cloth as 256 x 256 copies 0.8 MB, not 36 MB).
-        ``particles`` is uploaded once and reused while the same array is passed."""
+        ``particles`` (scene indices) is uploaded once and reused while the same array is passed."""
         from warp_verlet.kernels.positions import instance
         from warp_verlet.kernels.readback import gather_drawn
 
         if self._gather is None or self._gather[0] is not particles:
             with wp.ScopedDevice(self.device):
-                self._gather = (particles, wp.array(np.asarray(particles, np.int32), dtype=int),
+                on_device = self.model.device_particles(np.asarray(particles, np.int32)).astype(np.int32)
+                self._gather = (particles, wp.array(on_device, dtype=int),
                                 wp.empty(len(particles), dtype=wp.vec3f))
         _, index, out = self._gather
         q = self.state
@@ -516,8 +535,9 @@ class Simulator:
         return StretchStats(float(largest.numpy()[0]), float(np.sqrt(sum_squares.numpy()[0] / n)))
 
     def diverged_particle(self) -> int | None:
-        """The lowest index of a particle that is not finite or beyond ``position_bound``, or None. Checked on
-        the device; the host reads back one integer, so it is cheap enough to ask once per frame."""
+        """The scene index of a particle that is not finite or beyond ``position_bound`` (the lowest such on the
+        device), or None. Checked on the device; the host reads back one integer, so it is cheap enough to ask
+        once per frame."""
         n = self.model.particle_count
         with wp.ScopedDevice(self.device):
             if self._first_diverged is None:
@@ -526,7 +546,7 @@ class Simulator:
             wp.launch(find_diverged, n, inputs=[self.state.particle_q, self.settings.position_bound],
                       outputs=[self._first_diverged])
             first = int(self._first_diverged.numpy()[0])
-        return None if first == n else first
+        return None if first == n else int(self.model.scene_particles(first))
 
     def torn_count(self) -> int:
         """Sticks torn so far: one integer copied from the device, so it is cheap to ask every frame."""

@@ -20,7 +20,8 @@ from .model import Model
 class State:
     """The time-varying data of one scene on one device.
 
-    Attributes (N particles, E tear entries: one per stick for the coloured solver, two for Jacobi):
+    Attributes (N particles, in the Model's device order; E tear entries: one per stick for the coloured
+    solver, two for Jacobi):
 
     - ``particle_q``: (N,) ``wp.vec3`` (float32), or ``wp.vec3d`` where the model's precision is float64
       (``model.position_dtype``), m. Positions.
@@ -45,6 +46,10 @@ class State:
     None before the first step: the next step then runs the exact start). On the host too, ``start_velocity``:
     (N, 3) m/s of the positions' numpy type, or None (at rest): the velocity :meth:`set_velocity` gave, which
     the exact start turns into the first increment; None again once it has.
+
+    The host methods (:meth:`positions`, :meth:`previous_positions`, :meth:`set_positions`,
+    :meth:`set_velocity`) take and give particles in the scene's order, whatever order the device holds them in
+    (``Model.scene_particle``): positions cross between the device and the user here, and are converted here.
     """
 
     _ARRAYS = ("particle_q", "particle_q_inertial", "particle_dq", "stick_weight", "torn_entries",
@@ -119,19 +124,23 @@ class State:
                                 f"particles, got {shape}") from None
         if not np.isfinite(v).all():
             raise ArgumentError("velocity must be finite")
+        v = self.model.to_device_order(v)
         self.start_velocity = np.where(self.model.host_inv_mass[:, None] > 0, v, 0.0).astype(dtype)
         self.particle_dq.zero_()
         self.particle_q_inertial.assign(self.particle_q)
         self.dt_prev = None
 
     def positions(self) -> np.ndarray:
-        """Particle positions, (N, 3) m, float32 or float64 as ``model.precision``: a host snapshot that later
-        steps do not change."""
+        """Particle positions in the scene's order, (N, 3) m, float32 or float64 as ``model.precision``: a host
+        snapshot that later steps do not change."""
         points = self.particle_q.numpy()
+        if self.model.device_particle is not None:
+            return points[self.model.device_particle]  # a gather: a copy
         return points.copy() if self.model.device.is_cpu else points  # on the CPU numpy() is a live view
 
     def set_positions(self, points) -> None:
-        """Overwrite the positions, (N, 3) m, keeping the implicit velocity x - x_prev of every particle."""
+        """Overwrite the positions, (N, 3) m in the scene's order, keeping the implicit velocity x - x_prev of every
+        particle."""
         n = self.model.particle_count
         try:
             points = np.asarray(points, dtype=self.model.host_position_dtype)
@@ -139,7 +148,7 @@ class State:
             raise ArgumentError(f"points must be numbers of shape ({n}, 3)") from None
         if points.size != 3 * n:
             raise ArgumentError(f"points must have shape ({n}, 3) for this model's {n} particles, got {points.shape}")
-        points = points.reshape(n, 3)
+        points = self.model.to_device_order(points.reshape(n, 3))
         if self.dt_prev is None:
             self.particle_q.assign(points)
             return
@@ -149,5 +158,5 @@ class State:
         self.particle_q_inertial.assign(self.particle_q_inertial.numpy() + shift)
 
     def previous_positions(self) -> np.ndarray:
-        """Positions at the end of the previous substep (x_prev of the textbook form)."""
-        return self.particle_q_inertial.numpy() - self.particle_dq.numpy()
+        """Positions at the end of the previous substep (x_prev of the textbook form), in the scene's order."""
+        return self.model.to_scene_order(self.particle_q_inertial.numpy() - self.particle_dq.numpy())

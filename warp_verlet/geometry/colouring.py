@@ -126,6 +126,14 @@ def colour(elements: np.ndarray, max_colours: int = MAX_COLOURS) -> Colouring:
     return Colouring(capped, max_colours, coloured.method + f", overflow past {max_colours - 1}", overflow=True)
 
 
+def stick_order(colour: np.ndarray, sticks: np.ndarray) -> np.ndarray:
+    """The order that sorts sticks by colour and, inside a colour, by first particle, then second. A colour is
+    one launch with one thread per stick, so a launch then reads memory forward (its sticks share no particle,
+    so their order inside a colour changes no result). A grid's sticks are in this order already (each colour
+    is one direction, its sticks in row-major order of their first particle)."""
+    return np.lexsort((sticks[:, 1], sticks[:, 0], colour))
+
+
 def colour_ranges(colouring: Colouring) -> tuple[np.ndarray, list[tuple[int, int]]]:
     """The order that sorts elements by colour (stable), and each non-empty colour's (first, count) in it."""
     order = np.argsort(colouring.colour, kind="stable")
