@@ -16,9 +16,10 @@ For each size n, three variants of the benchmark hanging cloth (bench.common.han
   opposite each interior edge (across a diagonal, that is the other diagonal). Its stretch is therefore
   not the same measure as the grid's: it includes the diagonals, and the cloth is stiffer in shear.
 
-Particle order (--orders): a mesh cloth's particles are held on the device in Morton order of their rest
-positions by default (Simulator's particle_order "auto": warp_verlet/geometry/particle_order.py); "input" holds
-them as the file numbers them. --orders input reordered gives each mesh variant a row per order in the same
+Particle order (--orders): "reordered" holds a mesh cloth's particles on the device in Morton order of their rest
+positions (Simulator's particle_order "morton": warp_verlet/geometry/particle_order.py); "input" holds them as
+the file numbers them (the default, "auto", picks Morton order only where it brings the sticks' ends much closer
+in memory). --orders input reordered gives each mesh variant a row per order in the same
 run; "reorder s" is the time the Model spends renumbering the cloth (its Morton order and the renumbered
 topology, timed apart from the Simulator). A grid's particles stay in row-major order either way. The mesh files
 list the grid's points in row-major order, already an order with locality; --shuffle writes them in a random
@@ -72,7 +73,7 @@ from .common import (HANGING_DAMPING, arg_parser, hanging_cloth, hanging_sheet, 
 FRAMES, WARM_UP = 60, 2
 PRIM = "/Set/Cloth"
 VARIANTS = ("grid", "quad mesh", "triangle mesh")
-ORDERS = ("input", "reordered")  # --orders: Simulator's particle_order "input" and "auto"
+ORDERS = ("input", "reordered")  # --orders: Simulator's particle_order "input" and "morton"
 ORDER_NAMES = {"input": "input", "reordered": "Morton"}  # the table's "particle order" column
 SHUFFLE_SEED = 7
 
@@ -222,7 +223,7 @@ def measure(variant: str, n: int, the_scene: Scene, load_s: float, device: str, 
     mesh = variant != "grid"
     start = time.perf_counter()
     sim = Simulator(the_scene, device, use_graph=use_graph, threads=threads,
-                    particle_order="auto" if order == "reordered" else "input")
+                    particle_order="morton" if order == "reordered" else "input")
     build_s = time.perf_counter() - start
     try:
         sim.step_frame()  # warm-up: compiles kernels, initialises the Verlet state
@@ -391,7 +392,7 @@ def setup_only(args, device, command) -> int:
              + "\n".join(where.lines(command)) + "\n\n"
              "- load s: parse_scene (the .usdc read, welded, checked). build_cloth s: its topology (sticks from the "
              "faces). Morton order s: the particles' Morton order. renumber s: the topology renumbered "
-             "(particle_order.reorder_topology). reorder s: the two together, what particle_order \"auto\" adds to "
+             "(particle_order.reorder_topology). reorder s: the two together, what particle_order \"morton\" adds to "
              "a mesh cloth's build. stick sort s: the sticks sorted by colour, then first and second particle "
              "(colouring.stick_order); colour sort s: the stable sort by colour alone it replaced. graph colouring "
              "s: Warp's graph colouring of the sticks, the bulk of a mesh cloth's build.\n")

@@ -11,7 +11,7 @@ order gets its own Simulator of the same scene; after two warm-up frames the sim
 frames each per round over --rounds rounds, so that a change in the machine's load falls on every order alike;
 ms/frame is each order's median round, spread half its range.
 
-Orders: "input" is Simulator's particle_order "input"; "Morton" is "auto" (warp_verlet/geometry/particle_order.py);
+Orders: "input" is Simulator's particle_order "input"; "Morton" is "morton" (warp_verlet/geometry/particle_order.py);
 "RCM" is scipy.sparse.csgraph.reverse_cuthill_mckee of the stick graph, put in Morton's place for its Simulator
 (scipy is not a dependency of warp-verlet: this benchmark needs it installed). "order s" is the time the order
 itself takes on the host.
@@ -61,9 +61,9 @@ def simulators(the_scene, device: str, threads: int | None) -> tuple[dict, dict]
     rcm = rcm_order(topology.particle_count, topology.sticks)
     seconds["RCM"] = time.perf_counter() - start
     sims = {"input": Simulator(the_scene, device, threads=threads, particle_order="input"),
-            "Morton": Simulator(the_scene, device, threads=threads)}
+            "Morton": Simulator(the_scene, device, threads=threads, particle_order="morton")}
     with mock.patch.object(model_module, "locality_order", lambda points: rcm):
-        sims["RCM"] = Simulator(the_scene, device, threads=threads)
+        sims["RCM"] = Simulator(the_scene, device, threads=threads, particle_order="morton")
     assert np.array_equal(sims["Morton"].model.scene_particle, morton)
     assert np.array_equal(sims["RCM"].model.scene_particle, rcm)
     return sims, seconds

@@ -70,7 +70,7 @@ def curtain(tmp_path, simulation: dict | None = None, output: dict | None = None
 
 
 def run(scene, frames: int, **simulator) -> np.ndarray:
-    sim = Simulator(scene, "cpu", threads=1, **simulator)
+    sim = Simulator(scene, "cpu", threads=1, **{"particle_order": "morton", **simulator})
     try:
         for _ in range(frames):
             sim.step_frame()
@@ -79,7 +79,7 @@ def run(scene, frames: int, **simulator) -> np.ndarray:
         sim.close()
 
 
-def model_of(scene, particle_order: str = "auto") -> Model:
+def model_of(scene, particle_order: str = "morton") -> Model:
     return build_model(scene, resolve_device("cpu"), particle_order=particle_order)[0]
 
 
@@ -134,8 +134,8 @@ def test_a_grid_is_never_renumbered():
 
 def test_particle_order_is_checked(tmp_path):
     scene, _ = curtain(tmp_path)
-    with pytest.raises(ArgumentError, match="particle_order must be 'auto' or 'input', got 'morton'"):
-        Simulator(scene, "cpu", particle_order="morton")
+    with pytest.raises(ArgumentError, match="particle_order must be 'auto', 'morton' or 'input', got 'hilbert'"):
+        Simulator(scene, "cpu", particle_order="hilbert")
 
 
 # -- sticks in each colour ----------------------------------------------------------------------------------------
@@ -144,7 +144,7 @@ def test_each_colour_reads_memory_forward(tmp_path):
     """Inside every colour the sticks are in increasing order of their first particle (no two share one), each
     stored (low, high): a launch walks the particle array forward."""
     scene, _ = curtain(tmp_path)
-    for particle_order in ("auto", "input"):
+    for particle_order in ("morton", "input"):
         model = model_of(scene, particle_order)
         ends = model.host_sticks
         assert (ends[:, 0] < ends[:, 1]).all()
@@ -160,7 +160,7 @@ def test_a_grid_keeps_its_stick_order():
     np.testing.assert_array_equal(stick_order(colour, top.sticks), np.argsort(colour, kind="stable"))
 
 
-@pytest.mark.parametrize("particle_order", ["auto", "input"])
+@pytest.mark.parametrize("particle_order", ["morton", "input"])
 def test_sorting_sticks_inside_a_colour_changes_no_bit(tmp_path, monkeypatch, particle_order):
     """The sticks of one colour share no particle, so projecting them in another order gives the same bits: the
     same run with the sticks in their colouring's order (a stable sort by colour, as before the sort by particle)
@@ -224,7 +224,7 @@ def test_simulator_speaks_the_scene_order(tmp_path):
     """positions, set_positions, previous_positions, render_points, diverged_particle and set_velocity take and
     give scene indices whatever order the device holds."""
     scene, _ = curtain(tmp_path)
-    sim = Simulator(scene, "cpu", threads=1)
+    sim = Simulator(scene, "cpu", threads=1, particle_order="morton")
     rest = build_cloth(scene.cloths[0]).positions
     np.testing.assert_array_equal(sim.positions(), rest)
     sim.step_frame()
@@ -258,7 +258,7 @@ def test_simulator_speaks_the_scene_order(tmp_path):
 def test_take_state_crosses_particle_orders(tmp_path):
     """A simulator in the input order continues exactly from a reordered one's state, torn sticks included."""
     scene, _ = curtain(tmp_path, {"wind": [0.0, 0.0, 60.0], "iterations": 4}, tear_threshold=1.005)
-    ordered = Simulator(scene, "cpu", threads=1)
+    ordered = Simulator(scene, "cpu", threads=1, particle_order="morton")
     for _ in range(6):
         ordered.step_frame()
     assert ordered.torn_count() > 0
@@ -279,7 +279,7 @@ def test_torn_faces_are_the_input_faces(tmp_path):
     top = build_cloth(scene.cloths[0])
     edges = np.array([(int(a), int(b)) for a, b in top.sticks[:200:37]])  # a few sticks, in scene indices
     hidden = []
-    for particle_order in ("auto", "input"):
+    for particle_order in ("morton", "input"):
         sim = Simulator(scene, "cpu", threads=1, particle_order=particle_order)
         sim.model.restore_tears(sim.state, edges)
         hidden.append(sim.model.hidden_faces(sim.sync_tears())[0])
@@ -307,7 +307,7 @@ def test_jacobi_runs_bit_for_bit_in_either_order(tmp_path, monkeypatch):
     scene, _ = curtain(tmp_path, {"relaxation": "jacobi", "air": air, "frames": 10}, {"torn_faces": "remove"},
                        [sphere], tethers=True, tear_threshold=1.005, rigid_patches=[lowest])
     caches = []
-    for particle_order in ("auto", "input"):
+    for particle_order in ("morton", "input"):
         monkeypatch.setattr(simulator_module, "Simulator", partial(Simulator, particle_order=particle_order))
         out = tmp_path / f"{particle_order}.usda"  # two files: a layer once opened is not read again
         summary = runner.run_scene(replace(scene, output=replace(scene.output, path=out)), device="cpu")
@@ -331,7 +331,7 @@ def test_gauss_seidel_in_either_order_is_the_same_cloth(tmp_path):
     while the cloth swings more than twice the spacing, and a particle shown in another's place is a spacing or
     more away."""
     scene, points = curtain(tmp_path, {"frames": 20})
-    ordered = Simulator(scene, "cpu", threads=1)
+    ordered = Simulator(scene, "cpu", threads=1, particle_order="morton")
     plain = Simulator(scene, "cpu", threads=1, particle_order="input")
     for _ in range(20):
         ordered.step_frame()
@@ -345,10 +345,13 @@ def test_gauss_seidel_in_either_order_is_the_same_cloth(tmp_path):
     plain.close()
 
 
-def test_live_recording_saves_the_input_vertex_order(tmp_path):
+def test_live_recording_saves_the_input_vertex_order(tmp_path, monkeypatch):
     """A live session records each frame as the device holds it and saves it through the scene's order: every
     saved frame of a reordered mesh is, vertex for vertex, what a batch simulator's positions give."""
     from warp_verlet.apps.live_session import LiveSession
+    from warp_verlet.geometry import particle_order
+
+    monkeypatch.setattr(particle_order, "LOCALITY_GAIN", 0.0)  # "auto" renumbers even this small mesh
     from warp_verlet.output.cache_reader import open_cache, read_cloths
 
     scene, points = curtain(tmp_path)
@@ -359,7 +362,7 @@ def test_live_recording_saves_the_input_vertex_order(tmp_path):
     assert session.save(tmp_path / "live.usdc") == 5
     cache = open_cache(tmp_path / "live.usdc")
     topology = build_cloth(scene.cloths[0])
-    batch = Simulator(scene, "cpu")
+    batch = Simulator(scene, "cpu", particle_order="morton")
     for frame in range(5):
         if frame:
             batch.step_frame()
@@ -396,7 +399,7 @@ def test_simulator_gathers_positions_on_the_device_as_the_state_does_on_the_host
     """Simulator.positions() puts a renumbered cloth back in the scene's order on the device; State.positions()
     does it on the host: the same gather, the same bits, and a snapshot that later steps leave alone."""
     scene, _ = curtain(tmp_path)
-    sim = Simulator(scene, "cpu", threads=1)
+    sim = Simulator(scene, "cpu", threads=1, particle_order="morton")
     sim.step_frame()
     first = sim.positions()
     np.testing.assert_array_equal(first, sim.state.positions())
@@ -406,3 +409,25 @@ def test_simulator_gathers_positions_on_the_device_as_the_state_does_on_the_host
     np.testing.assert_array_equal(first, kept)
     assert not np.array_equal(sim.positions(), kept)
     sim.close()
+
+
+def test_auto_renumbers_a_mesh_only_where_its_file_order_scatters_its_sticks(tmp_path):
+    """A mesh whose file lists its vertices row by row is held as it is (Morton order measured slower on a GPU
+    there); the same mesh with its vertex list shuffled is renumbered, since Morton order brings its sticks' ends
+    more than LOCALITY_GAIN times closer in memory."""
+    from warp_verlet.geometry.particle_order import LOCALITY_GAIN, inverse_order, mean_stick_span
+
+    points, faces = grid_mesh(24, 24)
+    order = np.random.default_rng(5).permutation(len(points))
+    place = np.empty(len(points), np.int64)
+    place[order] = np.arange(len(points))
+    files = {False: write_usd_mesh(tmp_path / "rows.usda", points, faces),
+             True: write_usd_mesh(tmp_path / "shuffled.usda", points[order], Faces(faces.counts, place[faces.indices]))}
+    for shuffled, asset in files.items():
+        scene = mesh_scene(tmp_path, {"mesh": asset.name, "prim": "/Set/Cloth", "sticks": ALL}, {"frames": 1})
+        model = model_of(scene, "auto")
+        assert (model.scene_particle is not None) == shuffled
+        top = model.cloths[0].topology
+        gain = mean_stick_span(top.sticks) / mean_stick_span(top.sticks, inverse_order(locality_order(top.positions)))
+        assert (gain > LOCALITY_GAIN) == shuffled
+        assert model_of(scene, "morton").scene_particle is not None  # "morton" renumbers either way

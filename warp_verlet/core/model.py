@@ -28,12 +28,12 @@ from ..input.scene import Scene
 from .stages import AERODYNAMICS, MAX_UNIFORM_MASS_PINS, Requirements
 from ..geometry.faces import edge_faces
 from ..geometry.mesh_cloth import STRUCTURAL
-from ..geometry.particle_order import inverse_order, locality_order, reorder_topology
+from ..geometry.particle_order import inverse_order, locality_order, reorder_topology, wants_locality_order
 from ..geometry.topology import (BEND_H, BEND_V, FAMILY_OF_CLASS, SHEAR_ANTI, SHEAR_DIAG, STRUCT_H, STRUCT_V,
                                  ClothTopology, build_cloth)
 
 
-PARTICLE_ORDERS = ("auto", "input")
+PARTICLE_ORDERS = ("auto", "morton", "input")
 
 
 @dataclass(frozen=True)
@@ -225,9 +225,9 @@ class Model:
     """Device arrays (read by the kernels, never written) and the host copies the metrics need.
 
     Particles (N), in the order the device holds them: ``inv_mass`` (N,) float32, 1/kg, 0 for a pin;
-    ``rest_positions`` (N, 3) float32, m (host). A mesh cloth's particles are held in Morton order of their rest
-    positions unless ``particle_order`` is "input" (warp_verlet/geometry/particle_order.py: a launch then reads
-    memory forward); a grid's stay in row-major order. ``scene_particle`` (N,) int32: the scene's index (cloth
+    ``rest_positions`` (N, 3) float32, m (host). A mesh cloth's particles may be held in Morton order of their rest
+    positions (``particle_order``; warp_verlet/geometry/particle_order.py: a launch then reads memory forward); a
+    grid's stay in row-major order. ``scene_particle`` (N,) int32: the scene's index (cloth
     after cloth, each cloth's particles as its ``ClothSlot.topology`` numbers them) of each device particle, and
     ``device_particle`` (N,) int32 the inverse, the device index of each scene particle; both None when the two
     orders are the same. Every index a Model holds (sticks, tethers, faces, the constraint kinds' data) is a
@@ -259,12 +259,14 @@ class Model:
         (grids only) or "graph". ``sticks``: "auto" (implicit grid sticks on a GPU where the scene allows
         them: stages.implicit_grid_obstacle, :func:`stick_form`), "explicit" or "implicit". ``requirements``: the
         scene's Requirements for that stick form, where the caller has computed them already.
-        ``particle_order``: "auto" (mesh cloths' particles in Morton order on the device, grids' in row-major
-        order) or "input" (every cloth's as the scene numbers them)."""
+        ``particle_order``: "auto" (a mesh cloth's particles in Morton order on the device where that brings its
+        sticks' ends much closer in memory than the scene's order: particle_order.wants_locality_order), "morton"
+        (every mesh cloth's in Morton order) or "input" (every cloth's as the scene numbers them); a grid's stay
+        in row-major order."""
         if colouring not in ("auto", "grid", "graph"):
             raise ArgumentError(f"colouring must be 'auto', 'grid' or 'graph', got {colouring!r}")
         if particle_order not in PARTICLE_ORDERS:
-            raise ArgumentError(f"particle_order must be 'auto' or 'input', got {particle_order!r}")
+            raise ArgumentError(f"particle_order must be 'auto', 'morton' or 'input', got {particle_order!r}")
         sticks = stick_form(sticks, colouring, device)
         self.device = device
         self.relaxation = scene.simulation.relaxation
@@ -280,8 +282,10 @@ class Model:
         for spec in scene.cloths:
             topology = build_cloth(spec)
             order = None
-            if particle_order == "auto" and not topology.is_grid:
+            if particle_order != "input" and not topology.is_grid:
                 order = locality_order(topology.positions)
+                if particle_order == "auto" and not wants_locality_order(topology, order):
+                    order = None
             slots.append(ClothSlot(topology, first, None if order is None else reorder_topology(topology, order)))
             orders.append(np.arange(first, first + spec.particle_count, dtype=np.int32) if order is None
                           else order + np.int32(first))

@@ -181,8 +181,9 @@ class Simulator:
         tile by tile in shared memory (kernels/grid_tiles.py); "explicit" always keeps them; "implicit" insists on
         a launch per colour, in the explicit sticks' order and with their positions bit for bit; "tiled" insists
         on tiles. ``constraint_sets`` says what was chosen. ``particle_order``: "auto" holds a mesh cloth's
-        particles in Morton order on the device, so that a launch reads memory forward
-        (warp_verlet/geometry/particle_order.py); "input" holds them as the scene numbers them. Either way every
+        particles in Morton order on the device where the scene's order scatters its sticks across memory, so
+        that a launch reads memory forward (warp_verlet/geometry/particle_order.py); "morton" always does;
+        "input" holds them as the scene numbers them. Either way every
         method here takes and gives particles in the scene's order: only the Gauss-Seidel order differs."""
         self.scene = scene
         self.settings = scene.simulation

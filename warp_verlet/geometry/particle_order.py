@@ -3,9 +3,12 @@
 A relaxation sweep is one launch per colour, one thread per stick, and each stick reads its two particles. A
 grid's particles are in row-major order, so the sticks of a colour, taken in order, read memory forward. A mesh's
 particles come in whatever order its file lists its vertices, which need not place neighbours near each other.
-The Model therefore holds a mesh cloth's particles in Morton order (Z order) of their rest positions: particles
+The Model can therefore hold a mesh cloth's particles in Morton order (Z order) of their rest positions: particles
 close in space are close in memory, and with each colour's sticks sorted by their first particle
-(warp_verlet/geometry/colouring.stick_order) a launch walks memory forward as it does on a grid.
+(warp_verlet/geometry/colouring.stick_order) a launch walks memory forward as it does on a grid. It does so
+("auto") where that brings the sticks' ends much closer in memory than the file's order (LOCALITY_GAIN), and
+always with ``particle_order = "morton"``: a file that already lists its vertices row by row measured faster
+as it is on an H100.
 
 Morton order needs only the rest positions (no graph, no new dependency: a few lines of numpy, a fraction of a
 second at a million particles) and does not depend on the order the file lists the vertices in, except between
@@ -59,6 +62,26 @@ def locality_order(points: np.ndarray) -> np.ndarray:
     """(n,) int32: the particles in Morton order of ``points`` (their rest positions); ties (one cell) keep
     their given order. ``order[k]`` is the particle that goes to place k."""
     return np.argsort(morton_codes(points), kind="stable").astype(np.int32)
+
+
+LOCALITY_GAIN = 4.0
+"""``particle_order = "auto"`` renumbers a mesh cloth only where Morton order brings its sticks' ends this many
+times closer in memory on average: on an H100 at 1024^2, renumbering a mesh whose file already lists its vertices
+row by row made a sweep slower (bench/results/mesh/h100-orders.md), while a shuffled vertex list gains from it."""
+
+
+def mean_stick_span(sticks: np.ndarray, place: np.ndarray | None = None) -> float:
+    """The mean |i - j| over ``sticks`` (M, 2), with particle p held at ``place[p]`` (its own index if None)."""
+    if len(sticks) == 0:
+        return 0.0
+    ends = sticks if place is None else place[sticks]
+    return float(np.abs(ends[:, 0].astype(np.int64) - ends[:, 1]).mean())
+
+
+def wants_locality_order(topology, order: np.ndarray) -> bool:
+    """Whether holding ``topology``'s particles in ``order`` brings its sticks' ends LOCALITY_GAIN times closer
+    in memory than the file's order does."""
+    return mean_stick_span(topology.sticks) > LOCALITY_GAIN * mean_stick_span(topology.sticks, inverse_order(order))
 
 
 def inverse_order(order: np.ndarray) -> np.ndarray:
