@@ -26,7 +26,7 @@ case "${PART:-bench}" in
     done ;;
   profile)
     ncu=$(command -v ncu || ls /usr/local/cuda*/bin/ncu /opt/nvidia/nsight-compute/*/ncu 2>/dev/null | head -1)
-    for sticks in tiled auto; do
+    for sticks in tiled implicit; do
       timeout 250 "$ncu" --cache-control none --kernel-name regex:relax_grid --launch-skip 200 --launch-count 2 \
         --section LaunchStats --section Occupancy --section WarpStateStats --section SchedulerStats \
         --section MemoryWorkloadAnalysis --section SpeedOfLight \
