@@ -5,13 +5,15 @@ in one run on one device.
     python -m bench.implicit_grid --device cpu --sizes 64 --budgets 4x8 --target-size 0   # a smoke run
 
 The scene is the benchmark's hanging sheet (bench.common.hanging_sheet: 1 m, pinned at its top corners, three rigid
-stick families) with tethers, n x n particles. For each size, each sticks' form ("explicit": every stick's ends,
-rest length and weight, and every tether, read from arrays; "auto": the sticks computed from the grid,
-kernels/grid_relax.py, the tethers from their table; "implicit": both computed) and each budget S x K (substeps x
-sweeps), it runs 60 frames: frames 1-2 are a warm-up (compilation, graph capture), frames 3-60 are timed in
-``--repeats`` batches and the median batch gives ms/frame (the spread is half the range). Beside it: G stick
-projections per second, the RMS and max structural stretch at frame 60 (the three forms must agree bit for bit, so
-their errors are equal; "same positions" says whether they do), and the bandwidth the explicit form's data needs
+stick families) with tethers, n x n particles. For each size, each sticks' form (``--forms``; "explicit": every
+stick's ends, rest length and weight, and every tether, read from arrays; "implicit": the sticks computed from the
+grid in a launch per colour, kernels/grid_relax.py, and the tethers computed too; "tiled": the sticks computed
+and swept tile by tile in shared memory, kernels/grid_tiles.py, the tethers from their table; "auto": what the
+simulator picks) and each budget S x K (substeps x sweeps), it runs 60 frames: frames 1-2 are a warm-up
+(compilation, graph capture), frames 3-60 are timed in ``--repeats`` batches and the median batch gives ms/frame
+(the spread is half the range). Beside it: G stick projections per second, the RMS and max structural stretch at
+frame 60 (explicit and implicit must agree bit for bit, so their errors are equal; "same positions" says whether
+they do; the tiled sweep projects in another order and has its own), and the bandwidth the explicit form's data needs
 per frame (RELAX_BYTES_PER_PROJECTION per stick projection, as bench.throughput counts it, plus the tether table
 and the positions per sweep) over the measured time, next to the device-to-device copy rate measured in the same
 run: an implicit row above 100% moves less data than that, from cache.
@@ -39,7 +41,7 @@ from .throughput import RELAX_BYTES_PER_PROJECTION
 
 FRAMES, WARM_UP, SETTLE = 60, 2, 20
 FORMS = ("explicit", "auto", "implicit", "tiled")
-"""Stick arrays and the tether table; implicit sticks and the tether table ("auto" on a GPU); both implicit;
+"""Stick arrays and the tether table; the simulator's choice; implicit sticks and tethers, a launch per colour;
 implicit sticks swept tile by tile in shared memory (kernels/grid_tiles.py) with the tether table."""
 
 
@@ -172,8 +174,9 @@ def main(argv=None) -> int:
     for n in args.sizes:
         rows += budget_rows(str(device), [n], parse(args.large_budgets if n >= 2048 else args.budgets), args.repeats,
                             copy_gbs, tuple(args.forms))
-    title = ("Hanging sheet with tethers at 1 s, stick and tether arrays (explicit) against implicit grid sticks "
-             f"with the tether table (auto, on a GPU) and with implicit tethers (implicit): {machine(device)}")
+    title = ("Hanging sheet with tethers at 1 s, stick and tether arrays (explicit) against implicit grid sticks: "
+             "a launch per colour with implicit tethers (implicit), swept tile by tile with the tether table (tiled), "
+             f"and what the simulator picks (auto): {machine(device)}")
     if copy_gbs:
         title += f"; device copy {copy_gbs:.0f} GB/s (read + write)"
     write_table(rows, args.out, "implicit-grid", title)
