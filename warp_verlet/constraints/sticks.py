@@ -8,9 +8,8 @@ tearing and the stretch metrics share); this module binds their sweeps.
 from __future__ import annotations
 
 from .kind import ConstraintSet
-from ..launches import (FLOAT, FLOAT64, INT, VEC2I, BoundStage, PhaseTask, copy_back_phase, recorded, split_tasks,
-                        start_compliant_substep)
-from ..launches import elements_per_thread
+from ..launches import (FLOAT, FLOAT64, INT, VEC2I, BoundStage, PhaseTask, copy_back_phase, elements_per_thread,
+                        recorded, split_tasks, start_compliant_substep)
 
 
 class Sticks(ConstraintSet):

@@ -15,8 +15,7 @@ import numpy as np
 
 from .kind import ConstraintSet
 from ..geometry.mesh_cloth import connected_labels
-from ..launches import FLOAT, FLOAT64, INT, BoundStage, recorded, split_tasks
-from ..launches import elements_per_thread
+from ..launches import FLOAT, FLOAT64, INT, BoundStage, elements_per_thread, recorded, split_tasks
 
 # Distances are computed for this many (particle, pin) pairs at a time, to bound the temporary memory.
 PAIRS_PER_CHUNK = 1 << 22

@@ -129,9 +129,9 @@ def global_levels(scene: "Scene") -> tuple[tuple[int, int, int], ...]:
 STICK_FORMS = ("auto", "explicit", "implicit", "tiled")
 MIN_TILED_PARTICLES = 512 * 512
 """Where "auto" sweeps a grid's rigid float32 sticks tile by tile (kernels/grid_tiles.py) on a GPU: from this
-many particles on. On an H100 the tiles reached the same stretch as a launch per colour in less time at 1024^2
-and 2048^2, and took longer at 64^2 and 256^2, where a launch of a quarter of the tiles leaves most of the GPU
-idle (bench/results/grid_tiles)."""
+many particles on. On an H100 the tiles reached the same stretch as a launch per colour in less time at 512^2,
+1024^2 and 2048^2, and took longer at 256^2, where a launch of a quarter of the tiles leaves most of the GPU idle
+(bench/results/grid_tiles)."""
 MAX_UNIFORM_MASS_PINS = 8
 """Implicit grid sticks find a particle's weight without reading it (0 for a pin, the free particles' for any
 other) when the cloth sets no particle masses and has at most this many pins, which each projection checks."""
