@@ -159,6 +159,8 @@ def main(argv=None) -> int:
     if args.tile:
         from warp_verlet.constraints import sticks
 
+        if args.tile < 4 or args.tile % 4:
+            p.error(f"--tile must be a multiple of 4 (a bend colour's parity repeats every 4 cells), got {args.tile}")
         sticks.GRID_TILE = args.tile
     if args.block_dim:
         from warp_verlet.constraints import sticks

@@ -34,8 +34,8 @@ def relax_grid_tiles(tile: int, colours: tuple):
     kernel per (tile, colours): the shared tiles' shapes and each colour's geometry are compile-time constants,
     so a colour's step unrolls to its own index arithmetic."""
     if tile < 4 or tile % 4:
-        raise ValueError(f"a tile's side must be a multiple of 4 (a bend colour's parity repeats every 4 rows or "
-                         f"columns, and two tiles apart must share no particle), got {tile}")
+        raise AssertionError(f"a tile's side must be a multiple of 4 (a bend colour's parity repeats every 4 rows or "
+                             f"columns, and two tiles apart must share no particle), got {tile}")
     key = (tile, tuple(colours))
     if key not in _KERNELS:
         _KERNELS[key] = _make_kernel(tile, tuple(colours))

@@ -9,7 +9,8 @@ import bench_package  # noqa: F401  (makes the repository's bench/ importable as
 from bench import l2_profile
 
 
-@pytest.mark.parametrize("sticks, sets", [("explicit", "'sticks'"), ("implicit", "'grid sticks'")])
+@pytest.mark.parametrize("sticks, sets", [("explicit", "'sticks'"), ("implicit", "'grid sticks'"),
+                                         ("tiled", "'grid tiles'")])
 def test_it_steps_the_sheet_with_the_sticks_asked_for(sticks, sets, capsys):
     assert l2_profile.main(["--size", "8", "--budget", "1x1", "--frames", "1", "--device", "cpu",
                             "--sticks", sticks]) == 0

@@ -1,0 +1,30 @@
+"""bench.implicit_grid at a tiny size on the CPU: a row per form and budget with its time and stretch, the
+computed sticks the same positions as the arrays, the tiled sweep its own order, and a bad tile refused."""
+
+from __future__ import annotations
+
+import csv
+
+import pytest
+
+import bench_package  # noqa: F401  (makes the repository's bench/ importable as the package "bench")
+from bench import implicit_grid
+
+
+def test_a_row_per_form_and_budget(tmp_path):
+    assert implicit_grid.main(["--device", "cpu", "--sizes", "16", "--budgets", "2x2", "--repeats", "1",
+                               "--target-size", "0", "--forms", "explicit", "implicit", "tiled",
+                               "--out", str(tmp_path)]) == 0
+    rows = list(csv.DictReader(open(tmp_path / "implicit-grid.csv")))
+    assert [r["sticks"] for r in rows] == ["explicit", "implicit", "tiled"]
+    same = {r["sticks"]: r["same positions"] for r in rows}
+    assert same == {"explicit": "", "implicit": "yes", "tiled": "(tile order)"}
+    assert "grid tiles" in rows[2]["constraint sets"]
+    for row in rows:
+        assert float(row["ms/frame"]) > 0 and row["stretch rms"].endswith("%")
+
+
+def test_a_tile_that_is_not_a_multiple_of_four_is_refused(capsys):
+    with pytest.raises(SystemExit):
+        implicit_grid.main(["--device", "cpu", "--sizes", "16", "--tile", "6", "--target-size", "0"])
+    assert "--tile must be a multiple of 4" in capsys.readouterr().err
