@@ -4,18 +4,22 @@ instead of once per colour.
 
 A tile owns the sticks anchored in its TILE x TILE cells (a stick's anchor is its first particle, (r, c); its
 other end is (r + dr, c + dc), dr in 0..2, dc in -1..2). A block loads the tile's region, its cells and the
-halo those sticks reach (rows r0 .. r0 + TILE + 1, columns c0 - 1 .. c0 + TILE + 1), projects the tile's
-sticks colour by colour in the analytic grid colouring's order (a colour's sticks share no particle, so its
-threads write disjoint cells; a barrier separates the colours), and writes the region back.
+halo those sticks reach (rows r0 .. r0 + TILE + 1, columns c0 - 1 .. c0 + TILE + 1), with the particles'
+weights and the rest-length tables over those rows and columns, into shared memory; projects the tile's sticks
+colour by colour in the analytic grid colouring's order, a thread per stick of the colour (a colour's sticks
+share no particle, so its threads write disjoint cells; a barrier separates the colours); and writes the region
+back. Each colour's geometry is a compile-time constant of the kernel, so its step unrolls to its own index
+arithmetic.
 
 Tiles are themselves coloured 2 x 2 by the parity of their tile row and column: the launch of one tile colour
 runs tiles two apart, whose regions (TILE + 2 rows, TILE + 3 columns, starting TILE x 2 apart) share no
 particle for any TILE >= 3, so the blocks of a launch neither read nor write each other's particles. A sweep is
-four launches, Gauss-Seidel across them.
+four launches, Gauss-Seidel across them. TILE is a multiple of 4, so that a bend colour's parity pattern, which
+repeats every 4 rows or columns, is the grid's in every tile.
 
 The projection is ``stick_correction`` with the rest lengths and weights the implicit grid sticks use
 (kernels/grid_relax.py), so every stick sees exactly the arithmetic of the other forms; only the order of the
-projections differs. That order is a fixed sequence (tile colour, tile, stick colour, cell), which the CPU
+projections differs. That order is a fixed sequence (tile colour, tile, stick colour, stick), which the CPU
 runs literally (one lane per block) and a GPU runs with the independent projections of one step at once.
 """
 
