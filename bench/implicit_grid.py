@@ -86,10 +86,11 @@ def budget_rows(device: str, sizes: list[int], budgets: list[tuple[int, int]], r
                 projections = sim.model.stick_count * sweeps
                 data = explicit_bytes_per_sweep(sim) * sweeps
                 key = (substeps, iterations)
-                same = "" if key not in finals else ("yes" if np.array_equal(points, finals[key]) else "NO")
-                if form == "tiled":  # another order of the same projections: its own error, not the same bits
+                if "grid tiles" in sim.constraint_sets:  # another order of the same projections: its own error
                     same = "(tile order)"
-                finals.setdefault(key, points)
+                else:  # the colour order: the first such form is the others' reference, bit for bit
+                    same = "" if key not in finals else ("yes" if np.array_equal(points, finals[key]) else "NO")
+                    finals.setdefault(key, points)
                 row = {"grid": f"{n}x{n}", "S x K": f"{substeps} x {iterations}", "sticks": form,
                        "constraint sets": " + ".join(sim.constraint_sets), "ms/frame": f"{per_frame * 1e3:.3f}",
                        "spread": f"±{spread * 100:.1f}%", "G proj/s": f"{projections / per_frame / 1e9:.1f}",
