@@ -1,7 +1,7 @@
 """Self-collision and cloth–cloth contact (warp_verlet/constraints/self_contact.py): candidate pairs once a
 substep, one Jacobi gather per sweep.
 
-Once a substep, the cell grid is rebuilt (``grid_keys``, a radix sort, ``grid_starts``, ``grid_gather``) and each particle of a
+Once a substep, the cell grid is rebuilt (``grid_keys``, a radix sort, ``grid_starts``) and each particle of a
 colliding cloth lists its candidate pairs from it (``contact_candidates``): the particles within ``reach`` × the pair's thickness (the mean of the two particles'), except those
 closer than ``rest_exclusion`` × the thickness in the rest pose of one cloth. In each sweep, for every candidate
 closer than the thickness, it takes its share of the push that separates the pair to the thickness: (h - d)
@@ -100,13 +100,6 @@ def grid_starts(keys: wp.array(dtype=int), count: int, slot_start: wp.array(dtyp
 
 
 @wp.kernel
-def grid_gather(x: wp.array(dtype=Any), order: wp.array(dtype=int), sorted_x: wp.array(dtype=Any)):
-    """The positions in the sorted order, so that the search reads a slot's particles from consecutive memory."""
-    k = wp.tid()
-    sorted_x[k] = x[order[k]]
-
-
-@wp.kernel
 def contact_candidates(
     x: wp.array(dtype=Any),
     thickness: wp.array(dtype=float),
@@ -117,10 +110,7 @@ def contact_candidates(
     inv_cell: float,
     dims: wp.vec3i,
     order: wp.array(dtype=int),
-    sorted_x: wp.array(dtype=Any),
     slot_start: wp.array(dtype=int),
-    largest_thickness: float,
-    columns: int,
     max_candidates: int,
     candidate: wp.array(dtype=int),
     candidate_count: wp.array(dtype=int),
@@ -128,37 +118,32 @@ def contact_candidates(
     """Once a substep: each colliding particle's pairs within ``reach`` x their thickness, the first
     ``max_candidates`` of them in a fixed order: the 27 cells around it (a cell is at least the reach, so they
     hold every pair within it), a column of three along the table's last axis at a time (three adjacent slots,
-    one range of the sorted order, unless the column wraps), then the particles of a slot by index. A particle
-    further than ``reach`` x ``largest_thickness`` is passed over on its sorted position alone. ``columns`` is 9 (a
-    launch argument, so that the loop stays one loop)."""
+    one range of the sorted order, unless the column wraps), then the particles of a slot by index."""
     i = wp.tid()
     count = int(0)
     if thickness[i] > 0.0:
         xi = x[i]
         c = grid_cell(xi, inv_cell)
-        far = type(xi[0])(reach * largest_thickness)
-        for column in range(columns):
-            dx = column // 3 - 1
-            dy = column % 3 - 1
-            first = cell_key(c + wp.vec3i(dx, dy, -1), dims)
-            last = cell_key(c + wp.vec3i(dx, dy, 1), dims)
-            runs = int(1)
-            if last != first + 2:  # the column wraps round the table: its three slots one by one
-                runs = 3
-            for r in range(runs):
-                lo = first
-                hi = first + 3
-                if runs == 3:
-                    lo = cell_key(c + wp.vec3i(dx, dy, r - 1), dims)
-                    hi = lo + 1
-                for k in range(slot_start[lo], slot_start[hi]):
-                    dist = wp.length(xi - sorted_x[k])
-                    if dist < far and count < max_candidates:
+        for dx in range(-1, 2):
+            for dy in range(-1, 2):
+                first = cell_key(c + wp.vec3i(dx, dy, -1), dims)
+                last = cell_key(c + wp.vec3i(dx, dy, 1), dims)
+                runs = int(1)
+                if last != first + 2:  # the column wraps round the table: its three slots one by one
+                    runs = 3
+                for r in range(runs):
+                    lo = first
+                    hi = first + 3
+                    if runs == 3:
+                        lo = cell_key(c + wp.vec3i(dx, dy, r - 1), dims)
+                        hi = lo + 1
+                    for k in range(slot_start[lo], slot_start[hi]):
                         j = order[k]
                         h = pair_thickness(i, j, thickness, rest, cloth, rest_exclusion)
-                        if h > 0.0 and dist < type(dist)(reach * h):
-                            candidate[i * max_candidates + count] = j
-                            count += 1
+                        if h > 0.0 and count < max_candidates:
+                            if wp.length(xi - x[j]) < type(xi[0])(reach * h):
+                                candidate[i * max_candidates + count] = j
+                                count += 1
     candidate_count[i] = count
 
 
@@ -208,6 +193,5 @@ def contact_gather(
 
 
 for_positions(grid_keys, arrays=("x",))
-for_positions(grid_gather, arrays=("x", "sorted_x"))
-for_positions(contact_candidates, arrays=("x", "sorted_x"))
+for_positions(contact_candidates, arrays=("x",))
 for_positions(contact_gather, arrays=("x_in", "x_out", "x_inertial", "delta"))

@@ -207,7 +207,7 @@ def grid_candidates(points: np.ndarray, thickness: np.ndarray, dims, reach: floa
                     builds: int = 1) -> list[list[int]]:
     """Each point's candidate list from the cell grid's kernels, as the binding runs them (the grid built
     ``builds`` times, the earlier builds from shuffled points, so that nothing of them may survive)."""
-    from warp_verlet.kernels.self_contact import contact_candidates, grid_gather, grid_keys, grid_starts
+    from warp_verlet.kernels.self_contact import contact_candidates, grid_keys, grid_starts
 
     n, cap = len(points), 64
     cell = reach * float(thickness.max())
@@ -220,7 +220,6 @@ def grid_candidates(points: np.ndarray, thickness: np.ndarray, dims, reach: floa
         keys = wp.zeros(2 * n, dtype=int)
         order = wp.zeros(2 * n, dtype=int)
         start = wp.zeros(cells + 1, dtype=int)
-        sorted_x = wp.zeros(n, dtype=wp.vec3)
         candidate, count = wp.zeros(n * cap, dtype=int), wp.zeros(n, dtype=int)
         rng = np.random.default_rng(3)
         for build in range(builds):
@@ -228,9 +227,8 @@ def grid_candidates(points: np.ndarray, thickness: np.ndarray, dims, reach: floa
             wp.launch(grid_keys, n, [x, h, 1.0 / cell, wp.vec3i(*dims), cells], [keys, order])
             wp.utils.radix_sort_pairs(keys, order, n)
             wp.launch(grid_starts, cells + 1, [keys, n], [start])
-            wp.launch(grid_gather, n, [x, order], [sorted_x])
         wp.launch(contact_candidates, n, [x, h, rest, cloth, REST_EXCLUSION, reach, 1.0 / cell,
-                                          wp.vec3i(*dims), order, sorted_x, start, float(thickness.max()), 9, cap], [candidate, count])
+                                          wp.vec3i(*dims), order, start, cap], [candidate, count])
         found, counts = candidate.numpy().reshape(n, cap), count.numpy()
     return [list(found[i, :counts[i]]) for i in range(n)]
 

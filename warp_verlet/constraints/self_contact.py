@@ -58,7 +58,7 @@ ones is repeatable). Particles at least a thickness apart fit about 12 around on
 (a dense packing); a particle between two layers of a fold has 2 to 8."""
 THIN_AXIS_CELLS = 8
 """Cells along an axis where the cloths are flat at rest: room for the layers of a fold or a pile."""
-CELLS_PER_PARTICLE = 8
+CELLS_PER_PARTICLE = 2
 """The grid's table slots at most, per particle (above 4096 slots): few enough that the slots' starts stay in a
 GPU's cache while the search reads them (at 8 a 1024^2 search ran several times slower); more particles share a
 slot where the table wraps, and the search skips them by distance."""
@@ -137,7 +137,7 @@ def cell_grid_dims(lo: np.ndarray, hi: np.ndarray, cell: float, particles: int) 
 
 def cell_grid_bytes(particles: int, cells: int) -> int:
     """Bytes of the cell grid: a slot and a particle index per particle, each twice (the radix sort's second
-    buffer), and a start per slot and one past them (the sorted positions are counted with the scratch). A CUDA sort's temporary space is not in it."""
+    buffer), and a start per slot and one past them. A CUDA sort's temporary space is not in it."""
     return particles * 4 * INT + (cells + 1) * INT
 
 
@@ -173,8 +173,7 @@ class ContactData:
             if h is not None:
                 thickness[slot.particles] = h
                 friction[slot.particles] = friction_of(spec)
-        self.largest = float(thickness.max())
-        self.cell = QUERY_REACH * self.largest
+        self.cell = QUERY_REACH * float(thickness.max())
         self.dims = scene_grid_dims(scene)
         self.thickness = wp.array(thickness, dtype=float, device=device)
         self.rest = wp.array(model.rest_positions.astype(np.float32), dtype=wp.vec3, device=device)
@@ -236,9 +235,9 @@ class SelfContact(ConstraintSet):
         return bool(req.count(self.name))
 
     def device_bytes(self, req) -> int:
-        # per particle: thickness, rest position, cloth, friction (μ_k, μ_s) (Model); a scratch and a sorted position, the
+        # per particle: thickness, rest position, cloth, friction (μ_k, μ_s) (Model); a scratch position, the
         # candidates and their count (solver); the cell grid
-        return (req.particles * (FLOAT + VEC3 + INT + 2 * FLOAT + 2 * req.position_bytes + (MAX_CANDIDATES + 1) * INT)
+        return (req.particles * (FLOAT + VEC3 + INT + 2 * FLOAT + req.position_bytes + (MAX_CANDIDATES + 1) * INT)
                 + cell_grid_bytes(req.particles, req.count(self.name)[1]))
 
     def build(self, model, scene, device):
@@ -247,7 +246,7 @@ class SelfContact(ConstraintSet):
     def bind(self, model, state, solver) -> BoundStage:
         import warp as wp
 
-        from warp_verlet.kernels.self_contact import contact_candidates, contact_gather, grid_gather, grid_keys, grid_starts
+        from warp_verlet.kernels.self_contact import contact_candidates, contact_gather, grid_keys, grid_starts
 
         data, x, n = model.constraints[self.name], state.particle_q, model.particle_count
         scratch = solver.scratch("contact_positions", n, model.position_dtype)
@@ -262,17 +261,14 @@ class SelfContact(ConstraintSet):
         inv_cell, dims = 1.0 / data.cell, wp.vec3i(*data.dims)
         place = recorded(grid_keys, n, [x, data.thickness, inv_cell, dims, cells], [keys, order])
         starts = recorded(grid_starts, cells + 1, [keys, n], [slot_start])
-        sorted_x = solver.scratch("contact_sorted_positions", n, model.position_dtype)
-        gather_sorted = recorded(grid_gather, n, [x, order], [sorted_x])
         find = recorded(contact_candidates, n, [x, data.thickness, data.rest, data.cloth, REST_EXCLUSION, QUERY_REACH,
-                                                inv_cell, dims, order, sorted_x, slot_start, data.largest,
-                                                9, MAX_CANDIDATES], [candidate, candidate_count])
+                                                inv_cell, dims, order, slot_start, MAX_CANDIDATES],
+                        [candidate, candidate_count])
 
         def search(state, dt: float) -> None:
             place.run()
             wp.utils.radix_sort_pairs(keys, order, n)
             starts.run()
-            gather_sorted.run()
             find.run()
 
         def gather(f, count):
