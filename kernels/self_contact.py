@@ -1,7 +1,7 @@
 """Self-collision and cloth–cloth contact (warp_verlet/constraints/self_contact.py): candidate pairs once a
 substep, one Jacobi gather per sweep.
 
-Once a substep, the cell grid is rebuilt (``grid_keys``, a radix sort, ``grid_starts``) and each particle of a
+Once a substep, the cell grid is rebuilt (``grid_keys``, a radix sort, ``grid_ranges``) and each particle of a
 colliding cloth lists its candidate pairs from it (``contact_candidates``): the particles within ``reach`` × the pair's thickness (the mean of the two particles'), except those
 closer than ``rest_exclusion`` × the thickness in the rest pose of one cloth. In each sweep, for every candidate
 closer than the thickness, it takes its share of the push that separates the pair to the thickness: (h - d)
@@ -71,10 +71,17 @@ def grid_keys(
     cells: int,
     keys: wp.array(dtype=int),
     order: wp.array(dtype=int),
+    cell_start: wp.array(dtype=int),
+    cell_end: wp.array(dtype=int),
 ):
-    """Each particle's table slot (``cells`` for one that does not collide: it sorts last and is in no slot), with
-    its own index as the value the sort carries."""
+    """Each particle's table slot (``cells`` for one that does not collide: it sorts last and is in no cell), with
+    its own index as the value the sort carries. First it empties the slot that the previous build's ``keys[i]``
+    (sorted) named: between them the threads empty every slot the previous build filled, and no other."""
     i = wp.tid()
+    old = keys[i]
+    if old >= 0 and old < cells:
+        cell_start[old] = 0
+        cell_end[old] = 0
     key = cells
     if thickness[i] > 0.0:
         key = cell_key(grid_cell(x[i], inv_cell), dims)
@@ -83,20 +90,18 @@ def grid_keys(
 
 
 @wp.kernel
-def grid_starts(keys: wp.array(dtype=int), count: int, slot_start: wp.array(dtype=int)):
-    """After the sort: where each slot's particles begin in the sorted order, for every slot s of the table and
-    one past it (the first sorted key >= s, by bisection), so slot s holds [start[s], start[s + 1]) and a run of
-    adjacent slots one range."""
-    s = wp.tid()
-    lo = int(0)
-    hi = count
-    while lo < hi:
-        mid = (lo + hi) // 2
-        if keys[mid] < s:
-            lo = mid + 1
-        else:
-            hi = mid
-    slot_start[s] = lo
+def grid_ranges(keys: wp.array(dtype=int), count: int, cells: int, cell_start: wp.array(dtype=int),
+                cell_end: wp.array(dtype=int)):
+    """After the sort: each filled slot's range [start, end) in the sorted order, from where its key begins and
+    ends (an empty slot keeps start = end = 0)."""
+    i = wp.tid()
+    key = keys[i]
+    if key >= cells:
+        return
+    if i == 0 or keys[i - 1] != key:
+        cell_start[key] = i
+    if i == count - 1 or keys[i + 1] != key:
+        cell_end[key] = i + 1
 
 
 @wp.kernel
@@ -110,15 +115,15 @@ def contact_candidates(
     inv_cell: float,
     dims: wp.vec3i,
     order: wp.array(dtype=int),
-    slot_start: wp.array(dtype=int),
+    cell_start: wp.array(dtype=int),
+    cell_end: wp.array(dtype=int),
     max_candidates: int,
     candidate: wp.array(dtype=int),
     candidate_count: wp.array(dtype=int),
 ):
     """Once a substep: each colliding particle's pairs within ``reach`` x their thickness, the first
     ``max_candidates`` of them in a fixed order: the 27 cells around it (a cell is at least the reach, so they
-    hold every pair within it), a column of three along the table's last axis at a time (three adjacent slots,
-    one range of the sorted order, unless the column wraps), then the particles of a slot by index."""
+    hold every pair within it), then the particles of a cell by index."""
     i = wp.tid()
     count = int(0)
     if thickness[i] > 0.0:
@@ -126,18 +131,9 @@ def contact_candidates(
         c = grid_cell(xi, inv_cell)
         for dx in range(-1, 2):
             for dy in range(-1, 2):
-                first = cell_key(c + wp.vec3i(dx, dy, -1), dims)
-                last = cell_key(c + wp.vec3i(dx, dy, 1), dims)
-                runs = int(1)
-                if last != first + 2:  # the column wraps round the table: its three slots one by one
-                    runs = 3
-                for r in range(runs):
-                    lo = first
-                    hi = first + 3
-                    if runs == 3:
-                        lo = cell_key(c + wp.vec3i(dx, dy, r - 1), dims)
-                        hi = lo + 1
-                    for k in range(slot_start[lo], slot_start[hi]):
+                for dz in range(-1, 2):
+                    key = cell_key(c + wp.vec3i(dx, dy, dz), dims)
+                    for k in range(cell_start[key], cell_end[key]):
                         j = order[k]
                         h = pair_thickness(i, j, thickness, rest, cloth, rest_exclusion)
                         if h > 0.0 and count < max_candidates:

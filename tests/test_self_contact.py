@@ -206,8 +206,9 @@ def test_a_mesh_cloths_default_is_its_median_edge(tmp_path):
 def grid_candidates(points: np.ndarray, thickness: np.ndarray, dims, reach: float, device: str,
                     builds: int = 1) -> list[list[int]]:
     """Each point's candidate list from the cell grid's kernels, as the binding runs them (the grid built
-    ``builds`` times, the earlier builds from shuffled points, so that nothing of them may survive)."""
-    from warp_verlet.kernels.self_contact import contact_candidates, grid_keys, grid_starts
+    ``builds`` times, the earlier builds from shuffled points, so that the later ones must empty the slots the
+    earlier filled)."""
+    from warp_verlet.kernels.self_contact import contact_candidates, grid_keys, grid_ranges
 
     n, cap = len(points), 64
     cell = reach * float(thickness.max())
@@ -217,27 +218,26 @@ def grid_candidates(points: np.ndarray, thickness: np.ndarray, dims, reach: floa
         h = wp.array(thickness, dtype=float)
         rest = wp.array(np.arange(n)[:, None] * np.array([[10.0, 0.0, 0.0]]), dtype=wp.vec3)  # no rest neighbours
         cloth = wp.zeros(n, dtype=int)
-        keys = wp.zeros(2 * n, dtype=int)
+        keys = wp.full(2 * n, -1, dtype=int)
         order = wp.zeros(2 * n, dtype=int)
-        start = wp.zeros(cells + 1, dtype=int)
+        start, end = wp.zeros(cells, dtype=int), wp.zeros(cells, dtype=int)
         candidate, count = wp.zeros(n * cap, dtype=int), wp.zeros(n, dtype=int)
         rng = np.random.default_rng(3)
         for build in range(builds):
             x.assign(points if build == builds - 1 else rng.permutation(points) + rng.normal(0, 0.05, points.shape))
-            wp.launch(grid_keys, n, [x, h, 1.0 / cell, wp.vec3i(*dims), cells], [keys, order])
+            wp.launch(grid_keys, n, [x, h, 1.0 / cell, wp.vec3i(*dims), cells], [keys, order, start, end])
             wp.utils.radix_sort_pairs(keys, order, n)
-            wp.launch(grid_starts, cells + 1, [keys, n], [start])
+            wp.launch(grid_ranges, n, [keys, n, cells], [start, end])
         wp.launch(contact_candidates, n, [x, h, rest, cloth, REST_EXCLUSION, reach, 1.0 / cell,
-                                          wp.vec3i(*dims), order, start, cap], [candidate, count])
+                                          wp.vec3i(*dims), order, start, end, cap], [candidate, count])
         found, counts = candidate.numpy().reshape(n, cap), count.numpy()
     return [list(found[i, :counts[i]]) for i in range(n)]
 
 
 @pytest.mark.parametrize("dims", [(8, 8, 8), (40, 9, 23)])
 def test_the_cell_grid_finds_every_pair_within_reach_and_no_other(device, dims):
-    # Points spread over more than the table (so far cells wrap onto near slots, and columns of three cells wrap
-    # round the table's last axis), some not colliding; the grid is built three times, so anything stale of an
-    # earlier build would show as a missing or extra candidate.
+    # Points spread over more than the table (so far cells wrap onto near slots), some not colliding; the grid
+    # is built three times, so a stale slot of an earlier build would show as a missing or extra candidate.
     rng = np.random.default_rng(7)
     n, reach = 3000, 1.25
     points = rng.uniform(-0.3, 0.3, (n, 3)).astype(np.float32)

@@ -14,10 +14,10 @@ largest thickness, and lists each particle's candidate pairs, those within ``QUE
 most ``MAX_CANDIDATES``): rebuilt every substep because at the shipped speeds a particle moves up to about a
 thickness per substep, so a list kept for longer would miss new pairs. The grid is the project's own
 (kernels/self_contact.py): each particle's cell, wrapped onto a table of ``dims`` slots, is radix-sorted with the
-particle indices (``wp.utils.radix_sort_pairs``, stable, so a slot lists its particles by index), and every slot
-keeps where it begins in that order, so that three adjacent slots (a column of cells) are one range to read. Every step of it is a launch or a sort that a captured frame replays, on the CPU
+particle indices (``wp.utils.radix_sort_pairs``, stable, so a slot lists its particles by index), and each slot
+keeps its range in that order. Every step of it is a launch or a sort that a captured frame replays, on the CPU
 and on CUDA (Warp's own ``wp.HashGrid.build`` replayed from a CUDA graph left the grid stale), and the candidate
-order, the 27 cells around a particle column by column and then by index, is the same on every run. Each sweep then (``phases``) gathers, per particle,
+order, the 27 cells around a particle in a fixed order and then by index, is the same on every run. Each sweep then (``phases``) gathers, per particle,
 the pushes of its candidates closer than the thickness, from the same old positions, into a scratch buffer
 (their average: Jacobi, as the Jacobi sticks do in kernels/relax.py) and copies the buffer back in a second
 launch: no atomics on positions, so the result is bit-for-bit repeatable on every device.
@@ -58,10 +58,8 @@ ones is repeatable). Particles at least a thickness apart fit about 12 around on
 (a dense packing); a particle between two layers of a fold has 2 to 8."""
 THIN_AXIS_CELLS = 8
 """Cells along an axis where the cloths are flat at rest: room for the layers of a fold or a pile."""
-CELLS_PER_PARTICLE = 2
-"""The grid's table slots at most, per particle (above 4096 slots): few enough that the slots' starts stay in a
-GPU's cache while the search reads them (at 8 a 1024^2 search ran several times slower); more particles share a
-slot where the table wraps, and the search skips them by distance."""
+CELLS_PER_PARTICLE = 8
+"""The grid's table slots at most, per particle (above 4096 slots): a slot costs 8 bytes (a start and an end)."""
 
 SELF_COLLISION = Key(
     "self_collision", boolean, False, type="boolean", default_text="`false`",
@@ -137,8 +135,8 @@ def cell_grid_dims(lo: np.ndarray, hi: np.ndarray, cell: float, particles: int) 
 
 def cell_grid_bytes(particles: int, cells: int) -> int:
     """Bytes of the cell grid: a slot and a particle index per particle, each twice (the radix sort's second
-    buffer), and a start per slot and one past them. A CUDA sort's temporary space is not in it."""
-    return particles * 4 * INT + (cells + 1) * INT
+    buffer), and a start and an end per slot. A CUDA sort's temporary space is not in it."""
+    return particles * 4 * INT + cells * 2 * INT
 
 
 def _colliding(scene) -> list:
@@ -246,29 +244,33 @@ class SelfContact(ConstraintSet):
     def bind(self, model, state, solver) -> BoundStage:
         import warp as wp
 
-        from warp_verlet.kernels.self_contact import contact_candidates, contact_gather, grid_keys, grid_starts
+        from warp_verlet.kernels.self_contact import contact_candidates, contact_gather, grid_keys, grid_ranges
 
         data, x, n = model.constraints[self.name], state.particle_q, model.particle_count
         scratch = solver.scratch("contact_positions", n, model.position_dtype)
         candidate = solver.scratch("contact_candidates", n * MAX_CANDIDATES, int)
         candidate_count = solver.scratch("contact_candidate_count", n, int)
         # The cell grid: each particle's table slot, sorted with the particle indices (a radix sort needs twice
-        # the length), and where each slot begins in that order.
+        # the length), and each slot's range in that order. Slots start empty, keys out of the table.
         keys = solver.scratch("contact_cell_keys", 2 * n, int)
+        keys.fill_(-1)
         order = solver.scratch("contact_cell_order", 2 * n, int)
         cells = math.prod(data.dims)
-        slot_start = solver.scratch("contact_slot_start", cells + 1, int)
+        cell_start = solver.scratch("contact_cell_start", cells, int)
+        cell_end = solver.scratch("contact_cell_end", cells, int)
+        cell_start.zero_()
+        cell_end.zero_()
         inv_cell, dims = 1.0 / data.cell, wp.vec3i(*data.dims)
-        place = recorded(grid_keys, n, [x, data.thickness, inv_cell, dims, cells], [keys, order])
-        starts = recorded(grid_starts, cells + 1, [keys, n], [slot_start])
+        place = recorded(grid_keys, n, [x, data.thickness, inv_cell, dims, cells], [keys, order, cell_start, cell_end])
+        ranges = recorded(grid_ranges, n, [keys, n, cells], [cell_start, cell_end])
         find = recorded(contact_candidates, n, [x, data.thickness, data.rest, data.cloth, REST_EXCLUSION, QUERY_REACH,
-                                                inv_cell, dims, order, slot_start, MAX_CANDIDATES],
+                                                inv_cell, dims, order, cell_start, cell_end, MAX_CANDIDATES],
                         [candidate, candidate_count])
 
         def search(state, dt: float) -> None:
             place.run()
             wp.utils.radix_sort_pairs(keys, order, n)
-            starts.run()
+            ranges.run()
             find.run()
 
         def gather(f, count):
