@@ -1,8 +1,8 @@
 """Self-collision and cloth–cloth contact (warp_verlet/constraints/self_contact.py): candidate pairs once a
 substep, one Jacobi gather per sweep.
 
-Once a substep, the cell grid is rebuilt (``grid_keys``, a radix sort, ``grid_ranges``) and each particle of a
-colliding cloth lists its candidate pairs from it (``contact_candidates``): the particles within ``reach`` × the pair's thickness (the mean of the two particles'), except those
+Once a substep, each particle of a colliding cloth lists its candidate pairs from the hash grid (rebuilt just
+before): the particles within ``reach`` × the pair's thickness (the mean of the two particles'), except those
 closer than ``rest_exclusion`` × the thickness in the rest pose of one cloth. In each sweep, for every candidate
 closer than the thickness, it takes its share of the push that separates the pair to the thickness: (h - d)
 along the separation, times w_i / (w_i + w_j), and writes the average of its pushes to ``x_out``; the caller
@@ -39,107 +39,34 @@ def pair_thickness(i: int, j: int, thickness: wp.array(dtype=float), rest: wp.ar
     return h
 
 
-@wp.func
-def grid_cell(x: Any, inv_cell: float):
-    """The integer cell of point ``x`` in cells of 1 / ``inv_cell`` metres."""
-    s = type(x[0])(inv_cell)
-    return wp.vec3i(int(wp.floor(x[0] * s)), int(wp.floor(x[1] * s)), int(wp.floor(x[2] * s)))
-
-
-@wp.func
-def cell_key(c: wp.vec3i, dims: wp.vec3i):
-    """The table slot of cell ``c``: its coordinates wrapped onto a dims[0] x dims[1] x dims[2] table (a cell far
-    away shares a slot with one inside, and the query checks distances)."""
-    a = c[0] % dims[0]
-    b = c[1] % dims[1]
-    d = c[2] % dims[2]
-    if a < 0:
-        a += dims[0]
-    if b < 0:
-        b += dims[1]
-    if d < 0:
-        d += dims[2]
-    return (a * dims[1] + b) * dims[2] + d
-
-
-@wp.kernel
-def grid_keys(
-    x: wp.array(dtype=Any),
-    thickness: wp.array(dtype=float),
-    inv_cell: float,
-    dims: wp.vec3i,
-    cells: int,
-    keys: wp.array(dtype=int),
-    order: wp.array(dtype=int),
-    cell_start: wp.array(dtype=int),
-    cell_end: wp.array(dtype=int),
-):
-    """Each particle's table slot (``cells`` for one that does not collide: it sorts last and is in no cell), with
-    its own index as the value the sort carries. First it empties the slot that the previous build's ``keys[i]``
-    (sorted) named: between them the threads empty every slot the previous build filled, and no other."""
-    i = wp.tid()
-    old = keys[i]
-    if old >= 0 and old < cells:
-        cell_start[old] = 0
-        cell_end[old] = 0
-    key = cells
-    if thickness[i] > 0.0:
-        key = cell_key(grid_cell(x[i], inv_cell), dims)
-    keys[i] = key
-    order[i] = i
-
-
-@wp.kernel
-def grid_ranges(keys: wp.array(dtype=int), count: int, cells: int, cell_start: wp.array(dtype=int),
-                cell_end: wp.array(dtype=int)):
-    """After the sort: each filled slot's range [start, end) in the sorted order, from where its key begins and
-    ends (an empty slot keeps start = end = 0)."""
-    i = wp.tid()
-    key = keys[i]
-    if key >= cells:
-        return
-    if i == 0 or keys[i - 1] != key:
-        cell_start[key] = i
-    if i == count - 1 or keys[i + 1] != key:
-        cell_end[key] = i + 1
-
-
 @wp.kernel
 def contact_candidates(
+    grid: wp.uint64,
     x: wp.array(dtype=Any),
     thickness: wp.array(dtype=float),
     rest: wp.array(dtype=wp.vec3),
     cloth: wp.array(dtype=int),
     rest_exclusion: float,
     reach: float,
-    inv_cell: float,
-    dims: wp.vec3i,
-    order: wp.array(dtype=int),
-    cell_start: wp.array(dtype=int),
-    cell_end: wp.array(dtype=int),
+    query_radius: Any,
     max_candidates: int,
     candidate: wp.array(dtype=int),
     candidate_count: wp.array(dtype=int),
 ):
-    """Once a substep: each colliding particle's pairs within ``reach`` x their thickness, the first
-    ``max_candidates`` of them in a fixed order: the 27 cells around it (a cell is at least the reach, so they
-    hold every pair within it), then the particles of a cell by index."""
+    """Once a substep: each colliding particle's pairs within ``reach`` x their thickness, in the grid's order,
+    the first ``max_candidates`` of them."""
     i = wp.tid()
     count = int(0)
     if thickness[i] > 0.0:
         xi = x[i]
-        c = grid_cell(xi, inv_cell)
-        for dx in range(-1, 2):
-            for dy in range(-1, 2):
-                for dz in range(-1, 2):
-                    key = cell_key(c + wp.vec3i(dx, dy, dz), dims)
-                    for k in range(cell_start[key], cell_end[key]):
-                        j = order[k]
-                        h = pair_thickness(i, j, thickness, rest, cloth, rest_exclusion)
-                        if h > 0.0 and count < max_candidates:
-                            if wp.length(xi - x[j]) < type(xi[0])(reach * h):
-                                candidate[i * max_candidates + count] = j
-                                count += 1
+        query = wp.hash_grid_query(grid, xi, query_radius)
+        j = int(0)
+        while wp.hash_grid_query_next(query, j):
+            h = pair_thickness(i, j, thickness, rest, cloth, rest_exclusion)
+            if h > 0.0 and count < max_candidates:
+                if wp.length(xi - x[j]) < type(query_radius)(reach * h):
+                    candidate[i * max_candidates + count] = j
+                    count += 1
     candidate_count[i] = count
 
 
@@ -188,6 +115,5 @@ def contact_gather(
     x_out[i] = xi
 
 
-for_positions(grid_keys, arrays=("x",))
-for_positions(contact_candidates, arrays=("x",))
+for_positions(contact_candidates, arrays=("x",), scalars=("query_radius",))
 for_positions(contact_gather, arrays=("x_in", "x_out", "x_inertial", "delta"))

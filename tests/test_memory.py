@@ -14,7 +14,9 @@ from conftest import make_scene
 from warp_verlet.errors import WarpVerletError
 import bench_package  # noqa: F401  (makes the repository's bench/ importable as the package "bench")
 from bench.common import device_arrays as every_device_array
+from warp_verlet.constraints.self_contact import hash_grid_bytes
 from warp_verlet.core.memory import check_fits, estimate, stick_count
+from warp_verlet.core.stages import Requirements
 from warp_verlet.input.scene import parse_scene
 from warp_verlet.core.simulator import Simulator
 from warp_verlet.geometry.topology import build_cloth
@@ -137,8 +139,10 @@ def test_estimate_matches_the_arrays_allocated(case):
     # The only arrays not in the estimate are one-element counters: the tear counter (4 bytes), and the
     # Jacobi CSR's extra row start (4 bytes). A moving sphere's key starts are counted (spheres + 1 of them).
     counters = 4 * (scene.tears + (scene.simulation.relaxation == "jacobi"))
-    # A mesh's BVH allocates outside any wp.array: counted from Warp's source.
-    allocated = simulator_bytes(sim) + mesh_native_bytes(sim)
+    # Warp's hash grid (self contact) and a mesh's BVH allocate outside any wp.array: counted from Warp's source.
+    contact = Requirements.of(scene).count("self contact")
+    native = hash_grid_bytes(scene.particle_count, contact[1]) if contact else 0
+    allocated = simulator_bytes(sim) + native + mesh_native_bytes(sim)
     assert allocated - estimate(scene, sim.model.sticks_form).device_bytes == counters
 
 
