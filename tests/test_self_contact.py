@@ -203,6 +203,52 @@ def test_a_mesh_cloths_default_is_its_median_edge(tmp_path):
     assert scene.cloths[0].options["collision_thickness"] == pytest.approx(DEFAULT_FRACTION * 0.05, rel=1e-6)
 
 
+def grid_candidates(points: np.ndarray, thickness: np.ndarray, dims, reach: float, device: str,
+                    builds: int = 1) -> list[list[int]]:
+    """Each point's candidate list as the binding finds it: the hash grid built (``builds`` times, the earlier
+    builds from other points, so that nothing of them may survive), then ``contact_candidates``."""
+    from warp_verlet.kernels.self_contact import contact_candidates
+
+    n, cap = len(points), 64
+    cell = reach * float(thickness.max())
+    with wp.ScopedDevice(device):
+        x = wp.array(points, dtype=wp.vec3)
+        h = wp.array(thickness, dtype=float)
+        rest = wp.array(np.arange(n)[:, None] * np.array([[10.0, 0.0, 0.0]]), dtype=wp.vec3)  # no rest neighbours
+        cloth = wp.zeros(n, dtype=int)
+        candidate, count = wp.zeros(n * cap, dtype=int), wp.zeros(n, dtype=int)
+        grid = wp.HashGrid(*dims)
+        grid.reserve(n)
+        rng = np.random.default_rng(3)
+        for build in range(builds):
+            x.assign(points if build == builds - 1 else rng.permutation(points) + rng.normal(0, 0.05, points.shape))
+            grid.build(x, cell)
+        wp.launch(contact_candidates, n, [wp.uint64(grid.id), x, h, rest, cloth, REST_EXCLUSION, reach, cell, cap],
+                  [candidate, count])
+        found, counts = candidate.numpy().reshape(n, cap), count.numpy()
+    return [list(found[i, :counts[i]]) for i in range(n)]
+
+
+@pytest.mark.parametrize("dims", [(8, 8, 8), (40, 9, 23)])
+def test_the_hash_grid_search_finds_every_pair_within_reach_and_no_other(device, dims):
+    # Points spread over more than the grid's cells (so far cells wrap onto near ones), some not colliding; the
+    # grid is built three times, so anything stale of an earlier build would show as a missing or extra candidate.
+    rng = np.random.default_rng(7)
+    n, reach = 3000, 1.25
+    points = rng.uniform(-0.3, 0.3, (n, 3)).astype(np.float32)
+    thickness = np.where(rng.uniform(size=n) < 0.9, rng.uniform(0.02, 0.04, n), 0.0).astype(np.float32)
+    got = grid_candidates(points, thickness, dims, reach, device, builds=3)
+    pair = 0.5 * (thickness[:, None] + thickness[None])
+    near = np.linalg.norm(points[:, None].astype(np.float64) - points[None], axis=2) < reach * pair
+    near &= (thickness[:, None] > 0) & (thickness[None] > 0)
+    np.fill_diagonal(near, False)
+    assert near.sum() > n  # the test has pairs to find
+    for i in range(n):
+        assert sorted(got[i]) == list(np.flatnonzero(near[i])), i
+    # A fixed order (the grid's), the same however the grid was reached.
+    assert got == grid_candidates(points, thickness, dims, reach, device, builds=1)
+
+
 @pytest.mark.cuda
 @pytest.mark.skipif(not wp.is_cuda_available(), reason="no CUDA device")
 def test_a_large_folded_cloth_holds_on_cuda_where_the_frame_is_not_captured():
