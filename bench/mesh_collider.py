@@ -4,7 +4,7 @@ the same cloth dropped on an analytic sphere of the same radius (the cheapest co
     python -m bench.mesh_collider [--sizes 64 128] [--subdivisions 5 6] [--frames 60] [--substeps 8]
                                   [--iterations 8] [--device cpu] [--out bench/results]
     python -m bench.mesh_collider --device cuda --sizes 256 1024 --substeps 32
-    python -m bench.mesh_collider --triangles 10000 100000 [...]   # lat-long spheres of exactly that many triangles
+    python -m bench.mesh_collider --triangles 10000 100000 [...]   # lat-long spheres of exactly N triangles
 
 --out writes mesh_collider.md and mesh_collider.csv there; bench/results/mesh_collider.md keeps a reading of the
 measured run above its table, to carry over when the run is repeated.
@@ -13,10 +13,10 @@ The cloth: n x n particles, a 1 m square of 0.3 kg, structural + shear + bend st
 laid horizontal 0.1 m above a sphere of radius 0.3 m at the origin, released at rest: it lands at about
 1.4 m/s and drapes over it. The collider: a trimesh icosphere of radius 0.3 m (subdivision 5: 20,480 triangles;
 6: 81,920), or, for each --triangles N, a lat-long sphere of radius 0.3 m with exactly N triangles (row "lat-long
-mesh"; ``latlong_sphere`` says which counts it can make; --triangles alone gives no icosphere rows unless
---subdivisions is given too), or a sphere collider of radius 0.3 m, or none; thickness half the cloth's spacing (0.5 / (n - 1) m),
-Coulomb friction 0.5. 60 fps, --substeps substeps and --iterations sweeps, damping 0.5 /s. On the CPU, one thread
-(``Simulator(..., threads=1)``).
+mesh"; ``latlong_segments`` says which counts it can make; --triangles alone gives no icosphere rows unless
+--subdivisions is given too), or a sphere collider of radius 0.3 m, or none; thickness half the cloth's spacing
+(0.5 / (n - 1) m), Coulomb friction 0.5. 60 fps, --substeps substeps and --iterations sweeps, damping 0.5 /s. On
+the CPU, one thread (``Simulator(..., threads=1)``).
 
 Columns: ms/frame (the median frame's wall time over --frames frames, frame 1 excluded as the warm-up; the
 median, since other work on a shared machine slows some frames); the same as a multiple of the run without a

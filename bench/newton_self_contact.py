@@ -4,6 +4,8 @@ solver (``newton.solvers.SolverVBD``, its particle self-contact on) and Style3D 
 
     python -m bench.self_contact --peer [--sizes 32 64] [--frames 60] [--device cpu]
 
+Written against Newton 1.8.0 (the newton-1.8.0-py3-none-any.whl wheel; it needs warp-lang and numpy only).
+
 Newton (github.com/newton-physics/newton, ``pip install newton``) is not a dependency of this project: this
 module imports Newton only inside the functions that need it, and
 ``peer_rows`` prints "Newton not installed: skipped" and returns no rows when ``import newton`` fails.
@@ -21,9 +23,10 @@ set once in its constructor, for garments, and is replaced here before the first
 with ``ModelBuilder.add_cloth_grid`` (VBD) or ``newton.solvers.style3d.add_cloth_grid`` (Style3D), rotated a
 quarter turn about +X so that its particle j * n + i lands on warp-verlet's particle r * n + c with r = j, c = i;
 the order is found by matching rest positions to grid cells, not assumed. The worst penetration is
-bench.self_contact's ``PointsGapMeter`` (its ``GapMeter``'s measure) on Newton's positions in warp-verlet's order, with warp-verlet's rest
-positions, thickness and rest exclusion (pairs closer than 1.5 thicknesses at rest are not counted), at the end
-of every frame, outside the timing; ms/frame is the median frame's synchronised wall time, frame 1 excluded.
+bench.self_contact's ``PointsGapMeter`` (its ``GapMeter``'s measure) on Newton's positions in warp-verlet's order,
+with warp-verlet's rest positions, thickness and rest exclusion (pairs closer than 1.5 thicknesses at rest are not
+counted), at the end of every frame, outside the timing; ms/frame is the median frame's synchronised wall time,
+frame 1 excluded.
 
 What differs (Newton's model is not warp-verlet's):
 
@@ -43,8 +46,9 @@ What differs (Newton's model is not warp-verlet's):
   stiffness coefficients). Neither keeps particle-particle distances, which the meter measures: a vertex may sit
   the thickness above a triangle's interior and nearer than the thickness to none of its corners, or the other way.
 * Friction. The ground's friction coefficient is 0.5 in both (Newton's shape ``mu`` and ``soft_contact_mu``,
-  0.5 each, so any mix of the two is 0.5); Newton's self-contact also has friction 0.5 (``soft_contact_mu``),
-  warp-verlet's self-contact has none unless asked.
+  0.5 each; VBD mixes them by their geometric mean). VBD's self-contact takes its friction from the same
+  ``soft_contact_mu``, so it has 0.5 too; warp-verlet's self-contact has none (``self_friction_coefficient`` 0,
+  its default).
 * The ground. warp-verlet keeps particles above y = 0 by projection (plane thickness 0). Newton pushes a particle
   whose centre is within ``particle_radius`` of the plane by a penalty (``soft_contact_ke``; the pipeline's
   ``soft_contact_gap`` is the thickness, for detection): the radius is 0.1 x the thickness, so the lower layer
@@ -53,9 +57,10 @@ What differs (Newton's model is not warp-verlet's):
   self-contacts inside each ``step`` (Newton's example_cloth_bending pattern). Style3D's self-contact candidates
   come from its own BVHs, refitted at each substep; its ground contacts from a pipeline run once a frame, before
   the substeps (Newton's example_cloth_style3d pattern).
-* CUDA graphs. On CUDA, a frame of substeps is captured once as a graph and replayed (as Newton's examples do),
-  when the capture succeeds; warp-verlet's self-contact frame is stepped launch by launch. On the CPU both step
-  directly.
+* Graphs. On CUDA, Newton's frame of substeps is captured once as a graph and replayed (as Newton's examples do),
+  when the capture succeeds; warp-verlet's self-contact frame is stepped launch by launch there. On the CPU
+  Newton's frames are stepped directly (Style3D's host calls cannot be captured there, as its example says);
+  warp-verlet replays its CPU capture.
 
 Each solver runs twice, as warp-verlet does, with its self-contact off and on; "off" keeps the ground (VBD:
 ``particle_enable_self_contact=False``; Style3D: its self-contact stiffnesses set to 0, its ground contact kept).

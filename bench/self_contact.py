@@ -27,7 +27,8 @@ how far the same cloth passes through itself.
 --peer adds NVIDIA Newton's rows for the same scene (bench/newton_self_contact.py, which lists what differs):
 newton-vbd (SolverVBD, its particle self-contact off and on) and newton-style3d (SolverStyle3D, its collision
 handler's self-contact off and on), measured the same way, with a "simulator" column and a "graph" column (whether
-a frame ran as one captured CUDA graph). Without Newton it prints "Newton not installed: skipped" and the table
+a frame ran as one captured graph: warp-verlet captures on the CPU too, but not a CUDA frame with self-collision;
+Newton's rows capture on CUDA only). Without Newton it prints "Newton not installed: skipped" and the table
 has warp-verlet's rows alone.
 """
 

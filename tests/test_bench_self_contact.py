@@ -1,5 +1,6 @@
 """bench/self_contact.py at a tiny size: a row with and without self-collision per size, the cost measured, and
-the worst penetration it reports is the one the self-contact tests bound with contact and large without."""
+the worst penetration it reports is the one the self-contact tests bound with contact and large without; --peer
+without Newton skips Newton's rows with one line, and with it adds them."""
 
 from __future__ import annotations
 
