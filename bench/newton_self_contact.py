@@ -50,9 +50,11 @@ What differs (Newton's model is not warp-verlet's):
   ``soft_contact_mu``, so it has 0.5 too; warp-verlet's self-contact has none (``self_friction_coefficient`` 0,
   its default).
 * The ground. warp-verlet keeps particles above y = 0 by projection (plane thickness 0). Newton pushes a particle
-  whose centre is within ``particle_radius`` of the plane by a penalty (``soft_contact_ke``; the pipeline's
-  ``soft_contact_gap`` is the thickness, for detection): the radius is 0.1 x the thickness, so the lower layer
-  rests about that far above the ground.
+  whose centre is within ``particle_radius`` of the plane by a penalty (the pipeline's ``soft_contact_gap`` is the
+  thickness, for detection): the radius is 0.1 x the thickness, so the lower layer rests about that far above the
+  ground. VBD's ground stiffness is the mean of the ground shape's ``ke`` (1e5 N/m) and ``soft_contact_ke``
+  (1e3 N/m): with the ground at 1e3 too, the 64 x 64 cloth's lower layer, pressed by the upper one's barrier,
+  went 4 mm into the ground and bounced 2 cm back up. Style3D's ground takes ``soft_contact_ke`` alone.
 * Collision detection. VBD's solver owns its ``newton.CollisionPipeline`` and detects ground contacts and
   self-contacts inside each ``step`` (Newton's example_cloth_bending pattern). Style3D's self-contact candidates
   come from its own BVHs, refitted at each substep; its ground contacts from a pipeline run once a frame, before
@@ -87,6 +89,7 @@ FPS = 60.0
 GROUND_FRICTION = 0.5
 CONTACT_KE = 1.0e3              # N/m, Newton's soft contact stiffness (ground and VBD self-contact)
 CONTACT_KD = 1.0e-2             # its damping
+GROUND_KE = 1.0e5               # N/m, the ground shape's stiffness (VBD's ground contact: the mean of it and CONTACT_KE)
 RADIUS_FRACTION = 0.1           # Newton's particle_radius (ground contact) / warp-verlet's thickness
 VBD_TRI_KE = 1.0e4              # membrane (tri_ke and tri_ka), bench.newton_peer's
 VBD_EDGE_KE = 1.0e-3            # bending, bench.newton_peer's
@@ -148,7 +151,7 @@ class NewtonFoldedCloth:
             builder.add_cloth_grid(**grid, tri_ke=VBD_TRI_KE, tri_ka=VBD_TRI_KE, tri_kd=0.0, edge_ke=VBD_EDGE_KE,
                                    edge_kd=0.0)
             builder.color(include_bending=True)
-        ground = newton.ModelBuilder.ShapeConfig(ke=CONTACT_KE, kd=CONTACT_KD, mu=GROUND_FRICTION)
+        ground = newton.ModelBuilder.ShapeConfig(ke=GROUND_KE, kd=CONTACT_KD, mu=GROUND_FRICTION)
         builder.add_ground_plane(cfg=ground)
         self.order = grid_order(np.asarray(builder.particle_q), n, origin, spacing)
 
