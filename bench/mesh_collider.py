@@ -4,6 +4,7 @@ the same cloth dropped on an analytic sphere of the same radius (the cheapest co
     python -m bench.mesh_collider [--sizes 64 128] [--subdivisions 5 6] [--frames 60] [--substeps 8]
                                   [--iterations 8] [--device cpu] [--out bench/results]
     python -m bench.mesh_collider --device cuda --sizes 256 1024 --substeps 32
+    python -m bench.mesh_collider --triangles 10000 100000 [...]   # lat-long spheres of exactly N triangles
 
 --out writes mesh_collider.md and mesh_collider.csv there; bench/results/mesh_collider.md keeps a reading of the
 measured run above its table, to carry over when the run is repeated.
@@ -11,9 +12,11 @@ measured run above its table, to carry over when the run is repeated.
 The cloth: n x n particles, a 1 m square of 0.3 kg, structural + shear + bend sticks (bend compliance 1 m/N),
 laid horizontal 0.1 m above a sphere of radius 0.3 m at the origin, released at rest: it lands at about
 1.4 m/s and drapes over it. The collider: a trimesh icosphere of radius 0.3 m (subdivision 5: 20,480 triangles;
-6: 81,920), or a sphere collider of radius 0.3 m, or none; thickness half the cloth's spacing (0.5 / (n - 1) m),
-Coulomb friction 0.5. 60 fps, --substeps substeps and --iterations sweeps, damping 0.5 /s. On the CPU, one thread
-(``Simulator(..., threads=1)``).
+6: 81,920), or, for each --triangles N, a lat-long sphere of radius 0.3 m with exactly N triangles (row "lat-long
+mesh"; ``latlong_segments`` says which counts it can make; --triangles alone gives no icosphere rows unless
+--subdivisions is given too), or a sphere collider of radius 0.3 m, or none; thickness half the cloth's spacing
+(0.5 / (n - 1) m), Coulomb friction 0.5. 60 fps, --substeps substeps and --iterations sweeps, damping 0.5 /s. On
+the CPU, one thread (``Simulator(..., threads=1)``).
 
 Columns: ms/frame (the median frame's wall time over --frames frames, frame 1 excluded as the warm-up; the
 median, since other work on a shared machine slows some frames); the same as a multiple of the run without a
@@ -54,19 +57,66 @@ def icosphere(subdivisions: int):
     return np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces, np.int32)
 
 
+def latlong_segments(triangles: int) -> tuple[int, int]:
+    """(segments round the axis u, stacks v) of the lat-long sphere with exactly ``triangles`` = 2 u (v - 1)
+    triangles: of the divisor pairs u x (v - 1) of triangles / 2 with u >= 3 and v >= 3, the one whose cells are
+    nearest square (u nearest 2 (v - 1), on a log scale; on a tie, more stacks). Raises ValueError naming the
+    count when none has cells within 4:1 of square (an odd count, or one whose half has no divisor near its
+    square root: a prime, say)."""
+    half = triangles // 2
+    pairs = [(half // k, k + 1) for k in range(2, half + 1) if half % k == 0 and half // k >= 3] \
+        if triangles % 2 == 0 and triangles > 0 else []
+    pairs = [(u, v) for u, v in pairs if abs(np.log(u / (2 * (v - 1)))) <= np.log(4.0)]
+    if not pairs:
+        raise ValueError(f"a lat-long sphere has 2 u (v - 1) triangles (u segments, v stacks); {triangles} is not "
+                         f"such a count with cells within 4:1 of square (use an even count whose half factors "
+                         f"into two near its square root, e.g. 10000 = 2 x 100 x 50 or 100000 = 2 x 250 x 200)")
+    return min(pairs, key=lambda p: (abs(np.log(p[0] / (2 * (p[1] - 1)))), -p[1]))
+
+
+def latlong_sphere(triangles: int):
+    """(points (V, 3), triangles (T, 3)) of a closed lat-long sphere of radius RADIUS at the origin with exactly
+    ``triangles`` triangles, counter-clockwise from outside: two poles on the Y axis, v - 1 rings of u points
+    (every point on the sphere), a fan of u triangles round each pole and two triangles per quad between rings
+    (segments and stacks from ``latlong_segments``)."""
+    u, v = latlong_segments(triangles)
+    polar = np.pi * np.arange(1, v) / v                      # the rings' angles from +Y
+    azimuth = 2.0 * np.pi * np.arange(u) / u
+    ring = np.stack([np.sin(polar)[:, None] * np.cos(azimuth), np.repeat(np.cos(polar)[:, None], u, axis=1),
+                     np.sin(polar)[:, None] * np.sin(azimuth)], axis=-1).reshape(-1, 3)
+    points = RADIUS * np.concatenate([[[0.0, 1.0, 0.0]], ring, [[0.0, -1.0, 0.0]]])
+    top, bottom = 0, len(points) - 1
+    j = np.arange(u)
+    nxt = (j + 1) % u
+    faces = [np.stack([np.full(u, top), 1 + nxt, 1 + j], axis=1)]
+    for r in range(v - 2):
+        a, b = 1 + r * u + j, 1 + r * u + nxt              # this ring's points, the next ring's below them
+        c, d = a + u, b + u
+        faces += [np.stack([a, b, d], axis=1), np.stack([a, d, c], axis=1)]
+    last = 1 + (v - 2) * u
+    faces.append(np.stack([np.full(u, bottom), last + j, last + nxt], axis=1))
+    return points, np.concatenate(faces).astype(np.int32)
+
+
+def collider_mesh(collider: str, size: int):
+    """The mesh of a "mesh" row (the icosphere of ``size`` subdivisions) or a "latlong" row (``size``
+    triangles)."""
+    return icosphere(size) if collider == "mesh" else latlong_sphere(size)
+
+
 def drop_scene(n: int, collider: str, subdivisions: int, folder: Path, frames: int, substeps: int,
                iterations: int):
-    """The cloth over a sphere; ``collider`` is "mesh" (the icosphere, written to ``folder``), "sphere" or
-    "none"."""
+    """The cloth over a sphere; ``collider`` is "mesh" (the icosphere of ``subdivisions``), "latlong" (the
+    lat-long sphere of ``subdivisions`` triangles), each written to ``folder``, "sphere" or "none"."""
     thickness = 0.5 * SIZE / (n - 1)
     cloth = {"name": "sheet", "resolution": [n, n], "size": [SIZE, SIZE], "origin": [-0.5, RADIUS + DROP, -0.5],
              "orientation": "horizontal", "sticks": ["structural", "shear", "bend"], "compliance": {"bend": 1.0},
              "mass": MASS}
     colliders = []
-    if collider == "mesh":
-        path = folder / f"icosphere{subdivisions}.obj"
+    if collider in ("mesh", "latlong"):
+        path = folder / f"{'icosphere' if collider == 'mesh' else 'latlong'}{subdivisions}.obj"
         if not path.exists():
-            points, triangles = icosphere(subdivisions)
+            points, triangles = collider_mesh(collider, subdivisions)
             trimesh.Trimesh(points, triangles, process=False).export(str(path))
         colliders = [{"type": "mesh", "name": "ball", "mesh": path.name, "thickness": thickness,
                       "friction_coefficient": FRICTION}]
@@ -149,9 +199,9 @@ def run(n: int, collider: str, subdivisions: int, folder: Path, frames: int, sub
     start = time.perf_counter()
     sim = Simulator(scene, device, threads=1)
     build = time.perf_counter() - start
-    mesh = icosphere(subdivisions) if collider == "mesh" else None
+    mesh = collider_mesh(collider, subdivisions) if collider in ("mesh", "latlong") else None
     meter = PenetrationMeter(sim, thickness, mesh)
-    clamp = ClampTimer(sim, substeps) if collider == "mesh" else None
+    clamp = ClampTimer(sim, substeps) if mesh is not None else None
     readings, clamp_times = [], []
 
     def measure() -> None:
@@ -162,7 +212,8 @@ def run(n: int, collider: str, subdivisions: int, folder: Path, frames: int, sub
     times = timed_frames(sim, frames, measure)
     worst = max([0.0, *readings])
     ms = 1e3 * statistics.median(times[1:])
-    row = {"n": n, "particles": n * n, "collider": collider, "triangles": len(mesh[1]) if mesh else "-",
+    row = {"n": n, "particles": n * n, "collider": "lat-long mesh" if collider == "latlong" else collider,
+           "triangles": len(mesh[1]) if mesh else "-",
            "ms/frame": round(ms, 3), "clamp ms/frame": "-", "clamp share": "-",
            "deepest mm": round(1e3 * worst, 3), "thickness mm": round(1e3 * thickness, 3),
            "build s": round(build, 2)}
@@ -177,22 +228,33 @@ def run(n: int, collider: str, subdivisions: int, folder: Path, frames: int, sub
 def main(argv: list[str] | None = None) -> int:
     parser = arg_parser("bench.mesh_collider", __doc__)
     parser.add_argument("--sizes", type=int, nargs="+", default=[64, 128], help="particles along each side")
-    parser.add_argument("--subdivisions", type=int, nargs="+", default=[5, 6],
-                        help="icosphere subdivisions of the mesh colliders (5: 20,480 triangles, 6: 81,920)")
+    parser.add_argument("--subdivisions", type=int, nargs="+", default=None,
+                        help="icosphere subdivisions of the mesh colliders (5: 20,480 triangles, 6: 81,920); "
+                             "default 5 6 unless --triangles is given")
+    parser.add_argument("--triangles", type=int, nargs="+", default=[],
+                        help="lat-long sphere mesh colliders of exactly these many triangles (e.g. 10000 100000)")
     parser.add_argument("--frames", type=int, default=60)
     parser.add_argument("--substeps", type=int, default=8)
     parser.add_argument("--iterations", type=int, default=8, help="sweeps per substep")
     parser.add_argument("--device", default="cpu")
     parser.add_argument("--out", type=Path, default=None, help="directory for mesh_collider.md and .csv")
     args = parser.parse_args(argv)
+    if args.subdivisions is None:
+        args.subdivisions = [] if args.triangles else [5, 6]
     if any(n < 4 for n in args.sizes) or args.frames < 2 or any(s < 0 or s > 7 for s in args.subdivisions):
         parser.error("each size needs 4 particles a side or more, --frames at least 2, subdivisions 0 to 7")
+    for count in args.triangles:
+        try:
+            latlong_segments(count)
+        except ValueError as error:
+            parser.error(f"--triangles {count}: {error}")
     quiet_warp()
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         for n in args.sizes:
-            cases = [("none", 0), ("sphere", 0)] + [("mesh", s) for s in args.subdivisions]
+            cases = [("none", 0), ("sphere", 0)] + [("mesh", s) for s in args.subdivisions] \
+                + [("latlong", t) for t in args.triangles]
             size_rows = [run(n, kind, s, folder, args.frames, args.substeps, args.iterations, args.device)
                          for kind, s in cases]
             for row in size_rows:
@@ -201,7 +263,8 @@ def main(argv: list[str] | None = None) -> int:
     where = machine(args.device)
     command = ["bench.mesh_collider", *(sys.argv[1:] if argv is None else argv)]
     on = "one CPU thread" if wp.get_device(args.device).is_cpu else str(where)
-    title = (f"Mesh collider: a 1 m cloth dropped on a sphere of radius {RADIUS} m (an icosphere mesh, an analytic "
+    title = (f"Mesh collider: a 1 m cloth dropped on a sphere of radius {RADIUS} m (an icosphere mesh, a lat-long "
+             f"mesh, an analytic "
              f"sphere, or none), {args.frames} frames at 60 fps, {args.substeps} substeps, {args.iterations} sweeps, "
              f"{on}\n\n" + "\n".join(where.lines(command)))
     write_table(rows, args.out, STEM, title,

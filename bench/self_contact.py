@@ -4,6 +4,7 @@
     python -m bench.self_contact [--sizes 64 128] [--frames 60] [--substeps 8] [--iterations 8]
                                  [--device cpu] [--out bench/results]
     python -m bench.self_contact --device cuda --sizes 256 1024 --substeps 32
+    python -m bench.self_contact --peer [...]   # beside NVIDIA Newton, when installed (bench/newton_self_contact.py)
 
 --out writes self_contact.md and self_contact.csv there; bench/results/self_contact.md keeps a reading of the
 measured run above its table, to carry over when the run is repeated.
@@ -22,6 +23,13 @@ without, and the worst penetration over the run, 1 - (least distance between two
 neighbours) / thickness, taken at the end of every frame (after timing it) by a hash-grid query on the device
 (0: no pair closer than the thickness; 1: two particles at one point). The run without self-collision shows
 how far the same cloth passes through itself.
+
+--peer adds NVIDIA Newton's rows for the same scene (bench/newton_self_contact.py, which lists what differs):
+newton-vbd (SolverVBD, its particle self-contact off and on) and newton-style3d (SolverStyle3D, its collision
+handler's self-contact off and on), measured the same way, with a "simulator" column and a "graph" column (whether
+a frame ran as one captured graph: warp-verlet captures on the CPU too, but not a CUDA frame with self-collision;
+Newton's rows capture on CUDA only). Without Newton it prints "Newton not installed: skipped" and the table
+has warp-verlet's rows alone.
 """
 
 from __future__ import annotations
@@ -38,6 +46,7 @@ from warp_verlet.constraints.self_contact import DEFAULT_FRACTION, REST_EXCLUSIO
 from warp_verlet.core.simulator import Simulator
 from warp_verlet.input.scene import parse_scene
 
+from . import newton_self_contact
 from .common import arg_parser, machine, quiet_warp, timed_frames, write_table
 
 STEM = "self_contact"
@@ -83,24 +92,35 @@ def least_gap(grid: wp.uint64, x: wp.array(dtype=wp.vec3), rest: wp.array(dtype=
                 wp.atomic_min(out, 0, d / thickness)
 
 
-class GapMeter:
-    """The worst penetration at a frame end, measured on the simulator's device."""
+class PointsGapMeter:
+    """The worst penetration of given positions, measured on ``device``; ``rest``: the particles' rest positions,
+    in the order the positions come in."""
 
-    def __init__(self, sim: Simulator, thickness: float):
-        n, device = sim.model.particle_count, sim.device
-        self.sim, self.thickness = sim, thickness
-        self.grid = wp.HashGrid(128, 128, 128, device=device)
-        self.points = wp.empty(n, dtype=wp.vec3, device=device)
-        self.rest = wp.array(sim.model.rest_positions.astype(np.float32), dtype=wp.vec3, device=device)
-        self.out = wp.empty(1, dtype=float, device=device)
+    def __init__(self, rest: np.ndarray, thickness: float, device):
+        self.device, self.thickness = wp.get_device(device), thickness
+        self.grid = wp.HashGrid(128, 128, 128, device=self.device)
+        self.points = wp.empty(len(rest), dtype=wp.vec3, device=self.device)
+        self.rest = wp.array(np.asarray(rest, dtype=np.float32), dtype=wp.vec3, device=self.device)
+        self.out = wp.empty(1, dtype=float, device=self.device)
 
-    def penetration(self) -> float:
-        self.points.assign(self.sim.positions().astype(np.float32))  # float32 or float64 positions alike
+    def penetration_of(self, positions: np.ndarray) -> float:
+        self.points.assign(np.asarray(positions, dtype=np.float32))  # float32 or float64 positions alike
         self.grid.build(self.points, self.thickness)
         self.out.fill_(1.0)
         wp.launch(least_gap, len(self.points), inputs=[wp.uint64(self.grid.id), self.points, self.rest, self.thickness,
-                                                       REST_EXCLUSION, self.out], device=self.sim.device)
+                                                       REST_EXCLUSION, self.out], device=self.device)
         return 1.0 - float(self.out.numpy()[0])
+
+
+class GapMeter(PointsGapMeter):
+    """The worst penetration at a frame end, measured on the simulator's device."""
+
+    def __init__(self, sim: Simulator, thickness: float):
+        super().__init__(sim.model.rest_positions, thickness, sim.device)
+        self.sim = sim
+
+    def penetration(self) -> float:
+        return self.penetration_of(self.sim.positions())
 
 
 def run(n: int, self_collision: bool, frames: int, substeps: int, iterations: int, device: str) -> dict:
@@ -116,7 +136,7 @@ def run(n: int, self_collision: bool, frames: int, substeps: int, iterations: in
     worst = max([0.0, *readings])
     return {"n": n, "self_collision": "on" if self_collision else "off", "particles": n * n,
             "ms/frame": round(1e3 * statistics.median(times[1:]), 3), "worst penetration": round(worst, 4),
-            "build s": round(build, 2)}
+            "build s": round(build, 2), "graph": sim._use_graph}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -127,24 +147,33 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--iterations", type=int, default=8, help="sweeps per substep")
     parser.add_argument("--device", default="cpu")
     parser.add_argument("--out", type=Path, default=None, help="directory for self_contact.md and .csv")
+    parser.add_argument("--peer", action="store_true",
+                        help="also run NVIDIA Newton's VBD and Style3D solvers on the scene, when Newton is installed")
     args = parser.parse_args(argv)
     if any(n < 4 for n in args.sizes) or args.frames < 2:
         parser.error("each size needs 4 particles a side or more, and --frames at least 2")
     quiet_warp()
+    if args.peer and not newton_self_contact.available():
+        print(newton_self_contact.SKIP_MESSAGE)
+        args.peer = False
     rows = []
     for n in args.sizes:
         without, with_contact = (run(n, on, args.frames, args.substeps, args.iterations, args.device)
                                  for on in (False, True))
         for row in (without, with_contact):
             row["x without"] = round(row["ms/frame"] / without["ms/frame"], 2)
-            rows.append(row)
+            rows.append({"simulator": "warp-verlet", **row})
+        if args.peer:
+            rows += newton_self_contact.peer_rows(n, args.frames, args.substeps, args.iterations, args.device)
     where = machine(args.device)
     command = ["bench.self_contact", *(sys.argv[1:] if argv is None else argv)]
     on = "one CPU thread" if wp.get_device(args.device).is_cpu else str(where)
     title = (f"Self-collision: a folded 1 m cloth dropped on the ground, {args.frames} frames at 60 fps, "
              f"{args.substeps} substeps, {args.iterations} sweeps, {on}\n\n" + "\n".join(where.lines(command)))
-    write_table(rows, args.out, STEM, title,
-                ["n", "particles", "self_collision", "ms/frame", "x without", "worst penetration", "build s"])
+    columns = ["n", "particles", "self_collision", "ms/frame", "x without", "worst penetration", "build s"]
+    if args.peer:
+        columns = ["simulator", *columns, "graph"]
+    write_table([{k: row[k] for k in columns} for row in rows], args.out, STEM, title, columns)
     return 0
 
 
