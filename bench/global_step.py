@@ -133,11 +133,31 @@ class GlobalStep:
             self.clamp(x)
         return x
 
+    def prolongation(self, kind: str, factor: int):
+        """The grid's prolongation for all three components (particle r * side + c, component-major in 3s)."""
+        if not hasattr(self, "_prolongation"):
+            side = int(round(np.sqrt(self.n)))
+            P1 = self.sp.csr_matrix(axis_prolongation(side, kind, factor))
+            self._prolongation = self.sp.kron(self.sp.kron(P1, P1), self.sp.identity(3)).tocsr()
+        return self._prolongation
+
     def solve(self, H, rhs):
         self.solves += 1
         kind, _, count = self.linear.partition(":")
         if kind == "direct":
             return self.spla.spsolve(H.tocsc(), rhs)
+        if kind in ("agg", "bilinear"):
+            # A two-level correction alone: the Galerkin coarse system P^T H P of a grid every ``factor`` particles
+            # (piecewise-constant aggregates, or bilinear interpolation), solved exactly, then ``smooth`` damped
+            # Jacobi sweeps on the fine level.
+            factor, _, smooth = count.partition(":")
+            P = self.prolongation(kind, int(factor))
+            coarse = (P.T @ H @ P).tocsc()
+            dx = P @ self.spla.spsolve(coarse, P.T @ rhs)
+            inv_diag = 1.0 / H.diagonal()
+            for _ in range(int(smooth or 0)):
+                dx = dx + 0.6 * inv_diag * (rhs - H @ dx)
+            return dx
         iters = int(count or 20)
         if kind == "amg":
             pyamg = _need("pyamg")
@@ -150,6 +170,23 @@ class GlobalStep:
         dx, _ = self.spla.cg(H, rhs, M=M, maxiter=iters, rtol=1e-10)
         self.cg_iterations += iters
         return dx
+
+
+def axis_prolongation(side: int, kind: str, factor: int) -> np.ndarray:
+    """(side, coarse) weights of one grid axis: aggregates of ``factor`` particles, or linear interpolation between
+    every ``factor``-th particle (and the last)."""
+    if kind == "agg":
+        coarse = -(-side // factor)
+        P = np.zeros((side, coarse))
+        P[np.arange(side), np.arange(side) // factor] = 1.0
+        return P
+    nodes = np.r_[np.arange(0, side - 1, factor), side - 1]
+    P = np.zeros((side, len(nodes)))
+    for i in range(side):
+        k = min(np.searchsorted(nodes, i, side="right") - 1, len(nodes) - 2)
+        t = (i - nodes[k]) / (nodes[k + 1] - nodes[k])
+        P[i, k], P[i, k + 1] = 1.0 - t, t
+    return P
 
 
 def run_drape(n: int, substeps: int, iterations: int, linear: str, newton: int, frames: int = 90,
