@@ -18,11 +18,8 @@ the lower one at about 1.4 m/s, so nearly every particle is in contact from then
 up to 128 x 128, 1024 x 1024 needs about 32. On the CPU, one thread (``Simulator(..., threads=1)``).
 
 Columns: ms/frame (the median frame's wall time over --frames frames, frame 1 excluded as the warm-up; the
-median, since other work on a shared machine slows some frames), the mean from frame 3 on (frame 2 captures the frame's graph; the cloth falls for about a third
-of 20 frames and lies still after, and a frame costs more while it falls where candidates are kept), the median
-with self-collision as a multiple of without, the share of substeps that searched the hash grid ("searched":
-all of them on the CPU; on CUDA only those after a particle moved half ``KEPT_MARGIN``, see
-warp_verlet/constraints/self_contact.py), and the worst penetration over the run, 1 - (least distance between two particles that were not rest
+median, since other work on a shared machine slows some frames), the same with self-collision as a multiple of
+without, and the worst penetration over the run, 1 - (least distance between two particles that were not rest
 neighbours) / thickness, taken at the end of every frame (after timing it) by a hash-grid query on the device
 (0: no pair closer than the thickness; 1: two particles at one point). The run without self-collision shows
 how far the same cloth passes through itself.
@@ -137,12 +134,9 @@ def run(n: int, self_collision: bool, frames: int, substeps: int, iterations: in
     readings = []
     times = timed_frames(sim, frames, lambda: readings.append(meter.penetration()))
     worst = max([0.0, *readings])
-    count = sim.solver._scratch.get("contact_searches")
-    searched = f"{count.searches / count.substeps:.0%}" if count is not None and count.substeps else "-"
     return {"n": n, "self_collision": "on" if self_collision else "off", "particles": n * n,
-            "ms/frame": round(1e3 * statistics.median(times[1:]), 3),
-            "mean ms/frame": round(1e3 * statistics.fmean(times[2:] or times[1:]), 3), "worst penetration": round(worst, 4),
-            "searched": searched, "build s": round(build, 2), "graph": sim._use_graph}
+            "ms/frame": round(1e3 * statistics.median(times[1:]), 3), "worst penetration": round(worst, 4),
+            "build s": round(build, 2), "graph": sim._use_graph}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -176,8 +170,7 @@ def main(argv: list[str] | None = None) -> int:
     on = "one CPU thread" if wp.get_device(args.device).is_cpu else str(where)
     title = (f"Self-collision: a folded 1 m cloth dropped on the ground, {args.frames} frames at 60 fps, "
              f"{args.substeps} substeps, {args.iterations} sweeps, {on}\n\n" + "\n".join(where.lines(command)))
-    columns = ["n", "particles", "self_collision", "ms/frame", "mean ms/frame", "x without", "worst penetration",
-               "searched", "build s"]
+    columns = ["n", "particles", "self_collision", "ms/frame", "x without", "worst penetration", "build s"]
     if args.peer:
         columns = ["simulator", *columns, "graph"]
     write_table([{k: row[k] for k in columns} for row in rows], args.out, STEM, title, columns)

@@ -1,8 +1,7 @@
 """Self-collision and cloth–cloth contact (warp_verlet/constraints/self_contact.py): candidate pairs once a
 substep, one Jacobi gather per sweep.
 
-Once a substep (or, where candidates are kept, when a particle has moved half the margin since they were
-found: ``moved_beyond``), each particle of a colliding cloth lists its candidate pairs from the hash grid (rebuilt just
+Once a substep, each particle of a colliding cloth lists its candidate pairs from the hash grid (rebuilt just
 before): the particles within ``reach`` × the pair's thickness (the mean of the two particles'), except those
 closer than ``rest_exclusion`` × the thickness in the rest pose of one cloth. In each sweep, for every candidate
 closer than the thickness, it takes its share of the push that separates the pair to the thickness: (h - d)
@@ -50,12 +49,11 @@ def contact_candidates(
     rest_exclusion: float,
     reach: float,
     query_radius: Any,
-    margin: Any,
     max_candidates: int,
     candidate: wp.array(dtype=int),
     candidate_count: wp.array(dtype=int),
 ):
-    """Each colliding particle's pairs within ``reach`` x their thickness plus ``margin``, in the grid's order,
+    """Once a substep: each colliding particle's pairs within ``reach`` x their thickness, in the grid's order,
     the first ``max_candidates`` of them."""
     i = wp.tid()
     count = int(0)
@@ -66,30 +64,10 @@ def contact_candidates(
         while wp.hash_grid_query_next(query, j):
             h = pair_thickness(i, j, thickness, rest, cloth, rest_exclusion)
             if h > 0.0 and count < max_candidates:
-                if wp.length(xi - x[j]) < type(query_radius)(reach * h) + margin:
+                if wp.length(xi - x[j]) < type(query_radius)(reach * h):
                     candidate[i * max_candidates + count] = j
                     count += 1
     candidate_count[i] = count
-
-
-@wp.kernel
-def moved_beyond(x: wp.array(dtype=Any), anchor: wp.array(dtype=Any), thickness: wp.array(dtype=float), limit: Any,
-                 moved: wp.array(dtype=int)):
-    """Sets ``moved[0]`` to 1 when a colliding particle is further than ``limit`` from where the candidates were
-    last found (``anchor``): then a pair may have come within reach that the list does not hold."""
-    i = wp.tid()
-    if thickness[i] > 0.0:
-        if wp.length(x[i] - anchor[i]) > limit:
-            moved[0] = 1
-
-
-@wp.kernel
-def keep_anchor(x: wp.array(dtype=Any), anchor: wp.array(dtype=Any), moved: wp.array(dtype=int)):
-    """Where the candidates were found, for ``moved_beyond``; clears the flag."""
-    i = wp.tid()
-    anchor[i] = x[i]
-    if i == 0:
-        moved[0] = 0
 
 
 @wp.kernel
@@ -137,7 +115,5 @@ def contact_gather(
     x_out[i] = xi
 
 
-for_positions(contact_candidates, arrays=("x",), scalars=("query_radius", "margin"))
-for_positions(moved_beyond, arrays=("x", "anchor"), scalars=("limit",))
-for_positions(keep_anchor, arrays=("x", "anchor"))
+for_positions(contact_candidates, arrays=("x",), scalars=("query_radius",))
 for_positions(contact_gather, arrays=("x_in", "x_out", "x_inertial", "delta"))

@@ -32,7 +32,6 @@ that a particle cannot slip between the four particles of a square of another la
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -48,10 +47,6 @@ QUERY_REACH = 1.25
 """Candidates are the pairs within this × their thickness at the start of a substep (and the hash grid's cell and
 query radius this × the largest thickness): they are found once per substep and checked in each of its sweeps,
 so the margin covers what the sweeps move a pair together after the search."""
-KEPT_MARGIN = 0.4
-"""Where candidates are kept over substeps (``SelfContact.keeps_candidates``): they are the pairs within
-``QUERY_REACH`` × their thickness plus this × the largest thickness, found again only once a particle has moved
-half of that margin since. A wider margin searches less often, but lists more pairs (up to ``MAX_CANDIDATES``)."""
 MAX_CANDIDATES = 12
 """Candidate pairs kept per particle and substep, the first found in the grid's order (a fixed order, so which
 ones is repeatable). Particles at least a thickness apart fit about 12 around one within 1.25 × the thickness
@@ -112,14 +107,6 @@ def rest_spacing(spec) -> float | None:
         return float(np.median(np.linalg.norm(points[edges[:, 0]] - points[edges[:, 1]], axis=1)))
     steps = [size / (n - 1) for n, size in zip(spec.resolution, spec.size) if n > 1]
     return min(steps) if steps else None
-
-
-@dataclass
-class SearchCount:
-    """How many substeps a solver's self-contact ran, and in how many it searched the hash grid."""
-
-    substeps: int = 0
-    searches: int = 0
 
 
 def thickness_of(spec) -> float | None:
@@ -205,11 +192,6 @@ class SelfContact(ConstraintSet):
     name = "self contact"
     cloth_keys = (SELF_COLLISION, COLLISION_THICKNESS, SELF_FRICTION_COEFFICIENT, SELF_STATIC_FRICTION_COEFFICIENT)
 
-    def keeps_candidates(self, device) -> bool:
-        """Whether candidates are kept over substeps until a particle has moved half of ``KEPT_MARGIN``: where the
-        frame is stepped launch by launch (the check reads a flag on the host, which a captured frame cannot)."""
-        return not self.capturable(device)
-
     def capturable(self, device) -> bool:
         # Warp's HashGrid.build replayed from a CUDA graph left the grid stale past a small cloth: on an H100 a
         # folded 256^2 cloth's layers passed through each other with the frame captured, and held without
@@ -253,10 +235,10 @@ class SelfContact(ConstraintSet):
         return bool(req.count(self.name))
 
     def device_bytes(self, req) -> int:
-        # per particle: thickness, rest position, cloth, friction (μ_k, μ_s) (Model); a scratch position, where the
-        # candidates were found, the candidates and their count, and a flag (solver); the hash grid
-        return (req.particles * (FLOAT + VEC3 + INT + 2 * FLOAT + 2 * req.position_bytes + (MAX_CANDIDATES + 1) * INT)
-                + INT + hash_grid_bytes(req.particles, req.count(self.name)[1]))
+        # per particle: thickness, rest position, cloth, friction (μ_k, μ_s) (Model); a scratch position, the
+        # candidates and their count (solver); the hash grid
+        return (req.particles * (FLOAT + VEC3 + INT + 2 * FLOAT + req.position_bytes + (MAX_CANDIDATES + 1) * INT)
+                + hash_grid_bytes(req.particles, req.count(self.name)[1]))
 
     def build(self, model, scene, device):
         return ContactData(model, scene, device)
@@ -264,41 +246,23 @@ class SelfContact(ConstraintSet):
     def bind(self, model, state, solver) -> BoundStage:
         import warp as wp
 
-        from warp_verlet.kernels.self_contact import (contact_candidates, contact_gather, keep_anchor,
-                                                      moved_beyond)
+        from warp_verlet.kernels.self_contact import contact_candidates, contact_gather
 
         data, x, n = model.constraints[self.name], state.particle_q, model.particle_count
         real = model.position_scalar
         scratch = solver.scratch("contact_positions", n, model.position_dtype)
         candidate = solver.scratch("contact_candidates", n * MAX_CANDIDATES, int)
         candidate_count = solver.scratch("contact_candidate_count", n, int)
-        margin = real(KEPT_MARGIN * data.cell / QUERY_REACH if self.keeps_candidates(model.device) else 0.0)
         grid = wp.HashGrid(*data.dims, device=model.device, dtype=real)
         grid.reserve(n)
-        cell = real(data.cell) + margin
+        cell = data.cell
         find = recorded(contact_candidates, n, [wp.uint64(grid.id), x, data.thickness, data.rest, data.cloth,
-                                                REST_EXCLUSION, QUERY_REACH, cell, margin, MAX_CANDIDATES],
+                                                REST_EXCLUSION, QUERY_REACH, real(cell), MAX_CANDIDATES],
                         [candidate, candidate_count])
-        anchor = solver.scratch("contact_anchor", n, model.position_dtype)
-        moved = solver.scratch("contact_moved", 1, int)
-        check = recorded(moved_beyond, n, [x, anchor, data.thickness, real(0.5) * margin], [moved])
-        keep = recorded(keep_anchor, n, [x], [anchor, moved])
-        searches = solver.cached("contact_searches", SearchCount)
 
         def search(state, dt: float) -> None:
-            if margin > 0.0:
-                # Kept candidates hold while no particle has moved half the margin since they were found: two
-                # particles then came at most the margin closer, and the list reaches the margin further.
-                check.run()
-                if searches.substeps > 0 and not moved.numpy()[0]:
-                    searches.substeps += 1
-                    return
-            searches.substeps += 1
-            searches.searches += 1
             grid.build(x, cell)
             find.run()
-            if margin > 0.0:
-                keep.run()
 
         def gather(f, count):
             return recorded(contact_gather, count, [x, model.inv_mass, data.thickness, candidate, candidate_count,
