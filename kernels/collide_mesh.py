@@ -2,7 +2,8 @@
 
 Each particle asks each mesh's BVH for its closest point within the mesh's reach (its thickness outside, and
 deep enough inside to find any inside point: colliders/mesh.py); the sign from the normals there
-(``wp.mesh_query_point_sign_normal``) says whether it is inside. The BVH holds the mesh in its own frame: the
+(``wp.mesh_query_point_sign_normal``) says whether it is inside. The query first looks near the particle only,
+and over the whole reach only for a particle a ray test finds deep inside (``surface_query``). The BVH holds the mesh in its own frame: the
 particle is queried at its position less the mesh's translation (``collide_meshes``, where no mesh moves), or
 moved into the mesh's frame by its rotation and translation (``collide_moving_meshes``, placed on the device
 clock each substep), so a rigidly moving mesh needs no refit; a deforming mesh's points are placed each substep
@@ -38,6 +39,27 @@ def surface_depth(xi: Any, closest: Any, face_normal: Any, u: float, v: float, s
     return n, type(distance)(thickness) - height
 
 
+NEAR_BAND = 2.0
+"""The first query looks for the surface within this × the thickness: every particle the clamp acts on outside is
+within one thickness of it, and most particles of a cloth are nowhere near the surface, where a small radius lets
+the BVH prune almost everything."""
+
+
+@wp.func
+def surface_query(mesh: wp.uint64, p: wp.vec3, thickness: float, reach: float):
+    """The closest surface point within ``reach`` of ``p`` (the mesh's frame) where it matters, with the
+    ``wp.mesh_query_point_sign_normal`` sign. First within NEAR_BAND x ``thickness``; with nothing there, ``p`` is
+    either outside and clear of the surface (nothing to do) or deep inside. A ray up from it tells which: from
+    inside a closed mesh the first face it meets is crossed from behind. Only then the query over the whole
+    reach, whose radius makes the BVH visit far more of the mesh."""
+    query = wp.mesh_query_point_sign_normal(mesh, p, NEAR_BAND * thickness)
+    if not query.result:
+        ray = wp.mesh_query_ray(mesh, p, wp.vec3(0.0, 1.0, 0.0), 1.0e6)
+        if ray.result and ray.sign < 0.0:
+            query = wp.mesh_query_point_sign_normal(mesh, p, reach)
+    return query
+
+
 @wp.kernel
 def collide_meshes(
     x: wp.array(dtype=Any),
@@ -57,7 +79,7 @@ def collide_meshes(
         return
     xi = x[i]
     for m in range(meshes.shape[0]):
-        query = wp.mesh_query_point_sign_normal(meshes[m], wp.vec3(xi) - offsets[m], reach[m])
+        query = surface_query(meshes[m], wp.vec3(xi) - offsets[m], thickness[m], reach[m])
         if query.result:
             closest = x.dtype(wp.mesh_eval_position(meshes[m], query.face, query.u, query.v) + offsets[m])
             normal = x.dtype(wp.mesh_eval_face_normal(meshes[m], query.face))
@@ -98,7 +120,7 @@ def collide_moving_meshes(
     for m in range(meshes.shape[0]):
         q = rotations[m]
         local = wp.quat_rotate_inv(q, wp.vec3(xi) - offsets[m])
-        query = wp.mesh_query_point_sign_normal(meshes[m], local, reach[m])
+        query = surface_query(meshes[m], local, thickness[m], reach[m])
         if query.result:
             on_surface = wp.mesh_eval_position(meshes[m], query.face, query.u, query.v)
             closest = x.dtype(wp.quat_rotate(q, on_surface) + offsets[m])
