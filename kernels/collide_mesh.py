@@ -3,8 +3,8 @@
 Each particle asks each mesh's BVH for its closest point within the mesh's reach (its thickness outside, and
 deep enough inside to find any inside point: colliders/mesh.py); the sign from the normals there
 (``wp.mesh_query_point_sign_normal``) says whether it is inside. The query first looks near the particle only,
-and over the whole reach only for a particle a ray test finds deep inside (``surface_query``). The BVH holds the mesh in its own frame: the
-particle is queried at its position less the mesh's translation (``collide_meshes``, where no mesh moves), or
+and over the whole reach only for a particle a ray test finds deep inside (``surface_query``). The BVH holds the
+mesh in its own frame: the particle is queried at its position less the mesh's translation (``collide_meshes``, where no mesh moves), or
 moved into the mesh's frame by its rotation and translation (``collide_moving_meshes``, placed on the device
 clock each substep), so a rigidly moving mesh needs no refit; a deforming mesh's points are placed each substep
 (``place_mesh_points``) and its BVH refitted. The query runs in float32, the mesh's precision; the depth and
@@ -46,16 +46,24 @@ the BVH prune almost everything."""
 
 
 @wp.func
+def inside_by_ray(mesh: wp.uint64, p: wp.vec3, direction: wp.vec3):
+    """Whether the first face a ray from ``p`` meets is crossed from behind (``p`` is inside a closed mesh). Where
+    two parts touch (a table's leg under its top) a ray through the shared face may meet the other part's front
+    at the same distance, so ``surface_query`` asks two rays, up and sideways: taking an outside particle for an
+    inside one costs only the longer query, the reverse a missed push."""
+    ray = wp.mesh_query_ray(mesh, p, direction, 1.0e6)
+    return ray.result and ray.sign < 0.0
+
+
+@wp.func
 def surface_query(mesh: wp.uint64, p: wp.vec3, thickness: float, reach: float):
     """The closest surface point within ``reach`` of ``p`` (the mesh's frame) where it matters, with the
     ``wp.mesh_query_point_sign_normal`` sign. First within NEAR_BAND x ``thickness``; with nothing there, ``p`` is
-    either outside and clear of the surface (nothing to do) or deep inside. A ray up from it tells which: from
-    inside a closed mesh the first face it meets is crossed from behind. Only then the query over the whole
-    reach, whose radius makes the BVH visit far more of the mesh."""
+    either outside and clear of the surface (nothing to do) or deep inside, which rays tell (``inside_by_ray``).
+    Only then the query over the whole reach, whose radius makes the BVH visit far more of the mesh."""
     query = wp.mesh_query_point_sign_normal(mesh, p, NEAR_BAND * thickness)
     if not query.result:
-        ray = wp.mesh_query_ray(mesh, p, wp.vec3(0.0, 1.0, 0.0), 1.0e6)
-        if ray.result and ray.sign < 0.0:
+        if inside_by_ray(mesh, p, wp.vec3(0.0, 1.0, 0.0)) or inside_by_ray(mesh, p, wp.vec3(0.6, 0.0, 0.8)):
             query = wp.mesh_query_point_sign_normal(mesh, p, reach)
     return query
 

@@ -16,6 +16,7 @@ import warp as wp
 from warp_verlet.colliders.mesh import MESH, MeshCollider, distances_to_triangles, winding_numbers
 from warp_verlet.core.simulator import Simulator
 from warp_verlet.errors import SceneError
+from warp_verlet.kernels.collide_mesh import surface_query
 from warp_verlet.input.scene import parse_scene
 
 HALF = np.array([0.3, 0.1, 0.3])  # the test box's half extents, centred at the origin
@@ -356,6 +357,49 @@ def test_nothing_is_written_when_the_mesh_is_refused(tmp_path):
 
 
 # ------------------------------------------------------------------------------------------- warnings
+
+
+@wp.kernel
+def near_first_and_full_queries(mesh: wp.uint64, points: wp.array(dtype=wp.vec3), thickness: float, reach: float,
+                                near_first: wp.array(dtype=wp.vec4), full: wp.array(dtype=wp.vec4)):
+    """(closest point, sign) from the clamp's query and from one query over the whole reach; zeros: none found."""
+    i = wp.tid()
+    q = surface_query(mesh, points[i], thickness, reach)
+    if q.result:
+        c = wp.mesh_eval_position(mesh, q.face, q.u, q.v)
+        near_first[i] = wp.vec4(c[0], c[1], c[2], q.sign)
+    r = wp.mesh_query_point_sign_normal(mesh, points[i], reach)
+    if r.result:
+        c = wp.mesh_eval_position(mesh, r.face, r.u, r.v)
+        full[i] = wp.vec4(c[0], c[1], c[2], r.sign)
+
+
+def test_the_near_first_query_finds_what_the_full_query_finds_where_the_clamp_acts(tmp_path):
+    # The clamp asks near the particle first and over the whole reach only where a ray finds it deep inside. On a
+    # table with legs (concave, several parts, the legs touching the top's underside), at random points around
+    # and inside it, it must return the full query's closest point and side wherever the clamp acts (inside, or
+    # within the thickness outside), and may find nothing only for points outside and clear of the surface. (With
+    # the upward ray alone, 12 points deep in the legs were missed: the ray meets the top's underside there.)
+    thickness = 0.004  # the table's top is 40 mm thick and its legs 30 mm: room to be deeper than 2 thicknesses
+    write_table(tmp_path / "table.obj")
+    table = trimesh.load(str(tmp_path / "table.obj"), force="mesh")
+    lo, hi = table.bounds
+    reach = thickness + 0.5 * float(np.min(hi - lo))
+    mesh = wp.Mesh(points=wp.array(np.asarray(table.vertices, np.float32), dtype=wp.vec3, device="cpu"),
+                   indices=wp.array(np.asarray(table.faces, np.int32).ravel(), dtype=int, device="cpu"))
+    rng = np.random.default_rng(5)
+    points = rng.uniform(lo - 0.05, hi + 0.05, (20000, 3)).astype(np.float32)
+    near_first, full = wp.zeros(len(points), dtype=wp.vec4, device="cpu"), wp.zeros(len(points), dtype=wp.vec4, device="cpu")
+    wp.launch(near_first_and_full_queries, len(points), [mesh.id, wp.array(points, dtype=wp.vec3, device="cpu"),
+                                                         thickness, reach], [near_first, full], device="cpu")
+    near_first, full = near_first.numpy(), full.numpy()
+    distance = np.linalg.norm(points - full[:, :3], axis=1)
+    inside = full[:, 3] < 0
+    acts = inside | ((full[:, 3] > 0) & (distance < thickness))
+    assert (inside & (distance > 2 * thickness)).sum() > 100  # deep inside: found by the ray and the second query
+    np.testing.assert_allclose(near_first[acts], full[acts], atol=1e-6)
+    missed = near_first[:, 3] == 0
+    assert np.all(full[missed, 3] >= 0) and np.all(distance[missed & (full[:, 3] > 0)] > 2 * thickness - 1e-6)
 
 
 def test_a_cloth_starting_inside_the_mesh_is_warned_about(tmp_path):
