@@ -1,6 +1,6 @@
 """A global correction with contact inside it, prototyped on the host: how far can it take the drape?
 
-    python -m bench.global_step [--sizes 64 ...] [--budgets SxK ...] [--linear direct amg:N jacobi:N ...]
+    python -m bench.global_step [--sizes 64 ...] [--budgets SxK ...] [--linear direct amg:N jacobi:N bilinear:F agg:F ...]
         [--newton 1 2 ...] [--frames 90] [--out DIR]
 
 The drape of ``bench.convergence`` (1 m, 0.2 kg, structural + shear + bend sticks, dropped from 0.5 m onto a
@@ -17,7 +17,10 @@ Gauss-Newton matrix H = M/h^2 + k J^T J + kc n n^T:
 - ``direct``: a sparse LU (SciPy), the exact step: what any preconditioned Krylov solve converges to;
 - ``amg:N``: N conjugate-gradient iterations preconditioned by a smoothed-aggregation AMG V-cycle (PyAMG),
   the kind of operator hierarchy a device implementation would use;
-- ``jacobi:N``: N conjugate-gradient iterations preconditioned by the diagonal, the cheapest global step.
+- ``jacobi:N``: N conjugate-gradient iterations preconditioned by the diagonal, the cheapest global step;
+- ``bilinear:F[:J]`` and ``agg:F``: a coarse correction alone, no fine solve: the Galerkin system P^T H P of a grid
+  of every F-th particle (bilinear interpolation) or of F x F aggregates, solved exactly, then J damped-Jacobi
+  sweeps (bench/results/global_solve.md: it throws the cloth).
 
 After the step every collider clamps, then the coloured sweeps make the final projection and the substep's
 clamp runs, exactly as without the stage. Rows give the final RMS and max structural stretch, the lowest
@@ -135,11 +138,12 @@ class GlobalStep:
 
     def prolongation(self, kind: str, factor: int):
         """The grid's prolongation for all three components (particle r * side + c, component-major in 3s)."""
-        if not hasattr(self, "_prolongation"):
+        cache = self.__dict__.setdefault("_prolongations", {})
+        if (kind, factor) not in cache:
             side = int(round(np.sqrt(self.n)))
             P1 = self.sp.csr_matrix(axis_prolongation(side, kind, factor))
-            self._prolongation = self.sp.kron(self.sp.kron(P1, P1), self.sp.identity(3)).tocsr()
-        return self._prolongation
+            cache[kind, factor] = self.sp.kron(self.sp.kron(P1, P1), self.sp.identity(3)).tocsr()
+        return cache[kind, factor]
 
     def solve(self, H, rhs):
         self.solves += 1
