@@ -102,6 +102,17 @@ def colour_stick(g: GridColour, kr: int, kc: int, col_rest: wp.array(dtype=float
 
 
 @wp.func
+def stick_weights(g: GridColour, i: int, j: int, inv_mass: wp.array(dtype=float), pins: wp.array(dtype=int),
+                  read_weights: int):
+    """The inverse masses of a stick's ends: read from ``inv_mass`` where ``read_weights`` is 1 (the CPU: the array
+    stays in its caches, and reading it is cheaper than searching the pins), else found by particle_weight (a GPU,
+    where it saves memory traffic); both give the same float32."""
+    if read_weights != 0:
+        return inv_mass[i], inv_mass[j]
+    return particle_weight(g, i, inv_mass, pins), particle_weight(g, j, inv_mass, pins)
+
+
+@wp.func
 def project_grid_stick(
     x: wp.array(dtype=Any),
     inv_mass: wp.array(dtype=float),
@@ -115,21 +126,12 @@ def project_grid_stick(
     kc: int,
     read_weights: int,
 ):
-    """The rigid projection of the colour's stick (kr, kc) (relax_colour's, with ends and rest computed). The
-    weights are read from ``inv_mass`` where ``read_weights`` is 1 (the CPU: the array stays in its caches, and
-    reading it is cheaper than searching the pins), else found by particle_weight (a GPU, where it saves memory
-    traffic); both give the same float32."""
+    """The rigid projection of the colour's stick (kr, kc) (relax_colour's, with ends and rest computed), its ends'
+    weights as ``stick_weights`` finds them."""
     i, j, rest = colour_stick(g, kr, kc, col_rest, row_rest, col_sq, row_sq)
     if i < 0 or j < 0:  # never true (see colour_stick)
         return
-    wi = float(0.0)
-    wj = float(0.0)
-    if read_weights != 0:
-        wi = inv_mass[i]
-        wj = inv_mass[j]
-    else:
-        wi = particle_weight(g, i, inv_mass, pins)
-        wj = particle_weight(g, j, inv_mass, pins)
+    wi, wj = stick_weights(g, i, j, inv_mass, pins, read_weights)
     xi = x[i]
     xj = x[j]
     c = stick_correction(xi, xj, wi, wj, rest, 1.0)
@@ -198,14 +200,7 @@ def project_grid_stick_compliant(
     k = tension_first + kr * g.cols + kc
     if i < 0 or j < 0 or k < 0:  # never true (see colour_stick)
         return
-    wi = float(0.0)
-    wj = float(0.0)
-    if read_weights != 0:
-        wi = inv_mass[i]
-        wj = inv_mass[j]
-    else:
-        wi = particle_weight(g, i, inv_mass, pins)
-        wj = particle_weight(g, j, inv_mass, pins)
+    wi, wj = stick_weights(g, i, j, inv_mass, pins, read_weights)
     xi = x[i]
     xj = x[j]
     # Weight 1: a cloth that tears keeps stick arrays.
