@@ -79,6 +79,7 @@ import numpy as np
 from warp_verlet.geometry.topology import grid_positions
 
 from .common import timed_frames
+from .newton_style3d import NewtonFrames
 
 SKIP_MESSAGE = "Newton not installed: skipped"
 SOLVERS = ("vbd", "style3d")
@@ -120,7 +121,7 @@ def grid_order(points: np.ndarray, n: int, origin, spacing: float) -> np.ndarray
     return order
 
 
-class NewtonFoldedCloth:
+class NewtonFoldedCloth(NewtonFrames):
     """bench.self_contact's folded cloth in Newton; ``step_frame`` advances one 1/60 s frame."""
 
     def __init__(self, solver: str, n: int, start: np.ndarray, origin, self_contact: bool, substeps: int,
@@ -205,21 +206,6 @@ class NewtonFoldedCloth:
             return False
         self.graph = capture.graph
         return True
-
-    def step_frame(self) -> None:
-        import warp as wp
-
-        if self.graph is not None:
-            wp.capture_launch(self.graph)
-        else:
-            self.simulate()
-
-    def positions(self) -> np.ndarray:
-        """(n * n, 3) float32 in warp-verlet's particle order."""
-        q = self.state_0.particle_q.numpy()
-        out = np.empty_like(q)
-        out[self.order] = q
-        return out
 
 
 def run(solver: str, n: int, self_contact: bool, frames: int, substeps: int, iterations: int, device) -> dict:

@@ -97,7 +97,30 @@ def structural_stretch(points: np.ndarray, n: int) -> tuple[float, float]:
     return float(np.sqrt(np.mean(s * s))), float(s.max())
 
 
-class _NewtonCloth:
+class NewtonFrames:
+    """What every Newton cloth here shares: stepping a frame (its captured graph when ``graph`` is set, else
+    ``simulate()``) and reading its positions in warp_verlet's particle order (``order[k]``: where Newton's
+    particle k goes). A subclass sets ``graph``, ``state_0`` and ``order`` and defines ``simulate``."""
+
+    graph = None
+
+    def step_frame(self) -> None:
+        import warp as wp
+
+        if self.graph is not None:
+            wp.capture_launch(self.graph)
+        else:
+            self.simulate()
+
+    def positions(self) -> np.ndarray:
+        """(particles, 3) float32 in warp_verlet's particle order."""
+        q = self.state_0.particle_q.numpy()
+        out = np.empty_like(q)
+        out[self.order] = q
+        return out.astype(np.float32, copy=False)
+
+
+class _NewtonCloth(NewtonFrames):
     """The hanging sheet as a Newton model and solver; ``step_frame`` advances one 1/60 s frame."""
 
     def __init__(self, solver: str, n: int, device, substeps: int, iterations: int, self_contact: bool,
@@ -174,20 +197,6 @@ class _NewtonCloth:
                 self.simulate()
             self.graph = capture.graph
 
-    def step_frame(self) -> None:
-        import warp as wp
-
-        if self.graph is not None:
-            wp.capture_launch(self.graph)
-        else:
-            self.simulate()
-
-    def positions(self) -> np.ndarray:
-        """(n * n, 3) float32 in warp_verlet's particle order."""
-        q = self.state_0.particle_q.numpy()
-        out = np.empty_like(q)
-        out[self.order] = q
-        return out.astype(np.float32, copy=False)
 
 
 def run_peer(solver: str, n: int, frames: int = 60, device: str | None = None, *, substeps: int | None = None,
