@@ -32,21 +32,22 @@ from .relax import stick_correction
 _KERNELS: dict = {}
 
 
-def relax_grid_tiles(tile: int, colours: tuple):
+def relax_grid_tiles(tile: int, colours: tuple, max_registers: int | None = None):
     """The tiled sweep's kernel for tiles of ``tile`` x ``tile`` cells and the given colours, each
     ``(dr, dc, col_first, parity_axis, q, parity)`` (parity_axis 0: rows, 1: columns), in sweep order. One
-    kernel per (tile, colours): the shared tiles' shapes and each colour's geometry are compile-time constants,
-    so a colour's step unrolls to its own index arithmetic."""
+    kernel per (tile, colours, max_registers): the shared tiles' shapes and each colour's geometry are
+    compile-time constants, so a colour's step unrolls to its own index arithmetic. ``max_registers`` caps a
+    CUDA thread's registers (None: the compiler's choice), so that more blocks fit on a multiprocessor."""
     if tile < 4 or tile % 4:
         raise AssertionError(f"a tile's side must be a multiple of 4 (a bend colour's parity repeats every 4 rows or "
                              f"columns, and two tiles apart must share no particle), got {tile}")
-    key = (tile, tuple(colours))
+    key = (tile, tuple(colours), max_registers)
     if key not in _KERNELS:
-        _KERNELS[key] = _make_kernel(tile, tuple(colours))
+        _KERNELS[key] = _make_kernel(tile, tuple(colours), max_registers)
     return _KERNELS[key]
 
 
-def _make_kernel(tile: int, colours: tuple):
+def _make_kernel(tile: int, colours: tuple, max_registers: int | None):
     TILE_SIDE = tile
     HALF = tile // 2
     REGION_ROWS = tile + 2
@@ -61,7 +62,9 @@ def _make_kernel(tile: int, colours: tuple):
         f = wp.min(e, REGION - 1)
         return f // REGION_COLS, f % REGION_COLS
 
-    @wp.kernel(module="unique")
+    options = {} if max_registers is None else {"cuda_max_registers": max_registers}
+
+    @wp.kernel(module="unique", **options)
     def relax_grid_tiles(
         x: wp.array(dtype=wp.vec3),
         inv_mass: wp.array(dtype=float),

@@ -147,6 +147,9 @@ class GridSticks(ConstraintSet):
 GRID_TILE = 16
 """Cells per side of a tiled sweep's tile (kernels/grid_tiles.py), a multiple of 4; a block runs one thread per
 stick of a colour in the tile (half its cells)."""
+GRID_TILE_MAX_REGISTERS = None
+"""Registers a CUDA thread of the tiled sweep may use (None: the compiler's choice). Fewer registers let more
+blocks share a multiprocessor."""
 
 
 class GridTiles(ConstraintSet):
@@ -171,7 +174,7 @@ class GridTiles(ConstraintSet):
         g, x, tile = model.grid, state.particle_q, GRID_TILE
         geometry = tuple((c.layout.dr, c.layout.dc, c.layout.col_first, int(c.layout.row_q == 0),
                           c.layout.row_q or c.layout.col_q, c.layout.parity) for c in g.colours)
-        kernel = relax_grid_tiles(tile, geometry)
+        kernel = relax_grid_tiles(tile, geometry, GRID_TILE_MAX_REGISTERS)
         tiles_down, tiles_across = -(-g.rows // tile), -(-g.cols // tile)
         tasks = []
         for row_parity in (0, 1):
