@@ -24,6 +24,7 @@ and a step shrinking by more than max_dt_ratio at once (it created energy).
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 import bench_package  # noqa: F401  (makes the repository's bench/ importable as the package "bench")
@@ -166,6 +167,54 @@ def test_small_steps_stay_exact_in_free_fall_and_keep_the_pendulum_period(device
 
 def test_divergence_end_to_end(device, tmp_path):
     assert_all_pass(cases.divergence(device, out_dir=tmp_path))
+
+
+# ---------------------------------------------------------------------------------------------- contact
+
+
+def test_a_drape_held_by_contact_alone_stays_out_of_the_ball_and_within_its_stretch(device):
+    assert_all_pass(cases.drape(device))
+
+
+def test_a_sheet_crumpling_onto_itself_keeps_its_layers_apart(device):
+    assert_all_pass(cases.crumple(device))
+
+
+def test_a_sheet_thrown_at_30_m_s_neither_enters_nor_passes_through_the_ball(device):
+    assert_all_pass(cases.fast_impact(device))
+
+
+def test_the_contact_meters_see_a_particle_inside_a_collider_and_energy_gained():
+    """ContactLog's penetration and energy checks fail when a particle ends a substep inside the ball (put there
+    by hand after the clamp) and when the cloth is given energy (thrown up between two substeps)."""
+    from bench.stability_cases.contact import ContactLog, drape_scene
+    from warp_verlet.core.simulator import Simulator
+
+    sim = Simulator(drape_scene(8, 2, 2), "cpu", threads=1)
+    log = ContactLog(sim)
+    for _ in range(60):
+        log.step()
+    assert all(c.passed for c in log.checks("c"))
+    x = sim.positions()
+    x[0] = [0.0, 0.2, 0.0]  # 5.5 cm inside the ball's offset surface
+    sim.state.set_positions(x)
+    log.deepest["ball"] = max(log.deepest["ball"], contact_depth(sim))
+    failed = [c.criterion for c in log.checks("c") if not c.passed]
+    assert failed == ["deepest penetration of 'ball' at the end of any substep (m)"]
+
+    sim = Simulator(drape_scene(8, 2, 2), "cpu", threads=1)
+    log = ContactLog(sim)
+    log.step()
+    sim.state.set_positions(sim.positions() + np.float32([0.0, 0.05, 0.0]))  # 5 cm up in one substep
+    log.step()
+    failed = [c.criterion for c in log.checks("c") if not c.passed]
+    assert failed == ["energy rise max(E - E0) / (M g 1 m)"]
+
+
+def contact_depth(sim) -> float:
+    from bench.stability_cases.contact import penetration
+
+    return penetration(sim, sim.positions())["ball"]
 
 
 def test_checks_fail_when_they_should():

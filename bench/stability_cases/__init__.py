@@ -1,6 +1,6 @@
 """The stability cases, shared by ``tests/test_stability.py`` (small sizes) and ``bench.stability`` (large), one
 module per category: stiff, extreme_steps, loads, degenerate, over_constrained, long_runs, tethers (with small
-steps), divergence, air; what they share (the :class:`Check` row, scenes, energy) is in ``base``.
+steps), divergence, air, contact; what they share (the :class:`Check` row, scenes, energy) is in ``base``.
 
 Each case builds its scene, runs it and returns :class:`Check` rows: a stated pass criterion, the measured
 value, the bound and where the bound comes from. A check passes when ``measured <= bound`` (a NaN never
@@ -10,6 +10,7 @@ a case says so. ``CASES`` maps each case's name to its function, in the order th
 
 from .air import air_carried_sheet, air_gale, air_hurricane, air_zero_density
 from .base import SIZES, Check, count_check
+from .contact import crumple, drape, fast_impact
 from .degenerate import coincident, small_sphere, start_inside, zero_area
 from .divergence import divergence
 from .extreme_steps import STEP_RANGE, dt_drop_energy, fixed_steps, frame_spike, long_stall, variable_steps
@@ -46,6 +47,9 @@ CASES = {
     "air_hurricane": air_hurricane,
     "air_carried_sheet": air_carried_sheet,
     "air_zero_density": air_zero_density,
+    "drape": drape,
+    "crumple": crumple,
+    "fast_impact": fast_impact,
 }
 
 __all__ = ["CASES", "SIZES", "STEP_RANGE", "Check", "count_check", *CASES]
