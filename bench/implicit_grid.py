@@ -155,7 +155,8 @@ def main(argv=None) -> int:
     p.add_argument("--block-dim", type=int, default=None, help="threads per block of the implicit sticks' launches")
     p.add_argument("--forms", nargs="+", default=list(FORMS), choices=FORMS, help="the sticks' forms to run")
     p.add_argument("--tile", type=int, default=None, help="cells per side of the tiled sweep's tiles")
-    p.add_argument("--max-registers", type=int, default=None, help="registers a thread of the tiled sweep may use")
+    p.add_argument("--max-registers", type=int, default=None,
+                   help="registers a thread of the tiled sweep may use (0: the compiler's choice)")
     args = p.parse_args(argv)
     quiet_warp()
     if args.tile:
@@ -164,10 +165,10 @@ def main(argv=None) -> int:
         if args.tile < 4 or args.tile % 4:
             p.error(f"--tile must be a multiple of 4 (a bend colour's parity repeats every 4 cells), got {args.tile}")
         sticks.GRID_TILE = args.tile
-    if args.max_registers:
+    if args.max_registers is not None:
         from warp_verlet.constraints import sticks
 
-        sticks.GRID_TILE_MAX_REGISTERS = args.max_registers
+        sticks.GRID_TILE_MAX_REGISTERS = args.max_registers or None
     if args.block_dim:
         from warp_verlet.constraints import sticks
 

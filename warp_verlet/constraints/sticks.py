@@ -147,9 +147,10 @@ class GridSticks(ConstraintSet):
 GRID_TILE = 16
 """Cells per side of a tiled sweep's tile (kernels/grid_tiles.py), a multiple of 4; a block runs one thread per
 stick of a colour in the tile (half its cells)."""
-GRID_TILE_MAX_REGISTERS = None
-"""Registers a CUDA thread of the tiled sweep may use (None: the compiler's choice). Fewer registers let more
-blocks share a multiprocessor."""
+GRID_TILE_MAX_REGISTERS = 64
+"""Registers a CUDA thread of the tiled sweep may use (None: the compiler's choice, 94 with 16-cell tiles). At 64,
+eight 128-thread blocks share a multiprocessor instead of five; 56 and 48 spill and run slower
+(bench/results/grid_tiles/registers.md)."""
 
 
 class GridTiles(ConstraintSet):
