@@ -148,9 +148,12 @@ GRID_TILE = 16
 """Cells per side of a tiled sweep's tile (kernels/grid_tiles.py), a multiple of 4; a block runs one thread per
 stick of a colour in the tile (half its cells)."""
 GRID_TILE_MAX_REGISTERS = 64
-"""Registers a CUDA thread of the tiled sweep may use (None: the compiler's choice, 94 with 16-cell tiles). At 64,
-eight 128-thread blocks share a multiprocessor instead of five; 56 and 48 spill and run slower
-(bench/results/grid_tiles/registers.md)."""
+"""Registers a CUDA thread of the tiled sweep may use on a grid of GRID_TILE_CAPPED_FROM particles or more (None:
+the compiler's choice, 94 with 16-cell tiles). At 64, eight 128-thread blocks share a multiprocessor instead of
+five; 56 and 48 spill and run slower (bench/results/grid_tiles/registers.md)."""
+GRID_TILE_CAPPED_FROM = 1024 * 1024
+"""Particles from which the tiled sweep's registers are capped. A smaller grid's launch fits on the device at the
+compiler's occupancy, and the cap only costs it instructions (512^2 ran 3.5-4.6% slower capped on an H100)."""
 
 
 class GridTiles(ConstraintSet):
@@ -175,7 +178,8 @@ class GridTiles(ConstraintSet):
         g, x, tile = model.grid, state.particle_q, GRID_TILE
         geometry = tuple((c.layout.dr, c.layout.dc, c.layout.col_first, int(c.layout.row_q == 0),
                           c.layout.row_q or c.layout.col_q, c.layout.parity) for c in g.colours)
-        kernel = relax_grid_tiles(tile, geometry, GRID_TILE_MAX_REGISTERS)
+        registers = GRID_TILE_MAX_REGISTERS if g.rows * g.cols >= GRID_TILE_CAPPED_FROM else None
+        kernel = relax_grid_tiles(tile, geometry, registers)
         tiles_down, tiles_across = -(-g.rows // tile), -(-g.cols // tile)
         tasks = []
         for row_parity in (0, 1):
