@@ -149,11 +149,11 @@ GRID_TILE = 16
 stick of a colour in the tile (half its cells)."""
 GRID_TILE_MAX_REGISTERS = 64
 """Registers a CUDA thread of the tiled sweep may use on a grid of GRID_TILE_CAPPED_FROM particles or more (None:
-the compiler's choice, 94 with 16-cell tiles). At 64, eight 128-thread blocks share a multiprocessor instead of
-five; 56 and 48 spill and run slower (bench/results/grid_tiles/registers.md)."""
+the compiler's choice). At 64, eight 128-thread blocks fit a multiprocessor's registers, more than the compiler's
+choice lets fit; fewer registers spill (bench/results/grid_tiles/registers.md has the measurements)."""
 GRID_TILE_CAPPED_FROM = 1024 * 1024
 """Particles from which the tiled sweep's registers are capped. A smaller grid's launch fits on the device at the
-compiler's occupancy, and the cap only costs it instructions (512^2 ran 3.5-4.6% slower capped on an H100)."""
+compiler's occupancy, so the cap only costs it instructions (bench/results/grid_tiles/registers.md)."""
 
 
 class GridTiles(ConstraintSet):
