@@ -121,18 +121,19 @@ def drape(device: str = "cpu", size: str = "test") -> list[Check]:
     return out
 
 
-def crumple(device: str = "cpu", size: str = "test") -> list[Check]:
+def crumple(device: str = "cpu", size: str = "test", self_collision: bool = True) -> list[Check]:
     """A vertical sheet with self-collision, no pins, thrown down at 4 m/s onto the ground on its lower edge from
     0.2 m, tilted 3 degrees about that edge: its lower edge stops and the rest keeps coming, so it buckles and
     folds onto itself in a heap. Besides the shared checks, its layers stay apart: the closest two particles
     that were not rest neighbours overlap by less than half the collision thickness at the end of every
     substep (a contact pushes a pair apart within the substep, but the ground's clamp after it can put a
     particle back up into a landing layer, and a fold's tip moves faster than the landing), and after 2 s it
-    lies in a heap."""
-    from warp_verlet.constraints.self_contact import REST_EXCLUSION
+    lies in a heap. ``self_collision = False`` runs the same throw without it (the tests check that its layers
+    then pass through each other), measured against the thickness self-collision would have used."""
+    from warp_verlet.constraints.self_contact import DEFAULT_FRACTION, REST_EXCLUSION
 
     n = 16 if size == "test" else 32
-    case = f"contact: a sheet crumpling onto itself on the ground ({n}x{n}, self-collision)"
+    case = f"contact: a sheet crumpling onto itself on the ground ({n}x{n}, self-collision {'on' if self_collision else 'off'})"
     # The substeps keep a particle's move per substep at the landing speed under half the collision thickness, as
     # docs/scenes.md asks of self-collision.
     side, top, speed, substeps = 0.5, 0.7, 4.0, (8 if size == "test" else 16)
@@ -140,8 +141,9 @@ def crumple(device: str = "cpu", size: str = "test") -> list[Check]:
     sim = Simulator(scene({"substeps": substeps, "iterations": 8, "damping": 0.5},
                           {"name": "sheet", "resolution": [n, n], "size": [side, side], "origin": [-0.25, top, 0.0],
                            "mass": 0.2, "sticks": ["structural", "shear", "bend"], "compliance": {"bend": 1.0},
-                           "self_collision": True}, [ground]), device, threads=1)
-    thickness = sim.scene.cloths[0].options["collision_thickness"]
+                           "self_collision": self_collision}, [ground]), device, threads=1)
+    thickness = DEFAULT_FRACTION * side / (n - 1)
+    assert not self_collision or sim.scene.cloths[0].options["collision_thickness"] == thickness
     rest = sim.model.rest_positions.astype(np.float64)
     tilt = np.radians(3.0)  # a rigid turn about the lower edge: every stick stays at its rest length
     bottom = top - side
