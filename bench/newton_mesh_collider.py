@@ -60,9 +60,10 @@ What differs (Newton's model is not warp-verlet's):
   alone. These are bench.newton_self_contact's ground values (its ground shape is ke 1e5). A penalty gives
   way under load: the deepest-mm column counts the particles pressed inside the thickness.
 * Friction. Coulomb 0.5 in both. Newton's coefficient is the geometric mean of ``soft_contact_mu`` and the
-  shape's ``mu``, 0.5 each; its friction is regularised below a slip of 1e-2 m/s x dt per substep
+  shape's ``mu``, 0.5 each; it is a force in the solve, regularised below a slip speed of 1e-2 m/s
   (``friction_epsilon``, both solvers' default), where it acts as a stiff viscous force rather than sticking.
-  warp-verlet's friction is a position-level Coulomb clamp on the tangential move.
+  warp-verlet's friction is Coulomb's at the position level, applied with the clamp: a particle pushed out by
+  d sticks while its tangential move in the substep is under 0.5 d, else that move is shortened by 0.5 d.
 * Collision detection. warp-verlet queries the mesh's BVH for every particle at every substep (its clamp). VBD's
   solver owns its ``newton.CollisionPipeline`` and detects once per step, before initialisation (its default
   for the rigid slot, ``PRE_INIT``), i.e. once per substep. For Style3D this module runs the same pipeline before
@@ -76,8 +77,9 @@ What differs (Newton's model is not warp-verlet's):
   and edge BVHs are still refitted every substep, a cost warp-verlet's run does not have). Without a collider
   Style3D's handler is removed (``solver.collision = None``), as bench.newton_style3d does.
 * Graphs. On CUDA, Newton's frame of substeps is captured once as a graph and replayed (as Newton's examples
-  do), when the capture succeeds (an even number of substeps); warp-verlet captures its frame on the CPU and
-  CUDA alike. On the CPU Newton's frames are stepped directly. The "graph" column says which.
+  do), when the capture succeeds (it needs an even number of substeps; a failed capture falls back to stepping
+  directly); on the CPU Newton's frames are stepped directly. warp-verlet replays its captured frame on the CPU
+  too. The "graph" column says, row by row, which ran.
 """
 
 from __future__ import annotations
