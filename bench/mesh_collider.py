@@ -5,6 +5,7 @@ the same cloth dropped on an analytic sphere of the same radius (the cheapest co
                                   [--iterations 8] [--device cpu] [--out bench/results]
     python -m bench.mesh_collider --device cuda --sizes 256 1024 --substeps 32
     python -m bench.mesh_collider --triangles 10000 100000 [...]   # lat-long spheres of exactly N triangles
+    python -m bench.mesh_collider --peer [...]   # beside NVIDIA Newton, when installed (bench/newton_mesh_collider.py)
 
 --out writes mesh_collider.md and mesh_collider.csv there; bench/results/mesh_collider.md keeps a reading of the
 measured run above its table, to carry over when the run is repeated.
@@ -27,6 +28,14 @@ penetration over the run, max(0, thickness - signed distance) in mm, taken at th
 timing it) against the collider the row has: for a mesh row, against its own triangles by the kernel's own
 query (``wp.mesh_query_point_sign_normal``, negative inside); for the sphere row and the row without a
 collider, against the analytic sphere (|x| - 0.3 m), so that the last shows how far the cloth falls through.
+
+--peer adds NVIDIA Newton's rows for the same scene (bench/newton_mesh_collider.py, which lists what differs):
+newton-vbd (SolverVBD) and newton-style3d (SolverStyle3D), each without a collider and on each mesh (the same
+points and triangles, a static Newton mesh shape), measured by the same meter at the end of every frame, with a
+"simulator" column and a "graph" column (whether a frame ran as one captured graph: warp-verlet captures on the
+CPU too; Newton's rows capture on CUDA only); their "x none" is against their own run without a collider and
+their clamp columns are "-" (Newton's contact runs inside its solver). Without Newton it prints "Newton not
+installed: skipped" and the table has warp-verlet's rows alone.
 """
 
 from __future__ import annotations
@@ -44,6 +53,7 @@ import warp as wp
 from warp_verlet.core.simulator import Simulator
 from warp_verlet.input.scene import parse_scene
 
+from . import newton_mesh_collider
 from .common import arg_parser, machine, quiet_warp, timed_frames, write_table
 
 STEM = "mesh_collider"
@@ -140,30 +150,41 @@ def deepest_below(mesh: wp.uint64, x: wp.array(dtype=wp.vec3), thickness: float,
         wp.atomic_max(out, 0, thickness - query.sign * distance)
 
 
-class PenetrationMeter:
+class PointsPenetrationMeter:
+    """The deepest penetration of given positions (any order), measured on ``device``: against ``mesh`` ((points,
+    triangles), the row's collider) by the kernel's own query, else against the analytic sphere."""
+
+    def __init__(self, thickness: float, mesh=None, device=None, particles: int = 0):
+        self.thickness, self.device = thickness, wp.get_device(device)
+        self.mesh = None
+        if mesh is not None:
+            points, triangles = mesh
+            self.mesh = wp.Mesh(points=wp.array(points.astype(np.float32), dtype=wp.vec3, device=self.device),
+                                indices=wp.array(triangles.ravel(), dtype=wp.int32, device=self.device))
+            self.points = wp.empty(particles, dtype=wp.vec3, device=self.device)
+            self.out = wp.empty(1, dtype=float, device=self.device)
+
+    def penetration_of(self, q: np.ndarray) -> float:
+        if self.mesh is None:
+            below = self.thickness - (np.linalg.norm(np.asarray(q, dtype=np.float64), axis=1) - RADIUS)
+            return max(0.0, float(below.max()))
+        self.points.assign(np.asarray(q, dtype=np.float32))  # float32 or float64 positions alike
+        self.out.fill_(0.0)
+        wp.launch(deepest_below, len(self.points), inputs=[wp.uint64(self.mesh.id), self.points, self.thickness,
+                                                           self.out], device=self.device)
+        return float(self.out.numpy()[0])
+
+
+class PenetrationMeter(PointsPenetrationMeter):
     """The deepest penetration at a frame end: against the row's mesh on the simulator's device, else against
     the analytic sphere."""
 
     def __init__(self, sim: Simulator, thickness: float, mesh=None):
-        self.sim, self.thickness, device = sim, thickness, sim.device
-        self.mesh = None
-        if mesh is not None:
-            points, triangles = mesh
-            self.mesh = wp.Mesh(points=wp.array(points.astype(np.float32), dtype=wp.vec3, device=device),
-                                indices=wp.array(triangles.ravel(), dtype=wp.int32, device=device))
-            self.points = wp.empty(sim.model.particle_count, dtype=wp.vec3, device=device)
-            self.out = wp.empty(1, dtype=float, device=device)
+        super().__init__(thickness, mesh, sim.device, sim.model.particle_count)
+        self.sim = sim
 
     def penetration(self) -> float:
-        q = self.sim.positions()
-        if self.mesh is None:
-            below = self.thickness - (np.linalg.norm(q.astype(np.float64), axis=1) - RADIUS)
-            return max(0.0, float(below.max()))
-        self.points.assign(q.astype(np.float32))
-        self.out.fill_(0.0)
-        wp.launch(deepest_below, len(self.points), inputs=[wp.uint64(self.mesh.id), self.points, self.thickness,
-                                                           self.out], device=self.sim.device)
-        return float(self.out.numpy()[0])
+        return self.penetration_of(self.sim.positions())
 
 
 class ClampTimer:
@@ -216,7 +237,7 @@ def run(n: int, collider: str, subdivisions: int, folder: Path, frames: int, sub
            "triangles": len(mesh[1]) if mesh else "-",
            "ms/frame": round(ms, 3), "clamp ms/frame": "-", "clamp share": "-",
            "deepest mm": round(1e3 * worst, 3), "thickness mm": round(1e3 * thickness, 3),
-           "build s": round(build, 2)}
+           "build s": round(build, 2), "graph": sim._use_graph}
     if clamp is not None:
         clamp_ms = statistics.median(clamp_times[1:])
         row["clamp ms/frame"] = round(clamp_ms, 3)
@@ -238,6 +259,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--iterations", type=int, default=8, help="sweeps per substep")
     parser.add_argument("--device", default="cpu")
     parser.add_argument("--out", type=Path, default=None, help="directory for mesh_collider.md and .csv")
+    parser.add_argument("--peer", action="store_true",
+                        help="also run NVIDIA Newton's VBD and Style3D solvers on the scene, when Newton is installed")
     args = parser.parse_args(argv)
     if args.subdivisions is None:
         args.subdivisions = [] if args.triangles else [5, 6]
@@ -249,6 +272,9 @@ def main(argv: list[str] | None = None) -> int:
         except ValueError as error:
             parser.error(f"--triangles {count}: {error}")
     quiet_warp()
+    if args.peer and not newton_mesh_collider.available():
+        print(newton_mesh_collider.SKIP_MESSAGE)
+        args.peer = False
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
@@ -259,7 +285,10 @@ def main(argv: list[str] | None = None) -> int:
                          for kind, s in cases]
             for row in size_rows:
                 row["x none"] = round(row["ms/frame"] / size_rows[0]["ms/frame"], 2)
-            rows += size_rows
+            rows += [{"simulator": "warp-verlet", **row} for row in size_rows]
+            if args.peer:
+                rows += newton_mesh_collider.peer_rows(n, cases, args.frames, args.substeps, args.iterations,
+                                                       args.device)
     where = machine(args.device)
     command = ["bench.mesh_collider", *(sys.argv[1:] if argv is None else argv)]
     on = "one CPU thread" if wp.get_device(args.device).is_cpu else str(where)
@@ -267,9 +296,11 @@ def main(argv: list[str] | None = None) -> int:
              f"mesh, an analytic "
              f"sphere, or none), {args.frames} frames at 60 fps, {args.substeps} substeps, {args.iterations} sweeps, "
              f"{on}\n\n" + "\n".join(where.lines(command)))
-    write_table(rows, args.out, STEM, title,
-                ["n", "particles", "collider", "triangles", "ms/frame", "x none", "clamp ms/frame", "clamp share",
-                 "deepest mm", "thickness mm", "build s"])
+    columns = ["n", "particles", "collider", "triangles", "ms/frame", "x none", "clamp ms/frame", "clamp share",
+               "deepest mm", "thickness mm", "build s"]
+    if args.peer:
+        columns = ["simulator", *columns, "graph"]
+    write_table([{k: row[k] for k in columns} for row in rows], args.out, STEM, title, columns)
     return 0
 
 

@@ -1,10 +1,13 @@
 """bench/mesh_collider.py at a tiny size: a row per collider, each timed, the mesh clamp's share measured, and the
-penetration it reports zero with a collider and large without one."""
+penetration it reports zero with a collider and large without one; --peer without Newton skips Newton's rows with
+one line, and with it adds them (bench/newton_mesh_collider.py), its cloth and mesh the same as warp-verlet's."""
 
 from __future__ import annotations
 
 import csv
 import math
+
+import pytest
 
 import bench_package  # noqa: F401  (makes the repository's bench/ importable as the package "bench")
 from bench import mesh_collider
@@ -71,3 +74,101 @@ def test_triangles_alone_give_lat_long_rows_only(tmp_path):
     assert [(r["collider"], r["triangles"]) for r in rows] == [("none", "-"), ("sphere", "-"), ("lat-long mesh", "48")]
     assert float(rows[2]["clamp ms/frame"]) > 0
     assert float(rows[2]["deepest mm"]) <= 2e-3  # kept out, as the icosphere rows are
+
+
+def test_penetration_meter_measures_given_points_against_the_mesh_and_the_sphere():
+    """The meter Newton's rows share with warp-verlet's: thickness - signed distance, the sign negative inside."""
+    import numpy as np
+    import pytest
+    import trimesh
+
+    box = trimesh.creation.box(extents=(1.0, 1.0, 1.0))  # a closed mesh, its top face at y = 0.5
+    mesh = np.asarray(box.vertices), np.asarray(box.faces, dtype=np.int32)
+    thickness, far = 0.01, [0.0, 3.0, 0.0]
+    meter = mesh_collider.PointsPenetrationMeter(thickness, mesh, "cpu", 2)
+    assert meter.penetration_of(np.array([[0.1, 0.505, 0.2], far])) == pytest.approx(0.005, abs=1e-6)
+    assert meter.penetration_of(np.array([far, [0.1, 0.45, -0.2]])) == pytest.approx(0.06, abs=1e-6)  # inside
+    assert meter.penetration_of(np.array([far, far])) == 0.0
+    sphere = mesh_collider.PointsPenetrationMeter(thickness)  # no mesh: the analytic sphere of radius 0.3 m
+    assert sphere.penetration_of(np.array([[0.0, 0.305, 0.0], far])) == pytest.approx(0.005, abs=1e-12)
+    assert sphere.penetration_of(np.array([far, [0.0, 0.0, -0.29]])) == pytest.approx(0.02, abs=1e-12)
+    assert sphere.penetration_of(np.array([far])) == 0.0
+
+
+def test_peer_without_newton_prints_the_skip_and_keeps_the_table(tmp_path, capsys, monkeypatch):
+    import sys
+
+    from bench import newton_mesh_collider
+
+    monkeypatch.setitem(sys.modules, "newton", None)  # `import newton` raises ImportError, installed or not
+    assert not newton_mesh_collider.available()
+    assert mesh_collider.main(["--sizes", "6", "--triangles", "48", "--frames", "2", "--peer",
+                               "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert out.count(newton_mesh_collider.SKIP_MESSAGE) == 1
+    with open(tmp_path / "mesh_collider.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert [(r["n"], r["collider"]) for r in rows] == [("6", "none"), ("6", "sphere"), ("6", "lat-long mesh")]
+    assert "simulator" not in rows[0] and "graph" not in rows[0]  # warp-verlet's table as without --peer
+    reported = []
+    assert newton_mesh_collider.peer_rows(6, [("latlong", 48)], 2, 8, 8, "cpu", report=reported.append) == []
+    assert reported == [newton_mesh_collider.SKIP_MESSAGE]
+
+
+def test_newtons_contact_distances_and_cases():
+    import math
+
+    import pytest
+
+    from bench import newton_mesh_collider
+
+    # 11 particles a side: spacing 0.1 m, thickness 0.05 m; the gap adds sqrt(2 x 9.81 x 0.1) m/s x 1/480 s.
+    thickness, radius, gap = newton_mesh_collider.contact_distances(11, 8)
+    assert thickness == radius == 0.05
+    assert gap == pytest.approx(0.05 + math.sqrt(1.962) / 480.0, rel=1e-15)
+    assert gap == pytest.approx(0.052918154382, abs=1e-12)
+    cases = [("none", 0), ("sphere", 0), ("mesh", 2), ("latlong", 48), ("mesh", 3)]
+    assert newton_mesh_collider.peer_cases(cases) == [("none", 0), ("mesh", 2), ("latlong", 48), ("mesh", 3)]
+
+
+@pytest.mark.slow
+def test_newtons_cloth_and_mesh_are_warp_verlets_when_newton_is_installed(tmp_path):
+    """Newton's particles, reordered, start on warp-verlet's; its mesh shape holds the same points and triangles."""
+    pytest.importorskip("newton")
+    import numpy as np
+
+    from warp_verlet.geometry.topology import grid_positions
+
+    from bench import newton_mesh_collider
+
+    n = 7
+    mesh = mesh_collider.latlong_sphere(48)
+    scene, _ = mesh_collider.drop_scene(n, "latlong", 48, tmp_path, 2, 8, 4)
+    for solver in newton_mesh_collider.SOLVERS:
+        cloth = newton_mesh_collider.NewtonDroppedCloth(solver, n, mesh, 8, 4, "cpu")
+        np.testing.assert_allclose(cloth.positions(), grid_positions(scene.cloths[0]), atol=1e-6)
+        assert cloth.model.particle_mass.numpy() == pytest.approx(np.full(n * n, 0.3 / (n * n)), rel=1e-6)
+        shape = cloth.model.shape_source[0]
+        assert (shape.vertices == mesh[0].astype(np.float32)).all()
+        assert (shape.indices == mesh[1].ravel()).all()
+        assert shape.is_watertight
+        assert cloth.model.particle_radius.numpy() == pytest.approx(np.full(n * n, 0.5 / (n - 1)), rel=1e-6)
+
+
+@pytest.mark.slow
+def test_newton_rows_when_newton_is_installed():
+    pytest.importorskip("newton")
+    from bench import newton_mesh_collider
+
+    rows = newton_mesh_collider.peer_rows(8, [("none", 0), ("sphere", 0), ("latlong", 48)], 20, 8, 4, "cpu")
+    assert [(r["simulator"], r["collider"], r["triangles"]) for r in rows] == [
+        ("newton-vbd", "none", "-"), ("newton-vbd", "lat-long mesh", 48),
+        ("newton-style3d", "none", "-"), ("newton-style3d", "lat-long mesh", 48)]
+    for r in rows:
+        assert math.isfinite(r["ms/frame"]) and r["ms/frame"] > 0 and r["particles"] == 64
+    # Without a collider the cloth falls through the sphere's place (20 frames: 0.54 m down); on the mesh Newton's
+    # penalty holds it, pressed at most a tenth of the thickness (71 mm) inside it.
+    assert rows[0]["x none"] == rows[2]["x none"] == 1.0
+    assert rows[0]["deepest mm"] > 100.0 + rows[0]["thickness mm"] and rows[2]["deepest mm"] > 100.0
+    assert 0.0 <= rows[1]["deepest mm"] <= 0.1 * rows[1]["thickness mm"]
+    assert 0.0 <= rows[3]["deepest mm"] <= 0.1 * rows[3]["thickness mm"]
