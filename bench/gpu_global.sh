@@ -5,6 +5,7 @@
 # PART=drape256, drape1024  the drape: plain sweeps and the global correction (multigrid, Jacobi);
 # PART=rerun    the correction's drape rows again (after a change to it);
 # PART=contact  self-collision and mesh colliders at 1024^2 and 2048^2, 32 x 1;
+# PART=meshpeer Newton beside the mesh collider at 256^2 (10k and 100k triangles; ITERATIONS, default 1);
 # PART=peer     Newton beside self-collision at 256^2 (the wheel from ../shared/tools/gpu-warp/prepare.sh NEWTON_WHEEL);
 # PART=meshes   mesh colliders of exactly 10k and 100k triangles at 256^2, 1024^2 and 2048^2, 32 x 1;
 # PART=more     the hanging cloth at 1024^2 with the correction, the drape at 2048^2, and the air's cost.
@@ -42,6 +43,10 @@ case "$PART" in
     timeout 120 python3 -m bench.self_contact --device cuda --sizes 16 --frames 3 --peer > /dev/null 2>&1  # compiles Newton
     timeout 420 python3 -m bench.self_contact --device cuda --sizes 256 --substeps 32 --iterations 1 --frames 60 --peer \
       --out "$out" 2>&1 | tail -12 ;;
+  meshpeer)
+    timeout 150 python3 -m bench.mesh_collider --device cuda --sizes 16 --triangles 10000 --frames 3 --peer > /dev/null 2>&1  # compiles Newton
+    timeout 420 python3 -m bench.mesh_collider --device cuda --sizes 256 --triangles 10000 100000 --substeps 32 \
+      --iterations ${ITERATIONS:-1} --frames 20 --peer --out "$out" 2>&1 | tail -14 ;;
   meshes)
     timeout 560 python3 -m bench.mesh_collider --device cuda --sizes 256 1024 2048 --triangles 10000 100000 --substeps 32 \
       --iterations 1 --frames 20 --out "$out" 2>&1 | tail -14 ;;
