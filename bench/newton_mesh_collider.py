@@ -196,22 +196,6 @@ class NewtonDroppedCloth(NewtonFrames):
             self.solver.step(self.state_0, self.state_1, self.control, self.contacts, self.dt)
             self.state_0, self.state_1 = self.state_1, self.state_0
 
-    def capture(self) -> bool:
-        """On CUDA, record a frame of substeps as a graph (an even number of substeps leaves ``state_0`` holding
-        the result, so the graph replays frame after frame). Whether it did."""
-        import warp as wp
-
-        if not self.device.is_cuda or self.substeps % 2:
-            return False
-        try:
-            with wp.ScopedCapture(device=self.device) as capture:
-                self.simulate()
-        except Exception:
-            self.graph = None
-            return False
-        self.graph = capture.graph
-        return True
-
 
 def run(solver: str, n: int, collider: str, size: int, frames: int, substeps: int, iterations: int,
         device) -> dict:
@@ -229,7 +213,7 @@ def run(solver: str, n: int, collider: str, size: int, frames: int, substeps: in
     wp.synchronize_device(device)
     began = time.perf_counter()
     cloth = NewtonDroppedCloth(solver, n, mesh, substeps, iterations, device)
-    captured = cloth.capture()
+    captured = cloth.capture_frame()
     wp.synchronize_device(device)
     build = time.perf_counter() - began
     meter = bench.PointsPenetrationMeter(thickness, mesh, device, n * n)

@@ -191,22 +191,6 @@ class NewtonFoldedCloth(NewtonFrames):
             self.solver.step(self.state_0, self.state_1, self.control, self.contacts, self.dt)
             self.state_0, self.state_1 = self.state_1, self.state_0
 
-    def capture(self) -> bool:
-        """On CUDA, record a frame of substeps as a graph (an even number of substeps leaves ``state_0`` holding
-        the result, so the graph replays frame after frame). Whether it did."""
-        import warp as wp
-
-        if not self.device.is_cuda or self.substeps % 2:
-            return False
-        try:
-            with wp.ScopedCapture(device=self.device) as capture:
-                self.simulate()
-        except Exception:
-            self.graph = None
-            return False
-        self.graph = capture.graph
-        return True
-
 
 def run(solver: str, n: int, self_contact: bool, frames: int, substeps: int, iterations: int, device) -> dict:
     """One row of bench.self_contact's table for Newton's ``solver``, with its self-contact on or off."""
@@ -222,7 +206,7 @@ def run(solver: str, n: int, self_contact: bool, frames: int, substeps: int, ite
     wp.synchronize_device(device)
     began = time.perf_counter()
     cloth = NewtonFoldedCloth(solver, n, start, spec.origin, self_contact, substeps, iterations, device)
-    captured = cloth.capture()
+    captured = cloth.capture_frame()
     wp.synchronize_device(device)
     build = time.perf_counter() - began
     meter = bench.PointsGapMeter(rest, thickness, device)

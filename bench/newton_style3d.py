@@ -100,7 +100,8 @@ def structural_stretch(points: np.ndarray, n: int) -> tuple[float, float]:
 class NewtonFrames:
     """What every Newton cloth here shares: stepping a frame (its captured graph when ``graph`` is set, else
     ``simulate()``) and reading its positions in warp_verlet's particle order (``order[k]``: where Newton's
-    particle k goes). A subclass sets ``graph``, ``state_0`` and ``order`` and defines ``simulate``."""
+    particle k goes). A subclass sets ``graph``, ``state_0`` and ``order`` and defines ``simulate``; ``capture_frame``
+also reads its ``device`` and ``substeps``."""
 
     graph = None
 
@@ -111,6 +112,22 @@ class NewtonFrames:
             wp.capture_launch(self.graph)
         else:
             self.simulate()
+
+    def capture_frame(self) -> bool:
+        """On CUDA, record a frame of substeps as a graph (an even number of substeps leaves ``state_0`` holding
+        the result, so the graph replays frame after frame). Whether it did."""
+        import warp as wp
+
+        if not self.device.is_cuda or self.substeps % 2:
+            return False
+        try:
+            with wp.ScopedCapture(device=self.device) as capture:
+                self.simulate()
+        except Exception:
+            self.graph = None
+            return False
+        self.graph = capture.graph
+        return True
 
     def positions(self) -> np.ndarray:
         """(particles, 3) float32 in warp_verlet's particle order."""
