@@ -237,7 +237,7 @@ def run(n: int, collider: str, subdivisions: int, folder: Path, frames: int, sub
            "triangles": len(mesh[1]) if mesh else "-",
            "ms/frame": round(ms, 3), "clamp ms/frame": "-", "clamp share": "-",
            "deepest mm": round(1e3 * worst, 3), "thickness mm": round(1e3 * thickness, 3),
-           "build s": round(build, 2), "graph": sim._use_graph}
+           "build s": round(build, 2), "graph": sim.replays_frames}
     if clamp is not None:
         clamp_ms = statistics.median(clamp_times[1:])
         row["clamp ms/frame"] = round(clamp_ms, 3)

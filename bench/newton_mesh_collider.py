@@ -103,6 +103,7 @@ GRAVITY = (0.0, -9.81, 0.0)
 FPS = 60.0
 SHAPE_KE = 1.0e5                # N/m, the mesh shape's stiffness (VBD's contact: the mean of it and CONTACT_KE)
 
+
 def contact_distances(n: int, substeps: int) -> tuple[float, float, float]:
     """(warp-verlet's thickness, Newton's ``particle_radius``, Newton's ``soft_contact_gap``) in m for an n x n
     cloth at ``substeps`` substeps a frame: the radius is the thickness 0.5 / (n - 1) m (Newton pushes inside

@@ -136,7 +136,7 @@ def run(n: int, self_collision: bool, frames: int, substeps: int, iterations: in
     worst = max([0.0, *readings])
     return {"n": n, "self_collision": "on" if self_collision else "off", "particles": n * n,
             "ms/frame": round(1e3 * statistics.median(times[1:]), 3), "worst penetration": round(worst, 4),
-            "build s": round(build, 2), "graph": sim._use_graph}
+            "build s": round(build, 2), "graph": sim.replays_frames}
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -259,7 +259,7 @@ def test_a_large_folded_cloth_holds_on_cuda_where_the_frame_is_not_captured():
 
     n = 256
     sim = Simulator(sc.folded_scene(n, True, 20, 32, 8), "cuda")
-    assert not sim._use_graph
+    assert not sim.replays_frames
     thickness = sc.DEFAULT_FRACTION * sc.SIZE / (n - 1)
     sim.state.set_positions(sc.folded(sim.model.rest_positions, sc.SIZE / (n - 1), thickness))
     meter = sc.GapMeter(sim, thickness)
@@ -268,4 +268,4 @@ def test_a_large_folded_cloth_holds_on_cuda_where_the_frame_is_not_captured():
         sim.step_frame()
         worst = max(worst, meter.penetration())
     assert worst < 0.2  # without self-collision: 1.0 (two particles at one point)
-    assert Simulator(sc.folded_scene(64, True, 2, 8, 8), "cpu")._use_graph
+    assert Simulator(sc.folded_scene(64, True, 2, 8, 8), "cpu").replays_frames

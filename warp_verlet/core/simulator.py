@@ -251,6 +251,12 @@ class Simulator:
     def colliders(self):
         return self.model.colliders
 
+    @property
+    def replays_frames(self) -> bool:
+        """Whether a whole frame is stepped by replaying its captured substeps (a CUDA graph, or Warp's CPU
+        capture), rather than launch by launch from Python: what the scene, the device and the threads allow."""
+        return self._use_graph
+
     def stages(self) -> list[tuple[str, Callable[[float], None]]]:
         """The stages of one substep, in order, as (name, run(dt)) on this simulator's state: only those the
         scene uses (the table in warp_verlet/core/stages.py). ``bench/throughput.py`` times them one by one."""
