@@ -15,7 +15,7 @@ import numpy as np
 from warp_verlet.colliders.sphere import SphereCollider
 from warp_verlet.core.simulator import Simulator
 
-from .base import G, Check, count_check, nonfinite, particle_masses, scene
+from .base import G, Check, count_check, implicit_velocity, nonfinite, particle_masses, scene
 
 PENETRATION = 1e-5
 """m: the deepest a particle may end a substep inside a collider's offset surface."""
@@ -50,18 +50,15 @@ class ContactLog:
         self.m = particle_masses(sim.scene)
         self.nonfinite = 0
         self.deepest = {c.name: 0.0 for c in sim.scene.colliders}
-        self.energy = [self.total(sim.positions(), self.start_velocity())]
-        self.lowest_potential = self.energy[0]
-
-    def start_velocity(self) -> np.ndarray:
-        v = self.sim.state.start_velocity
-        return np.zeros((len(self.m), 3)) if v is None else np.asarray(v, np.float64)
+        # Before the first step, implicit_velocity is the velocity set_velocity gave (zero without one).
+        self.energy = [self.total(sim.positions(), implicit_velocity(sim, sim.dt))]
 
     def total(self, x: np.ndarray, v: np.ndarray) -> float:
         kinetic = 0.5 * np.sum(self.m * np.sum(v * v, axis=1))
         return float(kinetic + G * np.sum(self.m * x[:, 1].astype(np.float64)))
 
-    def step(self) -> None:
+    def step(self) -> np.ndarray:
+        """One substep, logged; the positions it ended with (float32, the scene's order)."""
         sim = self.sim
         sim.step()
         x = sim.positions()
@@ -70,6 +67,7 @@ class ContactLog:
             self.deepest[name] = max(self.deepest[name], depth)
         v = (x.astype(np.float64) - sim.state.previous_positions().astype(np.float64)) / sim.dt
         self.energy.append(self.total(x, v))
+        return x
 
     def checks(self, case: str, tolerance: float = 0.02) -> list[Check]:
         """No NaN; each collider's deepest penetration within PENETRATION; the total energy never above the
@@ -158,8 +156,7 @@ def crumple(device: str = "cpu", size: str = "test", self_collision: bool = True
     log = ContactLog(sim)
     closest = np.inf
     for _ in range(120 * substeps):
-        log.step()
-        x = sim.positions().astype(np.float64)
+        x = log.step().astype(np.float64)
         d = np.linalg.norm(x[:, None] - x[None], axis=2)
         d[neighbours] = np.inf
         closest = min(closest, float(d.min() / thickness))
@@ -193,8 +190,7 @@ def fast_impact(device: str = "cpu", size: str = "test") -> list[Check]:
     before = sim.positions().astype(np.float64)
     inside = 0.5 * RADIUS  # a column half the ball's radius wide: from its sides a particle may slide round
     for _ in range(60 * substeps):
-        log.step()
-        after = sim.positions().astype(np.float64)
+        after = log.step().astype(np.float64)
         # Within the ball's column, a particle above the centre at one substep and below it at the next went
         # through the ball: round it is more than half its circumference, 0.8 m, in one substep.
         column = (np.hypot(before[:, 0], before[:, 2]) < inside) & (np.hypot(after[:, 0], after[:, 2]) < inside)
