@@ -17,6 +17,11 @@ particle for any TILE >= 3, so the blocks of a launch neither read nor write eac
 four launches, Gauss-Seidel across them. TILE is a multiple of 4, so that a bend colour's parity pattern, which
 repeats every 4 rows or columns, is the grid's in every tile.
 
+Shared memory is written through ``shared_put`` and the block synchronised by ``block_barrier``, once where the
+order needs it: after the staging, after each colour and before the write-back. Warp's own tile writes
+(``tile_scatter_masked``) each end with a barrier, which at two writes a stick put twice as many barriers into
+a sweep as its colours need, and a thread would wait on every one of them.
+
 The projection is ``stick_correction`` with the rest lengths and weights the implicit grid sticks use
 (kernels/grid_relax.py), so every stick sees exactly the arithmetic of the other forms; only the order of the
 projections differs. That order is a fixed sequence (tile colour, tile, stick colour, stick), which the CPU
@@ -30,6 +35,12 @@ from .positions import scaled
 from .relax import stick_correction
 
 _KERNELS: dict = {}
+
+
+@wp.func_native("WP_TILE_SYNC();")
+def block_barrier():
+    """Every thread of the block waits here until all have arrived, and sees the others' shared-memory writes."""
+    ...
 
 
 def relax_grid_tiles(tile: int, colours: tuple, max_registers: int | None = None):
@@ -61,6 +72,30 @@ def _make_kernel(tile: int, colours: tuple, max_registers: int | None):
         """Row and column, in the tile's region, of the region's e-th cell (row-major), clamped into the region."""
         f = wp.min(e, REGION - 1)
         return f // REGION_COLS, f % REGION_COLS
+
+    @wp.func_native("t.data(wp::tile_coord(i, j)) = value;")
+    def put_point(t: wp.tile(dtype=wp.vec3, shape=(REGION_ROWS, REGION_COLS), storage="shared"), i: int, j: int,
+                  value: wp.vec3): ...
+
+    @wp.func_native("t.data(wp::tile_coord(i, j)) = value;")
+    def put_weight(t: wp.tile(dtype=float, shape=(REGION_ROWS, REGION_COLS), storage="shared"), i: int, j: int,
+                   value: float): ...
+
+    @wp.func_native("t.data(wp::tile_coord(i, j)) = value;")
+    def put_col_rest(t: wp.tile(dtype=float, shape=(2, REGION_COLS), storage="shared"), i: int, j: int,
+                     value: float): ...
+
+    @wp.func_native("t.data(wp::tile_coord(i, j)) = value;")
+    def put_row_rest(t: wp.tile(dtype=float, shape=(2, REGION_ROWS), storage="shared"), i: int, j: int,
+                     value: float): ...
+
+    @wp.func_native("t.data(wp::tile_coord(i)) = value;")
+    def put_col_step(t: wp.tile(dtype=wp.float64, shape=(REGION_COLS,), storage="shared"), i: int,
+                     value: wp.float64): ...
+
+    @wp.func_native("t.data(wp::tile_coord(i)) = value;")
+    def put_row_step(t: wp.tile(dtype=wp.float64, shape=(REGION_ROWS,), storage="shared"), i: int,
+                     value: wp.float64): ...
 
     options = {} if max_registers is None else {"cuda_max_registers": max_registers}
 
@@ -104,48 +139,32 @@ def _make_kernel(tile: int, colours: tuple, max_registers: int | None):
             rr, rc = region_cell(e0 + lane)
             gr = r0 + rr
             gc = c0 - 1 + rc
-            inside = e0 + lane < REGION and gr < grid_rows and gc >= 0 and gc < grid_cols
-            v = wp.vec3(0.0)
-            w = float(0.0)
-            if inside:
-                v = x[first + gr * grid_cols + gc]
-                w = particle_weight(layout, first + gr * grid_cols + gc, inv_mass, pins)
-            wp.tile_scatter_masked(region, rr, rc, v, inside)
-            wp.tile_scatter_masked(weight, rr, rc, w, inside)
+            if e0 + lane < REGION and gr < grid_rows and gc >= 0 and gc < grid_cols:
+                put_point(region, rr, rc, x[first + gr * grid_cols + gc])
+                put_weight(weight, rr, rc, particle_weight(layout, first + gr * grid_cols + gc, inv_mass, pins))
         for e0 in range(0, REGION_COLS, threads):
             k = wp.min(e0 + lane, REGION_COLS - 1)
             gc = c0 - 1 + k
             ok = e0 + lane < REGION_COLS and gc >= 0
             one = ok and gc < col_rest1.shape[0]
             two = ok and gc < col_rest2.shape[0]
-            r1 = float(0.0)
-            r2 = float(0.0)
-            sq = wp.float64(0.0)
             if one:
-                r1 = col_rest1[gc]
-                sq = col_sq[gc]
+                put_col_rest(col_rest, 0, k, col_rest1[gc])
+                put_col_step(col_step, k, col_sq[gc])
             if two:
-                r2 = col_rest2[gc]
-            wp.tile_scatter_masked(col_rest, 0, k, r1, one)
-            wp.tile_scatter_masked(col_rest, 1, k, r2, two)
-            wp.tile_scatter_masked(col_step, k, sq, one)
+                put_col_rest(col_rest, 1, k, col_rest2[gc])
         for e0 in range(0, REGION_ROWS, threads):
             k = wp.min(e0 + lane, REGION_ROWS - 1)
             gr = r0 + k
             ok = e0 + lane < REGION_ROWS
             one = ok and gr < row_rest1.shape[0]
             two = ok and gr < row_rest2.shape[0]
-            r1 = float(0.0)
-            r2 = float(0.0)
-            sq = wp.float64(0.0)
             if one:
-                r1 = row_rest1[gr]
-                sq = row_sq[gr]
+                put_row_rest(row_rest, 0, k, row_rest1[gr])
+                put_row_step(row_step, k, row_sq[gr])
             if two:
-                r2 = row_rest2[gr]
-            wp.tile_scatter_masked(row_rest, 0, k, r1, one)
-            wp.tile_scatter_masked(row_rest, 1, k, r2, two)
-            wp.tile_scatter_masked(row_step, k, sq, one)
+                put_row_rest(row_rest, 1, k, row_rest2[gr])
+        block_barrier()
 
         for n in range(wp.static(len(COLOURS))):
             dr = wp.static(COLOURS[n][0])
@@ -172,8 +191,6 @@ def _make_kernel(tile: int, colours: tuple, max_registers: int | None):
                 ic = lc + 1
                 jr = lr + dr
                 jc = ic + dc
-                xi = wp.vec3(0.0)
-                xj = wp.vec3(0.0)
                 if active:
                     # The rest length as grid_relax.colour_stick finds it, from the staged tables (column
                     # c - 1 of the grid is the region's column ic - 1).
@@ -189,10 +206,11 @@ def _make_kernel(tile: int, colours: tuple, max_registers: int | None):
                     xi = region[lr, ic]
                     xj = region[jr, jc]
                     d = stick_correction(xi, xj, wi, wj, rest, 1.0)
-                    xi = xi + scaled(d, wi)
-                    xj = xj - scaled(d, wj)
-                wp.tile_scatter_masked(region, lr, ic, xi, active)
-                wp.tile_scatter_masked(region, jr, jc, xj, active)
+                    put_point(region, lr, ic, xi + scaled(d, wi))
+                    put_point(region, jr, jc, xj - scaled(d, wj))
+            # A colour's sticks share no particle, so its writes need no order among themselves; the next
+            # colour reads them.
+            block_barrier()
 
         for e0 in range(0, REGION, threads):
             rr, rc = region_cell(e0 + lane)
