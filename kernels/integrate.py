@@ -26,6 +26,7 @@ import warp as wp
 
 from .aerodynamics import air_acceleration
 from .positions import for_positions
+from .tether import tethered
 
 
 @wp.kernel
@@ -81,6 +82,31 @@ def verlet_step(
 
 
 @wp.kernel
+def verlet_step_tethered(
+    x: wp.array(dtype=Any),
+    x_inertial: wp.array(dtype=Any),
+    delta: wp.array(dtype=Any),
+    inv_mass: wp.array(dtype=float),
+    velocity_scale: Any,
+    accel_offset: Any,
+    tether_row: wp.array(dtype=int),
+    pin: wp.array2d(dtype=int),
+    length: wp.array2d(dtype=float),
+):
+    """verlet_step, then the first sweep's tether pass (kernels/tether.py) on the particle just moved:
+    ``tether_row[i]`` is particle i's row of the tether table (-1: none). The pass reads only pins, which this
+    kernel never moves (w = 0), so the pair is bit for bit the two launches one after the other, and the
+    positions make one trip through memory instead of two."""
+    i = wp.tid()
+    if inv_mass[i] == 0.0:
+        return  # pins never move
+    take_step(i, x, x_inertial, delta, implicit_move(i, x, x_inertial, delta) * velocity_scale + accel_offset)
+    t = tether_row[i]
+    if t >= 0:
+        x[i] = tethered(x[i], x, pin, length, t)
+
+
+@wp.kernel
 def verlet_step_air(
     x: wp.array(dtype=Any),
     x_inertial: wp.array(dtype=Any),
@@ -105,5 +131,7 @@ def verlet_step_air(
 
 for_positions(verlet_start, arrays=("x", "x_inertial", "delta"), vectors=("accel",), scalars=("dt",))
 for_positions(verlet_step, arrays=("x", "x_inertial", "delta"), vectors=("accel_offset",), scalars=("velocity_scale",))
+for_positions(verlet_step_tethered, arrays=("x", "x_inertial", "delta"), vectors=("accel_offset",),
+              scalars=("velocity_scale",))
 for_positions(verlet_step_air, arrays=("x", "x_inertial", "delta", "share"), vectors=("accel_offset",),
               scalars=("velocity_scale", "force_scale"))

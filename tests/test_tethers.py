@@ -100,3 +100,61 @@ def test_a_cloth_without_pins_or_with_tethers_off_gets_none():
     assert Simulator(make_scene(resolution=[8, 8]), "cpu").model.tether_table is None
     assert Simulator(hanging(False), "cpu").model.tether_table is None
     assert Simulator(hanging(True), "cpu").solver.req.tethered == 16 * 16 - 2
+
+
+WINDY = {"substeps": 2, "iterations": 3, "wind": [0.5, 0.0, 4.0]}
+
+
+@pytest.mark.parametrize("cloth, simulation, threads", [
+    ({"pins": ["top-left", "top-right"]}, {}, 1),  # two pins: every particle tied to both
+    ({"pins": ["top-left", "top-right"]}, {}, 2),  # the CPU thread team runs the first sweep without the pass
+    ({"pins": ["top-edge"], "tear_threshold": 1.05, "tethers": True, "tether_scale": 1.05},
+     {"wind": [0.5, 0.0, 20.0]}, 1),  # a gale tears it, and the tears cut tethers
+    ({"pins": ["top-left", [0, 5]], "tether_scale": 1.2}, {"precision": "float64"}, 1),
+    ({"pins": ["top-left", "top-right"]}, {"relaxation": "jacobi"}, 1),
+])
+def test_the_first_tether_pass_inside_the_verlet_step_changes_no_bit(cloth, simulation, threads, device, monkeypatch):
+    """The Verlet step that also runs the first sweep's tether pass (kernels/integrate.verlet_step_tethered) leaves
+    every position as the two launches one after the other do, bit for bit."""
+    from warp_verlet.core import stages
+
+    if device != "cpu":
+        threads = None
+    scene = make_scene({**WINDY, **simulation}, resolution=[12, 10], size=[1.0, 0.8], **cloth)
+    runs = []
+    for fold in (True, False):
+        monkeypatch.setattr(stages, "FOLD_TETHERS_INTO_INTEGRATE", fold)
+        sim = Simulator(scene, device, threads=threads)
+        assert stages.tethers_in_integrate(sim.solver.req) == fold
+        for _ in range(12):
+            sim.step_frame()
+        runs.append(sim.positions())
+    if "tear_threshold" in cloth:
+        assert sim.torn_count() > 0  # the tears cut tethers during the run
+    assert np.abs(runs[0] - sim.model.rest_positions).max() > 0.05  # it moved
+    np.testing.assert_array_equal(runs[0], runs[1])
+
+
+@pytest.mark.parametrize("simulation, cloth", [
+    ({"multilevel": True}, {}),  # its pass measures moves from the Verlet prediction, before the first sweep
+    ({"global_iterations": 3}, {}),  # the global correction runs between the step and the sweeps
+    ({"air": {"velocity": [0.0, 0.0, 5.0]}}, {}),  # the air's step gathers each particle's force
+    ({}, {"self_collision": True}),  # the self-contact search reads the positions before the first sweep
+])
+def test_the_tether_pass_stays_out_of_the_verlet_step_where_something_runs_between(simulation, cloth):
+    from warp_verlet.core import stages
+
+    scene = make_scene(simulation, resolution=[12, 10], pins=["top-left", "top-right"], **cloth)
+    sim = Simulator(scene, "cpu")
+    assert "tethers" in sim.constraint_sets
+    assert not stages.tethers_in_integrate(sim.solver.req)
+
+
+def test_the_tether_pass_stays_out_of_the_verlet_step_without_a_tether_table():
+    from warp_verlet.core import stages
+
+    grid = make_scene({}, resolution=[12, 10], pins=["top-left", "top-right"])
+    assert stages.tethers_in_integrate(Simulator(grid, "cpu").solver.req)
+    assert not stages.tethers_in_integrate(Simulator(grid, "cpu", sticks="implicit").solver.req)  # computed tethers
+    assert not stages.tethers_in_integrate(Simulator(make_scene({}, resolution=[12, 10], pins=["top-left"],
+                                                                tethers=False), "cpu").solver.req)

@@ -60,6 +60,10 @@ class ConstraintKind(Protocol):
         """Whether its launches replay correctly from a captured frame on ``device`` (a Warp device); a frame
         with a kind that does not is stepped launch by launch."""
 
+    reads_positions_before_sweeps: bool
+    """Whether its per-substep set-up (``bind``'s ``run``) reads or moves the positions the Verlet step left:
+    then nothing of the first sweep may be folded into that step (stages.tethers_in_integrate)."""
+
 
 class ConstraintSet:
     """Defaults for a kind that owns no keys, has nothing to check, keeps its data in the Model's core arrays
@@ -67,6 +71,7 @@ class ConstraintSet:
 
     name = ""
     cloth_keys: tuple = ()
+    reads_positions_before_sweeps = False
 
     def named_vertex_sets(self, options) -> tuple:
         return ()

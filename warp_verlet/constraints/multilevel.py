@@ -211,6 +211,7 @@ class Multilevel(ConstraintSet):
     measures each particle's move from the Verlet prediction."""
 
     name = "multilevel"
+    reads_positions_before_sweeps = True
 
     def needed(self, req) -> bool:
         return req.coarse_sticks > 0

@@ -190,6 +190,7 @@ class SelfContact(ConstraintSet):
     rebuilt each substep, then in each sweep a Jacobi gather of the pushes and a copy back."""
 
     name = "self contact"
+    reads_positions_before_sweeps = True
     cloth_keys = (SELF_COLLISION, COLLISION_THICKNESS, SELF_FRICTION_COEFFICIENT, SELF_STATIC_FRICTION_COEFFICIENT)
 
     def capturable(self, device) -> bool:

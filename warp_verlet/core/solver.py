@@ -88,12 +88,13 @@ class VerletSolver:
             self._scratch[name] = make()
         return self._scratch[name]
 
-    def team(self, phases: list[list[PhaseTask | None]]) -> PhaseTeam | None:
-        """A CPU thread team for the relaxation's phases, or None when it runs on one thread."""
+    def team(self, phases: list[list[PhaseTask | None]], repeats: int | None = None) -> PhaseTeam | None:
+        """A CPU thread team for the relaxation's phases, run ``repeats`` times (None: once a sweep), or None when it
+        runs on one thread."""
         if self.threads <= 1 or not phases:
             return None
         team = PhaseTeam([[t.run if t is not None else None for t in phase] for phase in phases],
-                         self.settings.iterations)
+                         self.settings.iterations if repeats is None else repeats)
         self._teams.add(team)
         return team
 

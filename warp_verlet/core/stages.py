@@ -28,7 +28,8 @@ if TYPE_CHECKING:  # pragma: no cover
     from .aerodynamics import AirCounts
 
 from ..constraints import kinds as constraint_kinds
-from ..launches import FLOAT, VEC2I, VEC3, VEC3D, BoundStage, recorded
+from ..constraints.tethers import Tethers
+from ..launches import FLOAT, INT, VEC2I, VEC3, VEC3D, BoundStage, recorded
 
 
 @dataclass(frozen=True)
@@ -245,27 +246,35 @@ class Integrate:
         return req.free_particles
 
     def device_bytes(self, req: Requirements) -> int:
-        return 0  # it updates the State's positions, prediction and increment, which every scene has
+        # It updates the State's positions, prediction and increment, which every scene has; with the first
+        # tether pass folded in, each particle's row of the tether table.
+        return req.particles * INT if tethers_in_integrate(req) else 0
 
     def bind(self, model, state, solver) -> BoundStage:
         if AERODYNAMICS.needed(solver.req):
             return self._bind_air(model, state, solver)
         import warp as wp
 
-        from warp_verlet.kernels.integrate import verlet_step
+        from warp_verlet.kernels.integrate import verlet_step, verlet_step_tethered
         from warp_verlet.kernels.positions import instance
 
         settings, accel, real = solver.settings, solver.accel, model.position_scalar
-        kernel = instance(verlet_step, model.position_dtype)  # launched every substep: resolved once here
         x, x_inertial, dq, inv_mass, n = (state.particle_q, state.particle_q_inertial, state.particle_dq,
                                           model.inv_mass, model.particle_count)
+        # Launched every substep: the kernel is resolved once here.
+        if tethers_in_integrate(solver.req):
+            kernel = instance(verlet_step_tethered, model.position_dtype)
+            length = state.tether_length if state.tether_length is not None else model.tether_length
+            tethers = [solver.cached("tether_row", lambda: tether_rows(model)), model.tether_pin, length]
+        else:
+            kernel, tethers = instance(verlet_step, model.position_dtype), []
 
         def run(state, dt: float) -> None:
             ratio = min(dt / state.dt_prev, settings.max_dt_ratio)
             # In the positions' type (accel is one too): a float32 factor would cost float64 its precision.
             velocity_scale = real(math.exp(-settings.damping * dt) * ratio)
             accel_offset = accel * real(dt * (dt + state.dt_prev) * 0.5)
-            wp.launch(kernel, n, inputs=[x, x_inertial, dq, inv_mass, velocity_scale, accel_offset])
+            wp.launch(kernel, n, inputs=[x, x_inertial, dq, inv_mass, velocity_scale, accel_offset, *tethers])
 
         return BoundStage(run)
 
@@ -289,6 +298,31 @@ class Integrate:
                                                             air.particle_face_start, air.particle_face, factor])
 
         return BoundStage(run)
+
+
+FOLD_TETHERS_INTO_INTEGRATE = True
+"""Whether the first sweep's tether pass runs inside the Verlet step where it may (tethers_in_integrate); off only
+to compare the two, which agree bit for bit."""
+
+
+def tethers_in_integrate(req: Requirements) -> bool:
+    """Whether the Verlet step also runs the first sweep's tether pass (kernels/integrate.verlet_step_tethered), so
+    that the positions make one trip through memory for both: the tether table's kind runs, and nothing runs
+    between the step and the first sweep's tethers that reads or moves the positions (the air's forces, the global
+    correction, a constraint kind's per-substep set-up such as the multilevel pass or the self-contact search)."""
+    return (FOLD_TETHERS_INTO_INTEGRATE and req.free_particles and RELAX.needed(req) and not AERODYNAMICS.needed(req)
+            and not GLOBAL.needed(req) and any(isinstance(c, Tethers) and c.needed(req) for c in constraint_kinds())
+            and not any(c.reads_positions_before_sweeps and c.needed(req) for c in constraint_kinds()))
+
+
+def tether_rows(model):
+    """Each particle's row of the tether table (-1: none), on the model's device."""
+    import numpy as np
+    import warp as wp
+
+    rows = np.full(model.particle_count, -1, np.int32)
+    rows[model.tether_table.particle] = np.arange(model.tether_table.count, dtype=np.int32)
+    return wp.array(rows, dtype=int, device=model.device)
 
 
 class GlobalSolve:
@@ -331,8 +365,13 @@ class Relax:
         return sum(c.device_bytes(req) for c in constraint_kinds() if c.needed(req))
 
     def bind(self, model, state, solver) -> BoundStage:
-        sets = [c.bind(model, state, solver) for c in constraint_kinds() if c.needed(solver.req)]
+        kinds = [c for c in constraint_kinds() if c.needed(solver.req)]
+        sets = [c.bind(model, state, solver) for c in kinds]
         phases = [phase for bound in sets for phase in bound.phases]
+        # The phases of the first sweep: without the tether pass where the Verlet step has run it.
+        folded = tethers_in_integrate(solver.req)
+        first = [phase for c, bound in zip(kinds, sets) if not (folded and isinstance(c, Tethers))
+                 for phase in bound.phases]
         before = [bound.run for bound in sets if bound.run is not None]  # per-substep set-up (dt, zeroing)
         collide_first = ()
         if contact_every_sweep(solver):
@@ -340,10 +379,12 @@ class Relax:
             launches = [kind.bind(model, state) for kind, _ in model.colliders.kinds]
             if collider_placement(solver) == self.name:
                 collide_first = [place for bound in launches for place in bound.before]
-            phases = phases + [[task] for bound in launches for task in bound.clamps]
-        team = solver.team(phases)
-        sweep = [task.run for phase in phases for task in phase if task is not None]
+            clamps = [[task] for bound in launches for task in bound.clamps]
+            phases, first = phases + clamps, first + clamps
         iterations = solver.settings.iterations
+        team = solver.team(first + phases * (iterations - 1), repeats=1) if first != phases else solver.team(phases)
+        sweep = [task.run for phase in phases for task in phase if task is not None]
+        first_sweep = [task.run for phase in first for task in phase if task is not None]
 
         def run(state, dt: float) -> None:
             for place in collide_first:
@@ -353,7 +394,9 @@ class Relax:
             if team is not None:
                 team.run()
                 return
-            for _ in range(iterations):
+            for task in first_sweep:
+                task()
+            for _ in range(iterations - 1):
                 for task in sweep:
                     task()
 
