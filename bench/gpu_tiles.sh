@@ -4,7 +4,8 @@
 # 1024^2 (4 x 8) and runs bench.implicit_grid at 1024^2 and 2048^2 with the copy rate in the same run, then the
 # tiled form alone with other tile sizes; PART=profile runs Nsight Compute's launch, occupancy and warp-state
 # sections on two tiled launches and one implicit colour of the second frame at 1024^2; PART=registers runs the
-# tiled form at 1024^2 and 2048^2 with each cap on a thread's registers in REGS (0: the compiler's choice). Results under $OUT
+# tiled form at 1024^2 and 2048^2 with each cap on a thread's registers in REGS (0: the compiler's choice); PART=fold
+# runs the tiled form with the first tether pass inside the Verlet step and apart (--tethers-apart). Results under $OUT
 # (default bench/results/grid_tiles).
 set -uo pipefail
 out=${OUT:-bench/results/grid_tiles}
@@ -24,6 +25,12 @@ case "${PART:-bench}" in
     for tile in ${TILES:-8 24 32}; do
       timeout 200 python3 -m bench.implicit_grid --device cuda --sizes 1024 --forms tiled --tile "$tile" \
         --target-size 0 --out "$out/tile-$tile" 2>&1 | grep "^| 1024"
+    done ;;
+  fold)
+    for apart in "" --tethers-apart; do
+      echo "== tethers ${apart:-inside the Verlet step}"
+      timeout 200 python3 -m bench.implicit_grid --device cuda --sizes ${SIZES:-512 1024 2048} --budgets 4x8 32x1 64x1 \
+        --large-budgets 4x8 64x1 --forms tiled --target-size 0 $apart --out "$out/fold${apart:+-apart}" 2>&1 | grep "^| [125]"
     done ;;
   registers)
     for r in ${REGS:-0 64 56 48}; do

@@ -157,8 +157,14 @@ def main(argv=None) -> int:
     p.add_argument("--tile", type=int, default=None, help="cells per side of the tiled sweep's tiles")
     p.add_argument("--max-registers", type=int, default=None,
                    help="registers a thread of the tiled sweep may use (0: the compiler's choice)")
+    p.add_argument("--tethers-apart", action="store_true",
+                   help="run the first sweep's tether pass as its own launch, not inside the Verlet step")
     args = p.parse_args(argv)
     quiet_warp()
+    if args.tethers_apart:
+        from warp_verlet.core import stages
+
+        stages.FOLD_TETHERS_INTO_INTEGRATE = dict.fromkeys(stages.FOLD_TETHERS_INTO_INTEGRATE, False)
     if args.tile:
         from warp_verlet.constraints import sticks
 

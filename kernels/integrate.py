@@ -89,21 +89,23 @@ def verlet_step_tethered(
     inv_mass: wp.array(dtype=float),
     velocity_scale: Any,
     accel_offset: Any,
-    tether_row: wp.array(dtype=int),
+    particle: wp.array(dtype=int),
     pin: wp.array2d(dtype=int),
     length: wp.array2d(dtype=float),
 ):
-    """verlet_step, then the first sweep's tether pass (kernels/tether.py) on the particle just moved:
-    ``tether_row[i]`` is particle i's row of the tether table (-1: none). The pass reads only pins, which this
-    kernel never moves (w = 0), so the pair is bit for bit the two launches one after the other, and the
-    positions make one trip through memory instead of two."""
-    i = wp.tid()
-    if inv_mass[i] == 0.0:
-        return  # pins never move
-    take_step(i, x, x_inertial, delta, implicit_move(i, x, x_inertial, delta) * velocity_scale + accel_offset)
-    t = tether_row[i]
-    if t >= 0:
-        x[i] = tethered(x[i], x, pin, length, t)
+    """verlet_step for tether row t's particle, then the first sweep's tether pass on it (kernels/tether.py),
+    launched over the tether table's rows where they hold every free particle. The pass reads only pins, which
+    no thread here moves (w = 0), so the pair is bit for bit the two launches one after the other, and the
+    position makes one trip through memory instead of two."""
+    t = wp.tid()
+    i = particle[t]
+    xi = x[i]
+    if inv_mass[i] != 0.0:  # as verlet_step, which leaves pins where they are
+        step = implicit_move(i, x, x_inertial, delta) * velocity_scale + accel_offset
+        xi = xi + step
+        x_inertial[i] = xi
+        delta[i] = step
+    x[i] = tethered(xi, x, pin, length, t)
 
 
 @wp.kernel

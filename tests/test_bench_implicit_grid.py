@@ -29,3 +29,21 @@ def test_a_tile_that_is_not_a_multiple_of_four_is_refused(capsys):
     with pytest.raises(SystemExit):
         implicit_grid.main(["--device", "cpu", "--sizes", "16", "--tile", "6", "--target-size", "0"])
     assert "--tile must be a multiple of 4" in capsys.readouterr().err
+
+
+def test_the_tether_pass_apart_gives_the_same_rows(tmp_path, monkeypatch):
+    """--tethers-apart runs the first sweep's tether pass as its own launch: the same positions, so the same
+    stretch to every printed digit."""
+    from warp_verlet.core import stages
+
+    monkeypatch.setattr(stages, "FOLD_TETHERS_INTO_INTEGRATE", {"cpu": True, "cuda": True})  # restored after
+    rows = {}
+    for name, extra in (("folded", []), ("apart", ["--tethers-apart"])):
+        assert implicit_grid.main(["--device", "cpu", "--sizes", "16", "--budgets", "2x2", "--repeats", "1",
+                                   "--target-size", "0", "--forms", "explicit", "--out", str(tmp_path / name),
+                                   *extra]) == 0
+        assert stages.FOLD_TETHERS_INTO_INTEGRATE["cpu"] == (name == "folded")
+        rows[name] = list(csv.DictReader(open(tmp_path / name / "implicit-grid.csv")))[0]
+    assert "tethers" in rows["apart"]["constraint sets"]
+    for key in ("stretch rms", "stretch max"):
+        assert rows["folded"][key] == rows["apart"][key]

@@ -96,14 +96,12 @@ def test_a_step_launches_only_what_the_scene_uses(launches):
     jacobi = Simulator(make_scene({"iterations": k, "relaxation": "jacobi"}, resolution=[8, 8]), "cpu", use_graph=False)
     assert one_step(jacobi, launches) == ["verlet_step"] + ["relax_jacobi", "copy"] * k
 
-    # A pinned cloth that cannot tear gets tethers: a pass per sweep, before the sticks' 4 colours; the first
-    # sweep's runs inside the Verlet step.
+    # A pinned cloth that cannot tear gets tethers: one launch per sweep, before the sticks' 4 colours.
     pinned = make_scene({"iterations": k}, resolution=[8, 8], pins=["top-left", "top-right"])
     assert pinned.cloths[0].uses_tethers
     tethered = Simulator(pinned, "cpu", use_graph=False)
     assert tethered.model.colour_count == 4
-    assert one_step(tethered, launches) == (["verlet_step_tethered"] + ["relax_colour"] * 4
-                                            + (["pull_tethers"] + ["relax_colour"] * 4) * (k - 1))
+    assert one_step(tethered, launches) == ["verlet_step"] + (["pull_tethers"] + ["relax_colour"] * 4) * k
     untethered = Simulator(make_scene({"iterations": k}, resolution=[8, 8], pins=["top-left", "top-right"],
                                       tethers=False), "cpu", use_graph=False)
     assert one_step(untethered, launches) == ["verlet_step"] + ["relax_colour"] * (4 * k)

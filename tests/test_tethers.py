@@ -102,7 +102,10 @@ def test_a_cloth_without_pins_or_with_tethers_off_gets_none():
     assert Simulator(hanging(True), "cpu").solver.req.tethered == 16 * 16 - 2
 
 
+
 WINDY = {"substeps": 2, "iterations": 3, "wind": [0.5, 0.0, 4.0]}
+EVERYWHERE = {"cpu": True, "cuda": True}
+NOWHERE = {"cpu": False, "cuda": False}
 
 
 @pytest.mark.parametrize("cloth, simulation, threads", [
@@ -115,17 +118,18 @@ WINDY = {"substeps": 2, "iterations": 3, "wind": [0.5, 0.0, 4.0]}
 ])
 def test_the_first_tether_pass_inside_the_verlet_step_changes_no_bit(cloth, simulation, threads, device, monkeypatch):
     """The Verlet step that also runs the first sweep's tether pass (kernels/integrate.verlet_step_tethered) leaves
-    every position as the two launches one after the other do, bit for bit."""
+    every position as the two launches one after the other do, bit for bit, on every device (the CPU runs them
+    apart by default, so the test switches it on there)."""
     from warp_verlet.core import stages
 
     if device != "cpu":
         threads = None
     scene = make_scene({**WINDY, **simulation}, resolution=[12, 10], size=[1.0, 0.8], **cloth)
     runs = []
-    for fold in (True, False):
+    for fold in (EVERYWHERE, NOWHERE):
         monkeypatch.setattr(stages, "FOLD_TETHERS_INTO_INTEGRATE", fold)
         sim = Simulator(scene, device, threads=threads)
-        assert stages.tethers_in_integrate(sim.solver.req) == fold
+        assert stages.tethers_in_integrate(sim.solver) == fold["cpu"]
         for _ in range(12):
             sim.step_frame()
         runs.append(sim.positions())
@@ -135,26 +139,49 @@ def test_the_first_tether_pass_inside_the_verlet_step_changes_no_bit(cloth, simu
     np.testing.assert_array_equal(runs[0], runs[1])
 
 
+def test_with_the_pass_inside_a_substep_launches_one_tether_pass_fewer(launches, monkeypatch):
+    from warp_verlet.core import stages
+
+    monkeypatch.setattr(stages, "FOLD_TETHERS_INTO_INTEGRATE", EVERYWHERE)
+    k = 4
+    sim = Simulator(make_scene({"iterations": k}, resolution=[8, 8], pins=["top-left", "top-right"]), "cpu",
+                    use_graph=False)
+    sim.step()  # the first step also runs verlet_start
+    assert launches.of(sim.step) == (["verlet_step_tethered"] + ["relax_colour"] * 4
+                                     + (["pull_tethers"] + ["relax_colour"] * 4) * (k - 1))
+
+
 @pytest.mark.parametrize("simulation, cloth", [
     ({"multilevel": True}, {}),  # its pass measures moves from the Verlet prediction, before the first sweep
     ({"global_iterations": 3}, {}),  # the global correction runs between the step and the sweeps
     ({"air": {"velocity": [0.0, 0.0, 5.0]}}, {}),  # the air's step gathers each particle's force
     ({}, {"self_collision": True}),  # the self-contact search reads the positions before the first sweep
 ])
-def test_the_tether_pass_stays_out_of_the_verlet_step_where_something_runs_between(simulation, cloth):
+def test_the_tether_pass_stays_out_of_the_verlet_step_where_something_runs_between(simulation, cloth, monkeypatch):
     from warp_verlet.core import stages
 
+    monkeypatch.setattr(stages, "FOLD_TETHERS_INTO_INTEGRATE", EVERYWHERE)
     scene = make_scene(simulation, resolution=[12, 10], pins=["top-left", "top-right"], **cloth)
     sim = Simulator(scene, "cpu")
     assert "tethers" in sim.constraint_sets
-    assert not stages.tethers_in_integrate(sim.solver.req)
+    assert not stages.tethers_in_integrate(sim.solver)
 
 
-def test_the_tether_pass_stays_out_of_the_verlet_step_without_a_tether_table():
+def test_the_tether_pass_stays_out_of_the_verlet_step_unless_the_table_holds_every_free_particle(monkeypatch):
     from warp_verlet.core import stages
 
+    monkeypatch.setattr(stages, "FOLD_TETHERS_INTO_INTEGRATE", EVERYWHERE)
     grid = make_scene({}, resolution=[12, 10], pins=["top-left", "top-right"])
-    assert stages.tethers_in_integrate(Simulator(grid, "cpu").solver.req)
-    assert not stages.tethers_in_integrate(Simulator(grid, "cpu", sticks="implicit").solver.req)  # computed tethers
-    assert not stages.tethers_in_integrate(Simulator(make_scene({}, resolution=[12, 10], pins=["top-left"],
-                                                                tethers=False), "cpu").solver.req)
+    assert stages.tethers_in_integrate(Simulator(grid, "cpu").solver)
+    assert not stages.tethers_in_integrate(Simulator(grid, "cpu", sticks="implicit").solver)  # computed tethers
+    untethered = make_scene({}, resolution=[12, 10], pins=["top-left"], tethers=False)
+    assert not stages.tethers_in_integrate(Simulator(untethered, "cpu").solver)
+    from warp_verlet.input.scene import parse_scene
+
+    one_tethered = parse_scene({"simulation": {}, "cloth": [
+        {"name": "a", "resolution": [4, 4], "size": [1.0, 1.0], "pins": ["top-left"]},
+        {"name": "b", "resolution": [4, 4], "size": [1.0, 1.0], "origin": [2.0, 0.0, 0.0], "tethers": False}]},
+        file="<test>")
+    assert not stages.tethers_in_integrate(Simulator(one_tethered, "cpu").solver)  # b's particles have no row
+    monkeypatch.setattr(stages, "FOLD_TETHERS_INTO_INTEGRATE", {"cpu": False, "cuda": True})
+    assert not stages.tethers_in_integrate(Simulator(grid, "cpu").solver)  # the CPU runs the pass apart

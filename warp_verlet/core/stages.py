@@ -29,7 +29,7 @@ if TYPE_CHECKING:  # pragma: no cover
 
 from ..constraints import kinds as constraint_kinds
 from ..constraints.tethers import Tethers
-from ..launches import FLOAT, INT, VEC2I, VEC3, VEC3D, BoundStage, recorded
+from ..launches import FLOAT, VEC2I, VEC3, VEC3D, BoundStage, recorded
 
 
 @dataclass(frozen=True)
@@ -246,9 +246,7 @@ class Integrate:
         return req.free_particles
 
     def device_bytes(self, req: Requirements) -> int:
-        # It updates the State's positions, prediction and increment, which every scene has; with the first
-        # tether pass folded in, each particle's row of the tether table.
-        return req.particles * INT if tethers_in_integrate(req) else 0
+        return 0  # it updates the State's positions, prediction and increment, which every scene has
 
     def bind(self, model, state, solver) -> BoundStage:
         if AERODYNAMICS.needed(solver.req):
@@ -262,10 +260,10 @@ class Integrate:
         x, x_inertial, dq, inv_mass, n = (state.particle_q, state.particle_q_inertial, state.particle_dq,
                                           model.inv_mass, model.particle_count)
         # Launched every substep: the kernel is resolved once here.
-        if tethers_in_integrate(solver.req):
+        if tethers_in_integrate(solver):
             kernel = instance(verlet_step_tethered, model.position_dtype)
             length = state.tether_length if state.tether_length is not None else model.tether_length
-            tethers = [solver.cached("tether_row", lambda: tether_rows(model)), model.tether_pin, length]
+            tethers, n = [model.tether_particle, model.tether_pin, length], model.tether_particle.shape[0]
         else:
             kernel, tethers = instance(verlet_step, model.position_dtype), []
 
@@ -300,29 +298,27 @@ class Integrate:
         return BoundStage(run)
 
 
-FOLD_TETHERS_INTO_INTEGRATE = True
-"""Whether the first sweep's tether pass runs inside the Verlet step where it may (tethers_in_integrate); off only
-to compare the two, which agree bit for bit."""
+FOLD_TETHERS_INTO_INTEGRATE = {"cpu": False, "cuda": True}
+"""Per kind of device, whether the Verlet step runs the first sweep's tether pass where it may
+(tethers_in_integrate). On a GPU that saves a launch a substep and a trip of the positions through memory; on the
+CPU the pass apart, which runs a thread's whole piece in one loop, measured faster
+(bench/results/grid_tiles/barriers-and-fold.md). The two agree bit for bit, which the tests check on the CPU too."""
 
 
-def tethers_in_integrate(req: Requirements) -> bool:
-    """Whether the Verlet step also runs the first sweep's tether pass (kernels/integrate.verlet_step_tethered), so
-    that the positions make one trip through memory for both: the tether table's kind runs, and nothing runs
-    between the step and the first sweep's tethers that reads or moves the positions (the air's forces, the global
-    correction, a constraint kind's per-substep set-up such as the multilevel pass or the self-contact search)."""
-    return (FOLD_TETHERS_INTO_INTEGRATE and req.free_particles and RELAX.needed(req) and not AERODYNAMICS.needed(req)
-            and not GLOBAL.needed(req) and any(isinstance(c, Tethers) and c.needed(req) for c in constraint_kinds())
-            and not any(c.reads_positions_before_sweeps and c.needed(req) for c in constraint_kinds()))
-
-
-def tether_rows(model):
-    """Each particle's row of the tether table (-1: none), on the model's device."""
-    import numpy as np
-    import warp as wp
-
-    rows = np.full(model.particle_count, -1, np.int32)
-    rows[model.tether_table.particle] = np.arange(model.tether_table.count, dtype=np.int32)
-    return wp.array(rows, dtype=int, device=model.device)
+def tethers_in_integrate(solver) -> bool:
+    """Whether the Verlet step also runs the first sweep's tether pass (kernels/integrate.verlet_step_tethered,
+    launched over the tether table's rows): on a device kind where FOLD_TETHERS_INTO_INTEGRATE says so, where the
+    tether table's kind runs and its rows hold every free particle, and where nothing runs between the step and
+    the first sweep's tethers that reads or moves the positions (the air's forces, the global correction, a
+    constraint kind's per-substep set-up such as the multilevel pass or the self-contact search)."""
+    req, model = solver.req, solver.model
+    if not (FOLD_TETHERS_INTO_INTEGRATE["cuda" if model.device.is_cuda else "cpu"] and req.free_particles
+            and RELAX.needed(req) and not AERODYNAMICS.needed(req) and not GLOBAL.needed(req)
+            and any(isinstance(c, Tethers) and c.needed(req) for c in constraint_kinds())
+            and not any(c.reads_positions_before_sweeps and c.needed(req) for c in constraint_kinds())):
+        return False
+    free = sum(int((slot.device_topology.inv_mass > 0).sum()) for slot in model.cloths)
+    return model.tether_table.count == free
 
 
 class GlobalSolve:
@@ -369,7 +365,7 @@ class Relax:
         sets = [c.bind(model, state, solver) for c in kinds]
         phases = [phase for bound in sets for phase in bound.phases]
         # The phases of the first sweep: without the tether pass where the Verlet step has run it.
-        folded = tethers_in_integrate(solver.req)
+        folded = tethers_in_integrate(solver)
         first = [phase for c, bound in zip(kinds, sets) if not (folded and isinstance(c, Tethers))
                  for phase in bound.phases]
         before = [bound.run for bound in sets if bound.run is not None]  # per-substep set-up (dt, zeroing)
