@@ -128,12 +128,12 @@ def _make_kernel(tile: int, colours: tuple, max_registers: int | None):
         # Everything a projection reads is staged in shared memory first: the region's positions and weights,
         # and the rest-length tables over its columns and rows, so that the colours' steps, which a barrier
         # separates, wait on no global load.
-        region = wp.tile_zeros(shape=(REGION_ROWS, REGION_COLS), dtype=wp.vec3, storage="shared")
-        weight = wp.tile_zeros(shape=(REGION_ROWS, REGION_COLS), dtype=float, storage="shared")
-        col_rest = wp.tile_zeros(shape=(2, REGION_COLS), dtype=float, storage="shared")  # 1 and 2 columns apart
-        col_step = wp.tile_zeros(shape=REGION_COLS, dtype=wp.float64, storage="shared")  # squared, 1 apart
-        row_rest = wp.tile_zeros(shape=(2, REGION_ROWS), dtype=float, storage="shared")
-        row_step = wp.tile_zeros(shape=REGION_ROWS, dtype=wp.float64, storage="shared")
+        region = wp.tile_empty(shape=(REGION_ROWS, REGION_COLS), dtype=wp.vec3, storage="shared")
+        weight = wp.tile_empty(shape=(REGION_ROWS, REGION_COLS), dtype=float, storage="shared")
+        col_rest = wp.tile_empty(shape=(2, REGION_COLS), dtype=float, storage="shared")  # 1 and 2 columns apart
+        col_step = wp.tile_empty(shape=REGION_COLS, dtype=wp.float64, storage="shared")  # squared, 1 apart
+        row_rest = wp.tile_empty(shape=(2, REGION_ROWS), dtype=float, storage="shared")
+        row_step = wp.tile_empty(shape=REGION_ROWS, dtype=wp.float64, storage="shared")
 
         for e0 in range(0, REGION, threads):
             rr, rc = region_cell(e0 + lane)

@@ -86,7 +86,6 @@ def verlet_step_tethered(
     x: wp.array(dtype=Any),
     x_inertial: wp.array(dtype=Any),
     delta: wp.array(dtype=Any),
-    inv_mass: wp.array(dtype=float),
     velocity_scale: Any,
     accel_offset: Any,
     particle: wp.array(dtype=int),
@@ -94,17 +93,16 @@ def verlet_step_tethered(
     length: wp.array2d(dtype=float),
 ):
     """verlet_step for tether row t's particle, then the first sweep's tether pass on it (kernels/tether.py),
-    launched over the tether table's rows where they hold every free particle. The pass reads only pins, which
-    no thread here moves (w = 0), so the pair is bit for bit the two launches one after the other, and the
-    position makes one trip through memory instead of two."""
+    launched over the tether table's rows where they hold every free particle. A row's particle is free (the
+    table is built from the particles with w > 0, which the model never changes), so no weight is read. The pass
+    reads only pins, which no thread here moves (w = 0), so the pair is bit for bit the two launches one after
+    the other, and the position makes one trip through memory instead of two."""
     t = wp.tid()
     i = particle[t]
-    xi = x[i]
-    if inv_mass[i] != 0.0:  # as verlet_step, which leaves pins where they are
-        step = implicit_move(i, x, x_inertial, delta) * velocity_scale + accel_offset
-        xi = xi + step
-        x_inertial[i] = xi
-        delta[i] = step
+    step = implicit_move(i, x, x_inertial, delta) * velocity_scale + accel_offset
+    xi = x[i] + step
+    x_inertial[i] = xi
+    delta[i] = step
     x[i] = tethered(xi, x, pin, length, t)
 
 

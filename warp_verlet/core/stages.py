@@ -264,15 +264,16 @@ class Integrate:
             kernel = instance(verlet_step_tethered, model.position_dtype)
             length = state.tether_length if state.tether_length is not None else model.tether_length
             tethers, n = [model.tether_particle, model.tether_pin, length], model.tether_particle.shape[0]
+            weights = []  # every row's particle is free
         else:
-            kernel, tethers = instance(verlet_step, model.position_dtype), []
+            kernel, tethers, weights = instance(verlet_step, model.position_dtype), [], [inv_mass]
 
         def run(state, dt: float) -> None:
             ratio = min(dt / state.dt_prev, settings.max_dt_ratio)
             # In the positions' type (accel is one too): a float32 factor would cost float64 its precision.
             velocity_scale = real(math.exp(-settings.damping * dt) * ratio)
             accel_offset = accel * real(dt * (dt + state.dt_prev) * 0.5)
-            wp.launch(kernel, n, inputs=[x, x_inertial, dq, inv_mass, velocity_scale, accel_offset, *tethers])
+            wp.launch(kernel, n, inputs=[x, x_inertial, dq, *weights, velocity_scale, accel_offset, *tethers])
 
         return BoundStage(run)
 
