@@ -17,10 +17,13 @@ particle for any TILE >= 3, so the blocks of a launch neither read nor write eac
 four launches, Gauss-Seidel across them. TILE is a multiple of 4, so that a bend colour's parity pattern, which
 repeats every 4 rows or columns, is the grid's in every tile.
 
-Shared memory is written through ``shared_put`` and the block synchronised by ``block_barrier``, once where the
-order needs it: after the staging, after each colour and before the write-back. Warp's own tile writes
-(``tile_scatter_masked``) each end with a barrier, which at two writes a stick put twice as many barriers into
-a sweep as its colours need, and a thread would wait on every one of them.
+Shared memory is written through the ``put_*`` stores and the block synchronised by ``block_barrier``, once where
+the order needs it: after the staging, after each colour and before the write-back. Warp's own tile writes
+(``tile_scatter_masked``) each end with a barrier, which at two writes a stick put twice as many barriers into a
+sweep as its colours need, and a thread would wait on every one of them. The shared tiles are allocated
+uninitialised (``tile_empty``): a projection reads only cells of its own sticks, which lie in the grid and are
+staged first, so zero-filling them (a loop and barriers per tile) bought nothing
+(bench/results/grid_tiles/barriers-and-fold.md).
 
 The projection is ``stick_correction`` with the rest lengths and weights the implicit grid sticks use
 (kernels/grid_relax.py), so every stick sees exactly the arithmetic of the other forms; only the order of the
