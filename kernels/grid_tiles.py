@@ -72,9 +72,8 @@ def _make_kernel(tile: int, colours: tuple, max_registers: int | None):
 
     @wp.func
     def region_cell(e: int):
-        """Row and column, in the tile's region, of the region's e-th cell (row-major), clamped into the region."""
-        f = wp.min(e, REGION - 1)
-        return f // REGION_COLS, f % REGION_COLS
+        """Row and column, in the tile's region, of the region's e-th cell (row-major)."""
+        return e // REGION_COLS, e % REGION_COLS
 
     @wp.func_native("t.data(wp::tile_coord(i, j)) = value;")
     def put_point(t: wp.tile(dtype=wp.vec3, shape=(REGION_ROWS, REGION_COLS), storage="shared"), i: int, j: int,
@@ -138,35 +137,33 @@ def _make_kernel(tile: int, colours: tuple, max_registers: int | None):
         row_rest = wp.tile_empty(shape=(2, REGION_ROWS), dtype=float, storage="shared")
         row_step = wp.tile_empty(shape=REGION_ROWS, dtype=wp.float64, storage="shared")
 
-        for e0 in range(0, REGION, threads):
-            rr, rc = region_cell(e0 + lane)
+        e = lane
+        while e < REGION:
+            rr, rc = region_cell(e)
             gr = r0 + rr
             gc = c0 - 1 + rc
-            if e0 + lane < REGION and gr < grid_rows and gc >= 0 and gc < grid_cols:
+            if gr < grid_rows and gc >= 0 and gc < grid_cols:
                 put_point(region, rr, rc, x[first + gr * grid_cols + gc])
                 put_weight(weight, rr, rc, particle_weight(layout, first + gr * grid_cols + gc, inv_mass, pins))
-        for e0 in range(0, REGION_COLS, threads):
-            k = wp.min(e0 + lane, REGION_COLS - 1)
+            e += threads
+        k = lane
+        while k < REGION_COLS:
             gc = c0 - 1 + k
-            ok = e0 + lane < REGION_COLS and gc >= 0
-            one = ok and gc < col_rest1.shape[0]
-            two = ok and gc < col_rest2.shape[0]
-            if one:
+            if gc >= 0 and gc < col_rest1.shape[0]:
                 put_col_rest(col_rest, 0, k, col_rest1[gc])
                 put_col_step(col_step, k, col_sq[gc])
-            if two:
+            if gc >= 0 and gc < col_rest2.shape[0]:
                 put_col_rest(col_rest, 1, k, col_rest2[gc])
-        for e0 in range(0, REGION_ROWS, threads):
-            k = wp.min(e0 + lane, REGION_ROWS - 1)
+            k += threads
+        k = lane
+        while k < REGION_ROWS:
             gr = r0 + k
-            ok = e0 + lane < REGION_ROWS
-            one = ok and gr < row_rest1.shape[0]
-            two = ok and gr < row_rest2.shape[0]
-            if one:
+            if gr < row_rest1.shape[0]:
                 put_row_rest(row_rest, 0, k, row_rest1[gr])
                 put_row_step(row_step, k, row_sq[gr])
-            if two:
+            if gr < row_rest2.shape[0]:
                 put_row_rest(row_rest, 1, k, row_rest2[gr])
+            k += threads
         block_barrier()
 
         for n in range(wp.static(len(COLOURS))):
@@ -175,8 +172,8 @@ def _make_kernel(tile: int, colours: tuple, max_registers: int | None):
             col_first = wp.static(COLOURS[n][2])
             q = wp.static(COLOURS[n][4])
             parity = wp.static(COLOURS[n][5])
-            for e0 in range(0, STICKS, threads):
-                k = wp.min(e0 + lane, STICKS - 1)
+            k = lane
+            while k < STICKS:  # not range(), whose loop handles either sign of its step
                 # The colour's k-th anchor in the tile: half the rows (or columns) keep anchors, those whose
                 # (index // q) % 2 is the colour's parity (a tile starts on a multiple of 4, so the pattern is
                 # the grid's), all of the other axis.
@@ -190,7 +187,7 @@ def _make_kernel(tile: int, colours: tuple, max_registers: int | None):
                     lc = anchor_index(k % HALF, q, parity)
                 r = r0 + lr
                 c = c0 + lc
-                active = e0 + lane < STICKS and r + dr < grid_rows and c >= col_first and c + wp.max(dc, 0) < grid_cols
+                active = r + dr < grid_rows and c >= col_first and c + wp.max(dc, 0) < grid_cols
                 ic = lc + 1
                 jr = lr + dr
                 jc = ic + dc
@@ -211,15 +208,18 @@ def _make_kernel(tile: int, colours: tuple, max_registers: int | None):
                     d = stick_correction(xi, xj, wi, wj, rest, 1.0)
                     put_point(region, lr, ic, xi + scaled(d, wi))
                     put_point(region, jr, jc, xj - scaled(d, wj))
+                k += threads
             # A colour's sticks share no particle, so its writes need no order among themselves; the next
             # colour reads them.
             block_barrier()
 
-        for e0 in range(0, REGION, threads):
-            rr, rc = region_cell(e0 + lane)
+        e = lane
+        while e < REGION:
+            rr, rc = region_cell(e)
             gr = r0 + rr
             gc = c0 - 1 + rc
-            if e0 + lane < REGION and gr < grid_rows and gc >= 0 and gc < grid_cols:
+            if gr < grid_rows and gc >= 0 and gc < grid_cols:
                 x[first + gr * grid_cols + gc] = region[rr, rc]
+            e += threads
 
     return relax_grid_tiles
