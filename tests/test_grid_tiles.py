@@ -74,6 +74,21 @@ def test_a_tiled_sweep_is_the_sequential_sweep_in_tile_order_bit_for_bit(tile, c
     np.testing.assert_array_equal(tiled.state.positions(), x.numpy())
 
 
+@pytest.mark.parametrize("threads", [2, 3])
+def test_a_cpu_thread_team_runs_the_tiles_on_one_thread_and_changes_no_bit(threads):
+    """With a CPU thread team (the tethers' pass split between the threads), one thread runs each tile colour, whose
+    shared memory is one buffer for the process on the CPU: the positions are the one thread's, bit for bit."""
+    scene = sheet(orientation="horizontal", pins=["top-left", "top-right"])
+    runs = []
+    for n in (1, threads):
+        sim = Simulator(scene, "cpu", threads=n, sticks="tiled")
+        for _ in range(5):
+            sim.step_frame()
+        runs.append(sim.positions())
+    assert np.abs(runs[0] - sim.model.rest_positions).max() > 0.01  # it fell
+    np.testing.assert_array_equal(runs[1], runs[0])
+
+
 def one_tiled_substep(scene, device: str, start: np.ndarray) -> np.ndarray:
     """Positions after one frame of one substep of one sweep from ``start`` at rest: a Verlet step, then one
     tiled sweep, through the simulator as a run steps."""

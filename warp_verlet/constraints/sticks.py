@@ -192,4 +192,7 @@ class GridTiles(ConstraintSet):
                     inputs=[x, model.inv_mass, g.colours[0].layout, g.colours[0].pins, g.col_rest1, g.col_rest2,
                             g.row_rest1, g.row_rest2, g.col_sq1, g.row_sq1, g.rows, row_parity, col_parity, across])
                 tasks.append(PhaseTask(kernel.key, launch.launch, launch))
-        return BoundStage(None, [[task] for task in tasks])
+        # One thread runs a tile colour: on the CPU a tiled launch's shared memory is one buffer for the process,
+        # so two threads' launches would write over each other. The CPU thread team's other threads wait.
+        idle = [None] * (solver.threads - 1)
+        return BoundStage(None, [[task, *idle] for task in tasks])
