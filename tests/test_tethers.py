@@ -102,7 +102,6 @@ def test_a_cloth_without_pins_or_with_tethers_off_gets_none():
     assert Simulator(hanging(True), "cpu").solver.req.tethered == 16 * 16 - 2
 
 
-
 WINDY = {"substeps": 2, "iterations": 3, "wind": [0.5, 0.0, 4.0]}
 EVERYWHERE = {"cpu": True, "cuda": True}
 NOWHERE = {"cpu": False, "cuda": False}
