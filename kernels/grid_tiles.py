@@ -25,6 +25,15 @@ uninitialised (``tile_empty``): a projection reads only cells of its own sticks,
 staged first, so zero-filling them (a loop and barriers per tile) bought nothing
 (bench/results/grid_tiles/barriers-and-fold.md).
 
+Folded passes: the Verlet step and the computed grid tether pass, which otherwise run as launches of their own
+before the sweep, can run in the staging instead. Each touches one free particle and reads nothing that moves but
+that particle (the tethers read pins, which never move), so it may run at any time after the last write to its
+particle and before the first read of it. The first tile colour whose launch stages a particle is found from its
+grid coordinates (``first_tile_colour``; the regions of one tile colour share no particle, so exactly one tile
+of that colour stages it): that tile applies the passes as it stages the particle, and every later launch reads
+the result from memory. So the positions are the separate launches' bit for bit, and the step's trip of every
+position through memory, and the tether pass's, are gone (warp_verlet/core/stages.tiles_take_step says where).
+
 The projection is ``stick_correction`` with the rest lengths and weights the implicit grid sticks use
 (kernels/grid_relax.py), so every stick sees exactly the arithmetic of the other forms; only the order of the
 projections differs. That order is a fixed sequence (tile colour, tile, stick colour, stick), which the CPU
@@ -33,7 +42,8 @@ runs literally (one lane per block) and a GPU runs with the independent projecti
 
 import warp as wp
 
-from .grid_relax import GridColour, anchor_index, particle_weight
+from .grid_relax import GridColour, anchor_index, grid_tethered, particle_weight
+from .integrate import implicit_move
 from .positions import scaled
 from .relax import stick_correction
 
@@ -46,22 +56,28 @@ def block_barrier():
     ...
 
 
-def relax_grid_tiles(tile: int, colours: tuple, max_registers: int | None = None):
+def relax_grid_tiles(tile: int, colours: tuple, max_registers: int | None = None, step: bool = False,
+                     tethers: bool = False):
     """The tiled sweep's kernel for tiles of ``tile`` x ``tile`` cells and the given colours, each
     ``(dr, dc, col_first, parity_axis, q, parity)`` (parity_axis 0: rows, 1: columns), in sweep order. One
-    kernel per (tile, colours, max_registers): the shared tiles' shapes and each colour's geometry are
-    compile-time constants, so a colour's step unrolls to its own index arithmetic. ``max_registers`` caps a
-    CUDA thread's registers (None: the compiler's choice), so that more blocks fit on a multiprocessor."""
+    kernel per (tile, colours, max_registers, step, tethers): the shared tiles' shapes and each colour's geometry
+    are compile-time constants, so a colour's step unrolls to its own index arithmetic. ``max_registers`` caps a
+    CUDA thread's registers (None: the compiler's choice), so that more blocks fit on a multiprocessor.
+
+    ``step`` and ``tethers`` fold the work that runs before a sweep into its staging (see the module docstring,
+    "Folded passes"): the Verlet step (kernels/integrate.verlet_step) and the computed grid tether pass
+    (kernels/grid_relax.pull_grid_tethers), each applied to a free particle once, by the first tile that stages
+    it."""
     if tile < 4 or tile % 4:
         raise AssertionError(f"a tile's side must be a multiple of 4 (a bend colour's parity repeats every 4 rows or "
                              f"columns, and two tiles apart must share no particle), got {tile}")
-    key = (tile, tuple(colours), max_registers)
+    key = (tile, tuple(colours), max_registers, bool(step), bool(tethers))
     if key not in _KERNELS:
-        _KERNELS[key] = _make_kernel(tile, tuple(colours), max_registers)
+        _KERNELS[key] = _make_kernel(tile, tuple(colours), max_registers, bool(step), bool(tethers))
     return _KERNELS[key]
 
 
-def _make_kernel(tile: int, colours: tuple, max_registers: int | None):
+def _make_kernel(tile: int, colours: tuple, max_registers: int | None, step: bool, tethers: bool):
     TILE_SIDE = tile
     HALF = tile // 2
     REGION_ROWS = tile + 2
@@ -69,11 +85,31 @@ def _make_kernel(tile: int, colours: tuple, max_registers: int | None):
     REGION = REGION_ROWS * REGION_COLS
     STICKS = tile * tile // 2  # a colour's sticks in a tile: one axis keeps half its anchors
     COLOURS = colours
+    STEP = step
+    TETHERS = tethers
 
     @wp.func
     def region_cell(e: int):
         """Row and column, in the tile's region, of the region's e-th cell (row-major)."""
         return e // REGION_COLS, e % REGION_COLS
+
+    @wp.func
+    def first_tile_colour(gr: int, gc: int, grid_cols: int):
+        """The first tile colour (2 x tile row parity + tile column parity, the launch order) whose launch stages
+        the cloth's particle in row gr, column gc: the least over the tiles whose regions hold it. Its own tile's
+        region holds it; so does the region of the tile row above where gr is one of that region's last two rows
+        (gr % TILE <= 1), that of the tile column to the left where gc is one of its last two columns, and that of
+        the tile column to the right where gc is its first (halo) column and that tile exists. Two candidates
+        along an axis are neighbouring tiles, so their least parity is 0."""
+        tr = gr // TILE_SIDE
+        tc = gc // TILE_SIDE
+        row_parity = tr % 2
+        if tr > 0 and gr % TILE_SIDE <= 1:
+            row_parity = 0
+        col_parity = tc % 2
+        if (tc > 0 and gc % TILE_SIDE <= 1) or (gc % TILE_SIDE == TILE_SIDE - 1 and gc + 1 < grid_cols):
+            col_parity = 0
+        return 2 * row_parity + col_parity
 
     @wp.func_native("t.data(wp::tile_coord(i, j)) = value;")
     def put_point(t: wp.tile(dtype=wp.vec3, shape=(REGION_ROWS, REGION_COLS), storage="shared"), i: int, j: int,
@@ -117,10 +153,22 @@ def _make_kernel(tile: int, colours: tuple, max_registers: int | None):
         tile_row_parity: int,
         tile_col_parity: int,
         tiles_across: int,
+        x_inertial: wp.array(dtype=wp.vec3),
+        delta: wp.array(dtype=wp.vec3),
+        velocity_scale: float,
+        accel_offset: wp.vec3,
+        tether_pins: wp.array(dtype=int),
+        pin_col_sq: wp.array2d(dtype=wp.float64),
+        pin_row_sq: wp.array2d(dtype=wp.float64),
+        tethers: int,
+        tether_scale: wp.float64,
     ):
         """One sweep of every colour over the tiles of one tile colour (tile row parity, tile column parity):
         block k takes tile (parity_row + 2 (k // tiles_across), parity_col + 2 (k % tiles_across)). ``layout``
-        is any colour's (the kernel reads the cloth's first particle, row length and weights from it)."""
+        is any colour's (the kernel reads the cloth's first particle, row length and weights from it). The
+        arguments from ``x_inertial`` on are read only by a kernel that folds in the Verlet step (the State's
+        prediction and increment, and the step's factors, as verlet_step takes them) or the grid tethers
+        (GridTethersDevice's pins, squared column and row differences, tethers per particle and scale)."""
         block, lane = wp.tid()
         threads = wp.block_dim()
         first = layout.first_particle
@@ -143,8 +191,23 @@ def _make_kernel(tile: int, colours: tuple, max_registers: int | None):
             gr = r0 + rr
             gc = c0 - 1 + rc
             if gr < grid_rows and gc >= 0 and gc < grid_cols:
-                put_point(region, rr, rc, x[first + gr * grid_cols + gc])
-                put_weight(weight, rr, rc, particle_weight(layout, first + gr * grid_cols + gc, inv_mass, pins))
+                p = first + gr * grid_cols + gc
+                xp = x[p]
+                w = particle_weight(layout, p, inv_mass, pins)
+                if wp.static(STEP or TETHERS):
+                    # The first tile to stage a free particle moves it as the passes before the sweep would
+                    # have: no launch before this one read it, and every later one reads it from here.
+                    if w != 0.0 and first_tile_colour(gr, gc, grid_cols) == 2 * tile_row_parity + tile_col_parity:
+                        if wp.static(STEP):
+                            move = implicit_move(p, x, x_inertial, delta) * velocity_scale + accel_offset
+                            xp = xp + move
+                            x_inertial[p] = xp
+                            delta[p] = move
+                        if wp.static(TETHERS):
+                            xp = grid_tethered(xp, x, gr, gc, tether_pins, pin_col_sq, pin_row_sq, tethers,
+                                               tether_scale)
+                put_point(region, rr, rc, xp)
+                put_weight(weight, rr, rc, w)
             e += threads
         k = lane
         while k < REGION_COLS:

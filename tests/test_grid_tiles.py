@@ -11,8 +11,10 @@ import warp as wp
 
 from conftest import make_scene
 from warp_verlet.constraints.sticks import GridTiles
+from warp_verlet.core import stages
 from warp_verlet.core.simulator import Simulator
 from warp_verlet.errors import ArgumentError
+from warp_verlet.input.scene import parse_scene
 from warp_verlet.constraints import sticks
 from warp_verlet.kernels.relax import relax_colour
 
@@ -47,6 +49,8 @@ def perturbed(sim: Simulator, seed: int = 3) -> np.ndarray:
 ])
 def test_a_tiled_sweep_is_the_sequential_sweep_in_tile_order_bit_for_bit(tile, cloth, monkeypatch):
     monkeypatch.setattr(sticks, "GRID_TILE", tile)
+    # The sticks alone: the passes a tiled sweep can take in (the tethers) are tested below.
+    monkeypatch.setattr(stages, "FOLD_INTO_TILES", {"cpu": False, "cuda": False})
     scene = sheet(**cloth)
     tiled = Simulator(scene, "cpu", threads=1, sticks="tiled")
     explicit = Simulator(scene, "cpu", threads=1, sticks="explicit")
@@ -145,3 +149,72 @@ def test_tiled_sweeps_refuse_what_they_do_not_cover(cloth, simulation, words):
     scene = make_scene(simulation, **spec)
     with pytest.raises(ArgumentError, match=words):
         Simulator(scene, "cpu", sticks="tiled")
+
+
+APART = {"cpu": False, "cuda": False}
+TAKEN = {"cpu": True, "cuda": True}
+# A sheet released from a horizontal pose, which a ball under its middle catches: it falls, swings from its pins
+# and drapes, so that every particle moves between the staging of one tile colour and the next.
+BALL = {"type": "sphere", "centre": [0.5, -0.3, 0.6], "radius": 0.25}
+
+
+@pytest.mark.parametrize("tile, simulation, cloth, threads", [
+    (16, {"substeps": 2, "iterations": 3}, {}, 1),  # two pins: the step in the first sweep, tethers in all three
+    (4, {"substeps": 3, "iterations": 1}, {}, 1),  # the smallest tile: a particle in up to four regions
+    # three pins, each particle tied to its nearest two; a CPU thread team
+    (8, {"substeps": 2, "iterations": 2}, {"pins": ["top-left", "top-right", [0, 20]], "tether_scale": 1.1}, 2),
+    (16, {"substeps": 2, "iterations": 2, "contact_projection": "every_sweep"}, {"pins": []}, 1),  # no tethers
+])
+def test_tiles_that_take_the_step_and_the_tethers_leave_the_separate_launches_positions(
+        tile, simulation, cloth, threads, device, monkeypatch):
+    """The tiled sweep that runs the Verlet step (first sweep) and the grid tether pass (every sweep) as it
+    stages each particle leaves every position as the separate launches before it do, bit for bit, on every
+    device: each particle is moved once, by the first tile colour's launch that stages it (a particle a later
+    tile colour moved instead, or one moved twice, shows at the first substep)."""
+    monkeypatch.setattr(sticks, "GRID_TILE", tile)
+    spec = {"resolution": [ROWS, COLS], "size": [1.0, 1.2], "pins": ["top-left", "top-right"],
+            "orientation": "horizontal", "sticks": ["structural", "shear", "bend"], **cloth}
+    scene = parse_scene({"simulation": simulation, "cloth": [spec], "collider": [BALL]}, file="<test>")
+    runs = []
+    for fold in (TAKEN, APART):
+        monkeypatch.setattr(stages, "FOLD_INTO_TILES", fold)
+        sim = Simulator(scene, device, threads=threads if device == "cpu" else None, sticks="tiled")
+        assert stages.tiles_take_step(sim.solver) == fold["cpu"]
+        assert stages.tiles_take_tethers(sim.solver) == (fold["cpu"] and bool(spec["pins"]))
+        for _ in range(10):
+            sim.step_frame()
+        runs.append(sim.positions())
+    assert np.abs(runs[0] - sim.model.rest_positions).max() > 0.05  # it fell
+    np.testing.assert_array_equal(runs[0], runs[1])
+
+
+def test_tiles_that_take_the_step_and_the_tethers_are_all_a_substep_launches(launches, monkeypatch):
+    monkeypatch.setattr(stages, "FOLD_INTO_TILES", TAKEN)
+    k = sheet().simulation.iterations
+    sim = Simulator(sheet(), "cpu", threads=1, use_graph=False, sticks="tiled")
+    sim.step()  # the first step also runs verlet_start
+    names = launches.of(sim.step)
+    assert len(names) == 4 * k and all(name.endswith("relax_grid_tiles") for name in names)
+    assert not hasattr(sim.model, "tether_particle")  # computed tethers: no table on the device
+    monkeypatch.setattr(stages, "FOLD_INTO_TILES", APART)
+    apart = Simulator(sheet(), "cpu", threads=1, use_graph=False, sticks="tiled")
+    apart.step()
+    names = launches.of(apart.step)
+    assert names[0] == "verlet_step" and names.count("pull_grid_tethers") == k and len(names) == 1 + 5 * k
+
+
+@pytest.mark.parametrize("simulation, cloth, tethers_taken", [
+    ({"multilevel": True}, {}, True),  # its pass measures moves from the Verlet prediction, before the first sweep
+    ({"global_iterations": 3}, {}, True),  # the global correction runs between the step and the sweeps
+    ({"air": {"velocity": [0.0, 0.0, 5.0]}}, {}, True),  # the air's step gathers each particle's force
+    ({}, {"self_collision": True}, True),  # the self-contact search reads the positions before the first sweep
+    ({}, {"pins": ["top-edge"]}, False),  # more pins than computed tethers take: a table's pass before the tiles
+])
+def test_the_tiles_leave_the_step_alone_where_something_runs_before_their_first_sweep(simulation, cloth,
+                                                                                     tethers_taken, monkeypatch):
+    monkeypatch.setattr(stages, "FOLD_INTO_TILES", TAKEN)
+    scene = make_scene(simulation, **{"resolution": [12, 10], "pins": ["top-left", "top-right"], **cloth})
+    sim = Simulator(scene, "cpu", sticks="tiled")
+    assert not stages.tiles_take_step(sim.solver)
+    assert stages.tiles_take_tethers(sim.solver) == tethers_taken
+    assert ("grid tethers" if tethers_taken else "tethers") in sim.constraint_sets

@@ -123,7 +123,8 @@ class Tethers(ConstraintSet):
 class GridTethers(ConstraintSet):
     """Tethers of a grid cloth with few pins, computed (kernels/grid_relax.py): each free particle finds its
     nearest pins and their rest-pose distances from its grid coordinates, so a sweep reads no tether table.
-    One launch per sweep over the cloth's particles (pins skip), before the sticks, as Tethers."""
+    One launch per sweep over the cloth's particles (pins skip), before the sticks, as Tethers; none where the
+    tiled sweep takes the pass into its staging (stages.tiles_take_tethers)."""
 
     name = "grid tethers"
 
@@ -137,8 +138,11 @@ class GridTethers(ConstraintSet):
     def bind(self, model, state, solver) -> BoundStage:
         import warp as wp
 
+        from warp_verlet.core.stages import tiles_take_tethers
         from warp_verlet.kernels.grid_relax import pull_grid_tethers
 
+        if tiles_take_tethers(solver):
+            return BoundStage(None, [])  # the tiled sweep runs the pass as it stages each particle
         t, x = model.grid_tethers, state.particle_q
 
         def make(f, rows):

@@ -28,7 +28,8 @@ if TYPE_CHECKING:  # pragma: no cover
     from .aerodynamics import AirCounts
 
 from ..constraints import kinds as constraint_kinds
-from ..constraints.tethers import Tethers
+from ..constraints.sticks import GridTiles
+from ..constraints.tethers import GridTethers, Tethers
 from ..launches import FLOAT, VEC2I, VEC3, VEC3D, BoundStage, recorded
 
 
@@ -106,7 +107,7 @@ class Requirements:
         req = replace(req, precision=resolve(scene, relaxes=RELAX.needed(req)))
         if (sticks == "auto" and req.implicit_grid and not req.soft_sticks and req.precision == "float32"
                 and req.grid_rows * req.grid_cols >= MIN_TILED_PARTICLES):
-            req = replace(req, grid_tiles=True)
+            req = replace(req, grid_tiles=True, grid_pins=grid_tether_pins(scene.cloths[0]))
         if req.grid_tiles and req.precision != "float32":
             from ..errors import ArgumentError
 
@@ -162,11 +163,18 @@ def implicit_grid_obstacle(scene: "Scene") -> str | None:
     return None
 
 
+def grid_tether_pins(cloth) -> int:
+    """The pins a grid cloth's computed tethers read (Requirements.grid_pins): all of them where it uses tethers
+    and has at most MAX_GRID_TETHER_PINS, else 0 (its tethers, if any, are a table)."""
+    return cloth.pin_count if cloth.uses_tethers and 0 < cloth.pin_count <= MAX_GRID_TETHER_PINS else 0
+
+
 def grid_counts(scene: "Scene", sticks: str) -> dict:
     """Requirements's implicit-grid fields: all 0 when the sticks are arrays ("explicit", or "auto" where
     :func:`implicit_grid_obstacle` names one); "implicit" where one is named raises ArgumentError. "auto"
-    computes the sticks and keeps the tether table; "implicit" computes the tethers too (of a cloth with at most
-    MAX_GRID_TETHER_PINS pins), so that no per-stick or per-particle table is left on the device."""
+    computes the sticks and keeps the tether table, unless it sweeps tile by tile (Requirements.of); "implicit" and
+    "tiled" compute the tethers too (of a cloth with at most MAX_GRID_TETHER_PINS pins), so that no per-stick or
+    per-particle table is left on the device."""
     from ..errors import ArgumentError
 
     if sticks not in STICK_FORMS:
@@ -182,10 +190,10 @@ def grid_counts(scene: "Scene", sticks: str) -> dict:
     per_family = {"structural": r * (c - 1) + (r - 1) * c, "shear": 2 * (r - 1) * (c - 1),
                   "bend": r * max(c - 2, 0) + max(r - 2, 0) * c}
     soft = sum(per_family[f] for f in cloth.sticks if cloth.compliance.get(f, 0.0) > 0.0)
-    # Implicit tethers only when asked for: on an H100 the tether table's pass measured faster than computing
-    # each particle's nearest pins and their float64 distances in every sweep (bench/results/implicit_grid).
-    pins = cloth.pin_count if (sticks == "implicit" and cloth.uses_tethers
-                               and 0 < cloth.pin_count <= MAX_GRID_TETHER_PINS) else 0
+    # Implicit tethers with implicit sticks only when asked for: on an H100 the tether table's pass measured faster
+    # than computing each particle's nearest pins and their float64 distances in every sweep
+    # (bench/results/implicit_grid). Tiled sweeps compute them in their staging (tiles_take_tethers).
+    pins = grid_tether_pins(cloth) if sticks in ("implicit", "tiled") else 0
     weight_pins = cloth.pin_count if not cloth.particle_masses and 0 < cloth.pin_count <= MAX_UNIFORM_MASS_PINS else 0
     if sticks == "tiled" and soft:
         raise ArgumentError("sticks = 'tiled' projects rigid sticks only, but the cloth gives a stick family a "
@@ -236,6 +244,19 @@ class Aerodynamics:
         return BoundStage(run)
 
 
+def step_factors(solver, state, dt: float) -> tuple:
+    """The Verlet step's ``velocity_scale`` and ``accel_offset`` (kernels/integrate.py) for a substep of ``dt``
+    after one of ``state.dt_prev``, in the positions' type (accel is one too): a float32 factor would cost float64
+    its precision."""
+    settings, real = solver.settings, solver.model.position_scalar
+    ratio = min(dt / state.dt_prev, settings.max_dt_ratio)
+    return real(math.exp(-settings.damping * dt) * ratio), solver.accel * real(dt * (dt + state.dt_prev) * 0.5)
+
+
+def _taken_by_the_tiles(state, dt: float) -> None:
+    """The Verlet step where the first tiled sweep takes it (tiles_take_step): nothing to launch here."""
+
+
 class Integrate:
     """The Verlet step (kernels/integrate.py): gravity and wind in one acceleration, damping per second; with air,
     each particle's share of its faces' forces too (Aerodynamics)."""
@@ -251,6 +272,8 @@ class Integrate:
     def bind(self, model, state, solver) -> BoundStage:
         if AERODYNAMICS.needed(solver.req):
             return self._bind_air(model, state, solver)
+        if tiles_take_step(solver):
+            return BoundStage(_taken_by_the_tiles)
         import warp as wp
 
         from warp_verlet.kernels.integrate import verlet_step, verlet_step_tethered
@@ -269,10 +292,7 @@ class Integrate:
             kernel, tethers, weights = instance(verlet_step, model.position_dtype), [], [inv_mass]
 
         def run(state, dt: float) -> None:
-            ratio = min(dt / state.dt_prev, settings.max_dt_ratio)
-            # In the positions' type (accel is one too): a float32 factor would cost float64 its precision.
-            velocity_scale = real(math.exp(-settings.damping * dt) * ratio)
-            accel_offset = accel * real(dt * (dt + state.dt_prev) * 0.5)
+            velocity_scale, accel_offset = step_factors(solver, state, dt)
             wp.launch(kernel, n, inputs=[x, x_inertial, dq, *weights, velocity_scale, accel_offset, *tethers])
 
         return BoundStage(run)
@@ -322,6 +342,45 @@ def tethers_in_integrate(solver) -> bool:
     return model.tether_table.count == free
 
 
+FOLD_INTO_TILES = {"cpu": True, "cuda": True}
+"""Per device kind: whether tiled sweeps take the passes that run before them into their staging, where
+tiles_take_tethers and tiles_take_step allow (kernels/grid_tiles.py, "Folded passes"). The positions are the
+separate launches' bit for bit (tests/test_grid_tiles.py, on the CPU and on CUDA); on a GPU it saves the step's
+and the tether pass's trips of every position through memory (bench/results/grid_tiles/tiles-take-step.md).
+``bench.implicit_grid --tethers-apart`` turns it off to measure the difference."""
+
+
+def tiles_take_tethers(solver) -> bool:
+    """Whether the tiled sweep runs the computed grid tether pass in its staging, in every sweep: where the
+    device kind's FOLD_INTO_TILES says so and the scene runs both (the grid tethers come right before the tiles
+    in sweep order, with no kind between them: the stick kinds that could are the tiles' alternatives)."""
+    req, model = solver.req, solver.model
+    kinds = [c for c in constraint_kinds() if c.needed(req)]
+    return (FOLD_INTO_TILES["cuda" if model.device.is_cuda else "cpu"] and RELAX.needed(req)
+            and any(isinstance(c, GridTiles) for c in kinds) and any(isinstance(c, GridTethers) for c in kinds))
+
+
+def tiles_take_step(solver) -> bool:
+    """Whether the first tiled sweep of a substep also takes the Verlet step, in its staging: where the device
+    kind's FOLD_INTO_TILES says so, the step is the plain one (no air), nothing runs between the step and that
+    sweep (no global correction, no kind's per-substep set-up that reads positions: the multilevel pass, the
+    self-contact search), and every kind the sweep runs before the tiles is taken into them too (the grid
+    tethers)."""
+    req, model = solver.req, solver.model
+    if not (FOLD_INTO_TILES["cuda" if model.device.is_cuda else "cpu"] and req.free_particles and RELAX.needed(req)
+            and not AERODYNAMICS.needed(req) and not GLOBAL.needed(req)):
+        return False
+    kinds = [c for c in constraint_kinds() if c.needed(req)]
+    if any(c.reads_positions_before_sweeps for c in kinds):
+        return False
+    for c in kinds:
+        if isinstance(c, GridTiles):
+            return True
+        if not (isinstance(c, GridTethers) and tiles_take_tethers(solver)):
+            return False
+    return False
+
+
 class GlobalSolve:
     """The global correction (warp_verlet/core/global_solve.py): Gauss-Newton steps on the sticks with contact
     inside, between the prediction and the sweeps, when ``simulation.global_iterations`` > 0."""
@@ -365,10 +424,11 @@ class Relax:
         kinds = [c for c in constraint_kinds() if c.needed(solver.req)]
         sets = [c.bind(model, state, solver) for c in kinds]
         phases = [phase for bound in sets for phase in bound.phases]
-        # The phases of the first sweep: without the tether pass where the Verlet step has run it.
+        # The phases of the first sweep: without the tether pass where the Verlet step has run it, and a kind's own
+        # first sweep where it differs (the tiled sweep that takes the Verlet step).
         folded = tethers_in_integrate(solver)
         first = [phase for c, bound in zip(kinds, sets) if not (folded and isinstance(c, Tethers))
-                 for phase in bound.phases]
+                 for phase in (bound.phases if bound.first_phases is None else bound.first_phases)]
         before = [bound.run for bound in sets if bound.run is not None]  # per-substep set-up (dt, zeroing)
         collide_first = ()
         if contact_every_sweep(solver):
