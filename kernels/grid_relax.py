@@ -251,23 +251,34 @@ def relax_grid_colour_compliant(
         kr += 1
 
 
-@wp.func
-def grid_tethered(
-    xp: Any,
+@wp.kernel
+def pull_grid_tethers(
     x: wp.array(dtype=Any),
-    r: int,
-    c: int,
+    inv_mass: wp.array(dtype=float),
+    first_particle: int,
+    grid_cols: int,
     pins: wp.array(dtype=int),
     pin_col_sq: wp.array2d(dtype=wp.float64),
     pin_row_sq: wp.array2d(dtype=wp.float64),
     tethers: int,
     scale: wp.float64,
+    col_bits: int,
+    first_row: int,
 ):
-    """Position ``xp`` of the free particle in row r, column c of a grid cloth moved back within reach of its
-    ``tethers`` nearest pins (ties to the lower pin, as warp_verlet/constraints/tethers.nearest_pins chooses them),
-    each at its rest-pose distance times ``scale``, from the squared column and row differences to each pin
-    (pin_col_sq[pin, column], pin_row_sq[pin, row]), rounded to float32 as the tether table is; pins read from
-    ``x``."""
+    """pull_tethers for a free particle of a grid cloth (2^col_bits threads per row from ``first_row``, the
+    surplus returning at once), whose tethers are computed: its
+    ``tethers`` nearest pins (ties to the lower pin, as warp_verlet/constraints/tethers.nearest_pins chooses them) at
+    their rest-pose distances times ``scale``, from the squared column and row differences to each pin
+    (pin_col_sq[pin, column], pin_row_sq[pin, row]), rounded to float32 as the tether table is."""
+    t = wp.tid()
+    r = first_row + (t >> col_bits)
+    c = t & ((1 << col_bits) - 1)
+    if c >= grid_cols:
+        return
+    p = first_particle + r * grid_cols + c
+    if inv_mass[p] == 0.0:
+        return
+    xp = x[p]
     last_distance = wp.float64(-1.0)
     last_pin = int(-1)
     for _k in range(tethers):
@@ -289,34 +300,7 @@ def grid_tethered(
         limit = type(length)(wp.float32(best_distance * scale))
         if length > limit:
             xp = x[a] + d * (limit / length)
-    return xp
-
-
-@wp.kernel
-def pull_grid_tethers(
-    x: wp.array(dtype=Any),
-    inv_mass: wp.array(dtype=float),
-    first_particle: int,
-    grid_cols: int,
-    pins: wp.array(dtype=int),
-    pin_col_sq: wp.array2d(dtype=wp.float64),
-    pin_row_sq: wp.array2d(dtype=wp.float64),
-    tethers: int,
-    scale: wp.float64,
-    col_bits: int,
-    first_row: int,
-):
-    """pull_tethers for a free particle of a grid cloth (2^col_bits threads per row from ``first_row``, the
-    surplus returning at once), whose tethers are computed (``grid_tethered``)."""
-    t = wp.tid()
-    r = first_row + (t >> col_bits)
-    c = t & ((1 << col_bits) - 1)
-    if c >= grid_cols:
-        return
-    p = first_particle + r * grid_cols + c
-    if inv_mass[p] == 0.0:
-        return
-    x[p] = grid_tethered(x[p], x, r, c, pins, pin_col_sq, pin_row_sq, tethers, scale)
+    x[p] = xp
 
 
 for_positions(relax_grid_colour, arrays=("x",))

@@ -25,7 +25,7 @@ uninitialised (``tile_empty``): a projection reads only cells of its own sticks,
 staged first, so zero-filling them (a loop and barriers per tile) bought nothing
 (bench/results/grid_tiles/barriers-and-fold.md).
 
-Folded passes: the Verlet step and the computed grid tether pass, which otherwise run as launches of their own
+Folded passes: the Verlet step and the tether pass, which otherwise run as launches of their own
 before the sweep, can run in the staging instead. Each touches one free particle and reads nothing that moves but
 that particle (the tethers read pins, which never move), so it may run at any time after the last write to its
 particle and before the first read of it. The first tile colour whose launch stages a particle is found from its
@@ -42,9 +42,10 @@ runs literally (one lane per block) and a GPU runs with the independent projecti
 
 import warp as wp
 
-from .grid_relax import GridColour, anchor_index, grid_tethered, particle_weight
+from .grid_relax import GridColour, anchor_index, particle_weight
 from .integrate import implicit_move
 from .positions import scaled
+from .tether import tethered
 from .relax import stick_correction
 
 _KERNELS: dict = {}
@@ -65,9 +66,8 @@ def relax_grid_tiles(tile: int, colours: tuple, max_registers: int | None = None
     CUDA thread's registers (None: the compiler's choice), so that more blocks fit on a multiprocessor.
 
     ``step`` and ``tethers`` fold the work that runs before a sweep into its staging (see the module docstring,
-    "Folded passes"): the Verlet step (kernels/integrate.verlet_step) and the computed grid tether pass
-    (kernels/grid_relax.pull_grid_tethers), each applied to a free particle once, by the first tile that stages
-    it."""
+    "Folded passes"): the Verlet step (kernels/integrate.verlet_step) and the tether table's pass
+    (kernels/tether.pull_tethers), each applied to a free particle once, by the first tile that stages it."""
     if tile < 4 or tile % 4:
         raise AssertionError(f"a tile's side must be a multiple of 4 (a bend colour's parity repeats every 4 rows or "
                              f"columns, and two tiles apart must share no particle), got {tile}")
@@ -110,6 +110,16 @@ def _make_kernel(tile: int, colours: tuple, max_registers: int | None, step: boo
         if (tc > 0 and gc % TILE_SIDE <= 1) or (gc % TILE_SIDE == TILE_SIDE - 1 and gc + 1 < grid_cols):
             col_parity = 0
         return 2 * row_parity + col_parity
+
+    @wp.func
+    def tether_row(p: int, first: int, pins: wp.array(dtype=int)):
+        """The tether table's row of free particle p of a cloth whose pins are all in ``pins``: the table holds
+        the cloth's free particles in order, so p's row is its place in the cloth less the pins before it."""
+        row = p - first
+        for n in range(pins.shape[0]):
+            if pins[n] < p:
+                row -= 1
+        return row
 
     @wp.func_native("t.data(wp::tile_coord(i, j)) = value;")
     def put_point(t: wp.tile(dtype=wp.vec3, shape=(REGION_ROWS, REGION_COLS), storage="shared"), i: int, j: int,
@@ -157,18 +167,15 @@ def _make_kernel(tile: int, colours: tuple, max_registers: int | None, step: boo
         delta: wp.array(dtype=wp.vec3),
         velocity_scale: float,
         accel_offset: wp.vec3,
-        tether_pins: wp.array(dtype=int),
-        pin_col_sq: wp.array2d(dtype=wp.float64),
-        pin_row_sq: wp.array2d(dtype=wp.float64),
-        tethers: int,
-        tether_scale: wp.float64,
+        tether_pin: wp.array2d(dtype=int),
+        tether_length: wp.array2d(dtype=float),
     ):
         """One sweep of every colour over the tiles of one tile colour (tile row parity, tile column parity):
         block k takes tile (parity_row + 2 (k // tiles_across), parity_col + 2 (k % tiles_across)). ``layout``
         is any colour's (the kernel reads the cloth's first particle, row length and weights from it). The
         arguments from ``x_inertial`` on are read only by a kernel that folds in the Verlet step (the State's
-        prediction and increment, and the step's factors, as verlet_step takes them) or the grid tethers
-        (GridTethersDevice's pins, squared column and row differences, tethers per particle and scale)."""
+        prediction and increment, and the step's factors, as verlet_step takes them) or the tethers (the tether
+        table's pins and lengths, whose rows are the cloth's free particles in order)."""
         block, lane = wp.tid()
         threads = wp.block_dim()
         first = layout.first_particle
@@ -204,8 +211,7 @@ def _make_kernel(tile: int, colours: tuple, max_registers: int | None, step: boo
                             x_inertial[p] = xp
                             delta[p] = move
                         if wp.static(TETHERS):
-                            xp = grid_tethered(xp, x, gr, gc, tether_pins, pin_col_sq, pin_row_sq, tethers,
-                                               tether_scale)
+                            xp = tethered(xp, x, tether_pin, tether_length, tether_row(p, first, pins))
                 put_point(region, rr, rc, xp)
                 put_weight(weight, rr, rc, w)
             e += threads

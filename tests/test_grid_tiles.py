@@ -176,6 +176,7 @@ def test_tiles_that_take_the_step_and_the_tethers_leave_the_separate_launches_po
             "orientation": "horizontal", "sticks": ["structural", "shear", "bend"], **cloth}
     scene = parse_scene({"simulation": simulation, "cloth": [spec], "collider": [BALL]}, file="<test>")
     runs = []
+    monkeypatch.setattr(stages, "FOLD_TETHERS_INTO_INTEGRATE", APART)  # apart means every pass its own launch
     for fold in (TAKEN, APART):
         monkeypatch.setattr(stages, "FOLD_INTO_TILES", fold)
         sim = Simulator(scene, device, threads=threads if device == "cpu" else None, sticks="tiled")
@@ -195,12 +196,11 @@ def test_tiles_that_take_the_step_and_the_tethers_are_all_a_substep_launches(lau
     sim.step()  # the first step also runs verlet_start
     names = launches.of(sim.step)
     assert len(names) == 4 * k and all(name.endswith("relax_grid_tiles") for name in names)
-    assert not hasattr(sim.model, "tether_particle")  # computed tethers: no table on the device
     monkeypatch.setattr(stages, "FOLD_INTO_TILES", APART)
     apart = Simulator(sheet(), "cpu", threads=1, use_graph=False, sticks="tiled")
     apart.step()
     names = launches.of(apart.step)
-    assert names[0] == "verlet_step" and names.count("pull_grid_tethers") == k and len(names) == 1 + 5 * k
+    assert names[0] == "verlet_step" and names.count("pull_tethers") == k and len(names) == 1 + 5 * k
 
 
 @pytest.mark.parametrize("simulation, cloth, tethers_taken", [
@@ -208,7 +208,8 @@ def test_tiles_that_take_the_step_and_the_tethers_are_all_a_substep_launches(lau
     ({"global_iterations": 3}, {}, True),  # the global correction runs between the step and the sweeps
     ({"air": {"velocity": [0.0, 0.0, 5.0]}}, {}, True),  # the air's step gathers each particle's force
     ({}, {"self_collision": True}, True),  # the self-contact search reads the positions before the first sweep
-    ({}, {"pins": ["top-edge"]}, False),  # more pins than computed tethers take: a table's pass before the tiles
+    ({}, {"pins": ["top-edge"]}, False),  # more pins than the tiles know: a particle's row is not found from them
+    ({}, {"particle_masses": [[3, 4, 0.5]]}, False),  # weights read from the array: the tiles know no pins
 ])
 def test_the_tiles_leave_the_step_alone_where_something_runs_before_their_first_sweep(simulation, cloth,
                                                                                      tethers_taken, monkeypatch):
@@ -217,4 +218,4 @@ def test_the_tiles_leave_the_step_alone_where_something_runs_before_their_first_
     sim = Simulator(scene, "cpu", sticks="tiled")
     assert not stages.tiles_take_step(sim.solver)
     assert stages.tiles_take_tethers(sim.solver) == tethers_taken
-    assert ("grid tethers" if tethers_taken else "tethers") in sim.constraint_sets
+    assert "tethers" in sim.constraint_sets

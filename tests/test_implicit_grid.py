@@ -122,13 +122,12 @@ def test_the_rule_picks_implicit_sticks_for_one_grid_cloth_that_cannot_tear(devi
 
 
 @pytest.mark.parametrize("compliance, smallest_tiled, sets, same_as", [
-    # rigid float32 sticks of a large grid: swept tile by tile, which computes the tethers as it stages
-    ({}, 0, ("grid tethers", "grid tiles"), "tiled"),
+    ({}, 0, ("tethers", "grid tiles"), "tiled"),  # rigid float32 sticks of a large grid: swept tile by tile
     ({}, 64, ("tethers", "grid sticks"), "explicit"),  # a grid below the tiles' size: a launch per colour
     ({"bend": 1e-3}, 0, ("tethers", "grid sticks"), "explicit"),  # a soft family: a launch per colour
 ])
-def test_auto_on_a_gpu_computes_the_sticks_and_keeps_the_tether_table_unless_tiled(compliance, smallest_tiled, sets,
-                                                                                   same_as, monkeypatch):
+def test_auto_on_a_gpu_computes_the_sticks_and_keeps_the_tether_table(compliance, smallest_tiled, sets, same_as,
+                                                                      monkeypatch):
     """What "auto" does on a GPU, on the CPU: the rule's device test answered as a GPU would."""
     import warp_verlet.core.model as model_module
 
@@ -140,7 +139,7 @@ def test_auto_on_a_gpu_computes_the_sticks_and_keeps_the_tether_table_unless_til
                        sticks=["structural", "shear", "bend"], compliance=compliance)
     sim = Simulator(scene, "cpu")
     assert sim.constraint_sets == sets
-    assert hasattr(sim.model, "tether_pin") == ("tethers" in sets) and not hasattr(sim.model, "stick_ends")
+    assert hasattr(sim.model, "tether_pin") and not hasattr(sim.model, "stick_ends")
     for _ in range(3):
         sim.step_frame()
     reference, _ = run_frames(scene, "cpu", same_as, frames=3)

@@ -161,8 +161,8 @@ class GridTiles(ConstraintSet):
     its halo in shared memory and projects every colour of the tile's sticks there; four launches a sweep, one
     per tile colour. Rigid sticks, float32 positions. The same projections as GridSticks in another order
     (block Gauss-Seidel), so not the same positions bit for bit. Where stages.tiles_take_tethers and
-    stages.tiles_take_step allow, the tiles also run the grid tether pass in every sweep, and the Verlet step in
-    the first, as they stage each particle: the same positions as the separate launches, bit for bit."""
+    stages.tiles_take_step allow, the tiles also run the tether pass in every sweep, and the Verlet step in the
+    first, as they stage each particle: the same positions as the separate launches, bit for bit."""
 
     name = "grid tiles"
 
@@ -183,13 +183,11 @@ class GridTiles(ConstraintSet):
                           c.layout.row_q or c.layout.col_q, c.layout.parity) for c in g.colours)
         registers = GRID_TILE_MAX_REGISTERS if g.rows * g.cols >= GRID_TILE_CAPPED_FROM else None
         tethers, step = tiles_take_tethers(solver), tiles_take_step(solver)
-        if tethers:
-            t = model.grid_tethers
-            tether_inputs = [t.pins, t.pin_col_sq, t.pin_row_sq, t.tethers, wp.float64(t.scale)]
+        if tethers:  # a tiled cloth cannot tear, so its tethers keep the model's lengths
+            tether_inputs = [model.tether_pin, model.tether_length]
         else:
-            nothing = wp.empty(0, dtype=int, device=model.device)
-            no_rows = wp.empty((0, 0), dtype=wp.float64, device=model.device)
-            tether_inputs = [nothing, no_rows, no_rows, 0, wp.float64(1.0)]
+            tether_inputs = [wp.empty((0, 0), dtype=int, device=model.device),
+                             wp.empty((0, 0), dtype=float, device=model.device)]
         tiles_down, tiles_across = -(-g.rows // tile), -(-g.cols // tile)
 
         def sweep(steps: bool) -> list:

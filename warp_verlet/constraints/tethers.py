@@ -88,7 +88,8 @@ def cut_tethers(table: TetherTable, particle_count: int, intact_sticks: np.ndarr
 
 class Tethers(ConstraintSet):
     """Long-range attachments (kernels/tether.py): one launch per sweep, before the sticks, so that every sweep
-    starts from particles within reach of their pins. When the torn set changes, tethers cut off from their
+    starts from particles within reach of their pins (none where the tiled sweep runs the pass as it stages each
+    particle: stages.tiles_take_tethers). When the torn set changes, tethers cut off from their
     pin are dropped (cut_tethers above)."""
 
     name = "tethers"
@@ -102,8 +103,11 @@ class Tethers(ConstraintSet):
         return req.tethered * (per_particle + live)
 
     def bind(self, model, state, solver) -> BoundStage:
+        from warp_verlet.core.stages import tiles_take_tethers
         from warp_verlet.kernels.tether import pull_tethers
 
+        if tiles_take_tethers(solver):
+            return BoundStage(None, [])  # the tiled sweep runs the pass as it stages each particle
         length = state.tether_length if state.tether_length is not None else model.tether_length
         x, n = state.particle_q, model.tether_particle.shape[0]
 
@@ -123,8 +127,7 @@ class Tethers(ConstraintSet):
 class GridTethers(ConstraintSet):
     """Tethers of a grid cloth with few pins, computed (kernels/grid_relax.py): each free particle finds its
     nearest pins and their rest-pose distances from its grid coordinates, so a sweep reads no tether table.
-    One launch per sweep over the cloth's particles (pins skip), before the sticks, as Tethers; none where the
-    tiled sweep takes the pass into its staging (stages.tiles_take_tethers)."""
+    One launch per sweep over the cloth's particles (pins skip), before the sticks, as Tethers."""
 
     name = "grid tethers"
 
@@ -138,11 +141,8 @@ class GridTethers(ConstraintSet):
     def bind(self, model, state, solver) -> BoundStage:
         import warp as wp
 
-        from warp_verlet.core.stages import tiles_take_tethers
         from warp_verlet.kernels.grid_relax import pull_grid_tethers
 
-        if tiles_take_tethers(solver):
-            return BoundStage(None, [])  # the tiled sweep runs the pass as it stages each particle
         t, x = model.grid_tethers, state.particle_q
 
         def make(f, rows):

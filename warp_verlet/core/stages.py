@@ -29,7 +29,7 @@ if TYPE_CHECKING:  # pragma: no cover
 
 from ..constraints import kinds as constraint_kinds
 from ..constraints.sticks import GridTiles
-from ..constraints.tethers import GridTethers, Tethers
+from ..constraints.tethers import Tethers
 from ..launches import FLOAT, VEC2I, VEC3, VEC3D, BoundStage, recorded
 
 
@@ -107,7 +107,7 @@ class Requirements:
         req = replace(req, precision=resolve(scene, relaxes=RELAX.needed(req)))
         if (sticks == "auto" and req.implicit_grid and not req.soft_sticks and req.precision == "float32"
                 and req.grid_rows * req.grid_cols >= MIN_TILED_PARTICLES):
-            req = replace(req, grid_tiles=True, grid_pins=grid_tether_pins(scene.cloths[0]))
+            req = replace(req, grid_tiles=True)
         if req.grid_tiles and req.precision != "float32":
             from ..errors import ArgumentError
 
@@ -163,18 +163,11 @@ def implicit_grid_obstacle(scene: "Scene") -> str | None:
     return None
 
 
-def grid_tether_pins(cloth) -> int:
-    """The pins a grid cloth's computed tethers read (Requirements.grid_pins): all of them where it uses tethers
-    and has at most MAX_GRID_TETHER_PINS, else 0 (its tethers, if any, are a table)."""
-    return cloth.pin_count if cloth.uses_tethers and 0 < cloth.pin_count <= MAX_GRID_TETHER_PINS else 0
-
-
 def grid_counts(scene: "Scene", sticks: str) -> dict:
     """Requirements's implicit-grid fields: all 0 when the sticks are arrays ("explicit", or "auto" where
     :func:`implicit_grid_obstacle` names one); "implicit" where one is named raises ArgumentError. "auto"
-    computes the sticks and keeps the tether table, unless it sweeps tile by tile (Requirements.of); "implicit" and
-    "tiled" compute the tethers too (of a cloth with at most MAX_GRID_TETHER_PINS pins), so that no per-stick or
-    per-particle table is left on the device."""
+    computes the sticks and keeps the tether table; "implicit" computes the tethers too (of a cloth with at most
+    MAX_GRID_TETHER_PINS pins), so that no per-stick or per-particle table is left on the device."""
     from ..errors import ArgumentError
 
     if sticks not in STICK_FORMS:
@@ -190,10 +183,11 @@ def grid_counts(scene: "Scene", sticks: str) -> dict:
     per_family = {"structural": r * (c - 1) + (r - 1) * c, "shear": 2 * (r - 1) * (c - 1),
                   "bend": r * max(c - 2, 0) + max(r - 2, 0) * c}
     soft = sum(per_family[f] for f in cloth.sticks if cloth.compliance.get(f, 0.0) > 0.0)
-    # Implicit tethers with implicit sticks only when asked for: on an H100 the tether table's pass measured faster
-    # than computing each particle's nearest pins and their float64 distances in every sweep
-    # (bench/results/implicit_grid). Tiled sweeps compute them in their staging (tiles_take_tethers).
-    pins = grid_tether_pins(cloth) if sticks in ("implicit", "tiled") else 0
+    # Implicit tethers only when asked for: on an H100 the tether table's pass measured faster than computing
+    # each particle's nearest pins and their float64 distances in every sweep (bench/results/implicit_grid), and
+    # so did a tiled sweep that computed them in its staging (bench/results/grid_tiles/tiles-take-step.md).
+    pins = cloth.pin_count if (sticks == "implicit" and cloth.uses_tethers
+                               and 0 < cloth.pin_count <= MAX_GRID_TETHER_PINS) else 0
     weight_pins = cloth.pin_count if not cloth.particle_masses and 0 < cloth.pin_count <= MAX_UNIFORM_MASS_PINS else 0
     if sticks == "tiled" and soft:
         raise ArgumentError("sticks = 'tiled' projects rigid sticks only, but the cloth gives a stick family a "
@@ -333,6 +327,8 @@ def tethers_in_integrate(solver) -> bool:
     the first sweep's tethers that reads or moves the positions (the air's forces, the global correction, a
     constraint kind's per-substep set-up such as the multilevel pass or the self-contact search)."""
     req, model = solver.req, solver.model
+    if tiles_take_tethers(solver):
+        return False
     if not (FOLD_TETHERS_INTO_INTEGRATE["cuda" if model.device.is_cuda else "cpu"] and req.free_particles
             and RELAX.needed(req) and not AERODYNAMICS.needed(req) and not GLOBAL.needed(req)
             and any(isinstance(c, Tethers) and c.needed(req) for c in constraint_kinds())
@@ -351,21 +347,24 @@ and the tether pass's trips of every position through memory (bench/results/grid
 
 
 def tiles_take_tethers(solver) -> bool:
-    """Whether the tiled sweep runs the computed grid tether pass in its staging, in every sweep: where the
-    device kind's FOLD_INTO_TILES says so and the scene runs both (the grid tethers come right before the tiles
-    in sweep order, with no kind between them: the stick kinds that could are the tiles' alternatives)."""
+    """Whether the tiled sweep runs the tether table's pass in its staging, in every sweep: where the device kind's
+    FOLD_INTO_TILES says so, the scene runs both (the tethers come right before the tiles in sweep order, with no
+    kind between them: the stick kinds that could are the tiles' alternatives), the table's rows are the cloth's
+    free particles in order, and the cloth's pins are the few the tiles know (Requirements.weight_pins), from
+    which a particle's row follows: its index less the pins before it."""
     req, model = solver.req, solver.model
     kinds = [c for c in constraint_kinds() if c.needed(req)]
-    return (FOLD_INTO_TILES["cuda" if model.device.is_cuda else "cpu"] and RELAX.needed(req)
-            and any(isinstance(c, GridTiles) for c in kinds) and any(isinstance(c, GridTethers) for c in kinds))
+    if not (FOLD_INTO_TILES["cuda" if model.device.is_cuda else "cpu"] and RELAX.needed(req) and req.weight_pins
+            and any(isinstance(c, GridTiles) for c in kinds) and any(isinstance(c, Tethers) for c in kinds)):
+        return False
+    return model.tether_table.count == model.particle_count - req.weight_pins
 
 
 def tiles_take_step(solver) -> bool:
     """Whether the first tiled sweep of a substep also takes the Verlet step, in its staging: where the device
     kind's FOLD_INTO_TILES says so, the step is the plain one (no air), nothing runs between the step and that
     sweep (no global correction, no kind's per-substep set-up that reads positions: the multilevel pass, the
-    self-contact search), and every kind the sweep runs before the tiles is taken into them too (the grid
-    tethers)."""
+    self-contact search), and every kind the sweep runs before the tiles is taken into them too (the tethers)."""
     req, model = solver.req, solver.model
     if not (FOLD_INTO_TILES["cuda" if model.device.is_cuda else "cpu"] and req.free_particles and RELAX.needed(req)
             and not AERODYNAMICS.needed(req) and not GLOBAL.needed(req)):
@@ -376,7 +375,7 @@ def tiles_take_step(solver) -> bool:
     for c in kinds:
         if isinstance(c, GridTiles):
             return True
-        if not (isinstance(c, GridTethers) and tiles_take_tethers(solver)):
+        if not (isinstance(c, Tethers) and tiles_take_tethers(solver)):
             return False
     return False
 
