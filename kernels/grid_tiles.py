@@ -25,14 +25,16 @@ uninitialised (``tile_empty``): a projection reads only cells of its own sticks,
 staged first, so zero-filling them (a loop and barriers per tile) bought nothing
 (bench/results/grid_tiles/barriers-and-fold.md).
 
-Folded passes: the Verlet step and the tether pass, which otherwise run as launches of their own
-before the sweep, can run in the staging instead. Each touches one free particle and reads nothing that moves but
-that particle (the tethers read pins, which never move), so it may run at any time after the last write to its
-particle and before the first read of it. The first tile colour whose launch stages a particle is found from its
-grid coordinates (``first_tile_colour``; the regions of one tile colour share no particle, so exactly one tile
-of that colour stages it): that tile applies the passes as it stages the particle, and every later launch reads
-the result from memory. So the positions are the separate launches' bit for bit, and the step's trip of every
-position through memory, and the tether pass's, are gone (warp_verlet/core/stages.tiles_take_step says where).
+The Verlet step in the staging: where nothing runs between the Verlet step and the first sweep's tiles (no tether
+pass, no global correction, no air), the first sweep's kernel can take the step itself. The step moves one free
+particle and reads nothing else, so it may run at any time before the first read of that particle. The first tile
+colour whose launch stages a particle is found from its grid coordinates (``first_tile_colour``; the regions of one
+tile colour share no particle, so exactly one tile of that colour stages it): that tile steps the particle as it
+stages it, and every later launch reads the result from memory. So the positions are the separate launch's bit
+for bit, and the step's own trip of every position through memory is gone (warp_verlet/core/stages.tiles_take_step
+says where). Taking the tether pass in as well (the table's, or tethers computed from the grid) was measured
+slower than the launches it replaced: the staging then waits on chains of dependent loads
+(bench/results/grid_tiles/tiles-take-step.md).
 
 The projection is ``stick_correction`` with the rest lengths and weights the implicit grid sticks use
 (kernels/grid_relax.py), so every stick sees exactly the arithmetic of the other forms; only the order of the
@@ -45,7 +47,6 @@ import warp as wp
 from .grid_relax import GridColour, anchor_index, particle_weight
 from .integrate import implicit_move
 from .positions import scaled
-from .tether import tethered
 from .relax import stick_correction
 
 _KERNELS: dict = {}
@@ -57,27 +58,24 @@ def block_barrier():
     ...
 
 
-def relax_grid_tiles(tile: int, colours: tuple, max_registers: int | None = None, step: bool = False,
-                     tethers: bool = False):
+def relax_grid_tiles(tile: int, colours: tuple, max_registers: int | None = None, step: bool = False):
     """The tiled sweep's kernel for tiles of ``tile`` x ``tile`` cells and the given colours, each
     ``(dr, dc, col_first, parity_axis, q, parity)`` (parity_axis 0: rows, 1: columns), in sweep order. One
-    kernel per (tile, colours, max_registers, step, tethers): the shared tiles' shapes and each colour's geometry
-    are compile-time constants, so a colour's step unrolls to its own index arithmetic. ``max_registers`` caps a
+    kernel per (tile, colours, max_registers, step): the shared tiles' shapes and each colour's geometry are
+    compile-time constants, so a colour's step unrolls to its own index arithmetic. ``max_registers`` caps a
     CUDA thread's registers (None: the compiler's choice), so that more blocks fit on a multiprocessor.
-
-    ``step`` and ``tethers`` fold the work that runs before a sweep into its staging (see the module docstring,
-    "Folded passes"): the Verlet step (kernels/integrate.verlet_step) and the tether table's pass
-    (kernels/tether.pull_tethers), each applied to a free particle once, by the first tile that stages it."""
+    ``step``: the kernel also takes the Verlet step (kernels/integrate.verlet_step) of each free particle, as the
+    first tile that stages it (the module docstring, "The Verlet step in the staging")."""
     if tile < 4 or tile % 4:
         raise AssertionError(f"a tile's side must be a multiple of 4 (a bend colour's parity repeats every 4 rows or "
                              f"columns, and two tiles apart must share no particle), got {tile}")
-    key = (tile, tuple(colours), max_registers, bool(step), bool(tethers))
+    key = (tile, tuple(colours), max_registers, bool(step))
     if key not in _KERNELS:
-        _KERNELS[key] = _make_kernel(tile, tuple(colours), max_registers, bool(step), bool(tethers))
+        _KERNELS[key] = _make_kernel(tile, tuple(colours), max_registers, bool(step))
     return _KERNELS[key]
 
 
-def _make_kernel(tile: int, colours: tuple, max_registers: int | None, step: bool, tethers: bool):
+def _make_kernel(tile: int, colours: tuple, max_registers: int | None, step: bool):
     TILE_SIDE = tile
     HALF = tile // 2
     REGION_ROWS = tile + 2
@@ -86,7 +84,6 @@ def _make_kernel(tile: int, colours: tuple, max_registers: int | None, step: boo
     STICKS = tile * tile // 2  # a colour's sticks in a tile: one axis keeps half its anchors
     COLOURS = colours
     STEP = step
-    TETHERS = tethers
 
     @wp.func
     def region_cell(e: int):
@@ -110,16 +107,6 @@ def _make_kernel(tile: int, colours: tuple, max_registers: int | None, step: boo
         if (tc > 0 and gc % TILE_SIDE <= 1) or (gc % TILE_SIDE == TILE_SIDE - 1 and gc + 1 < grid_cols):
             col_parity = 0
         return 2 * row_parity + col_parity
-
-    @wp.func
-    def tether_row(p: int, first: int, pins: wp.array(dtype=int)):
-        """The tether table's row of free particle p of a cloth whose pins are all in ``pins``: the table holds
-        the cloth's free particles in order, so p's row is its place in the cloth less the pins before it."""
-        row = p - first
-        for n in range(pins.shape[0]):
-            if pins[n] < p:
-                row -= 1
-        return row
 
     @wp.func_native("t.data(wp::tile_coord(i, j)) = value;")
     def put_point(t: wp.tile(dtype=wp.vec3, shape=(REGION_ROWS, REGION_COLS), storage="shared"), i: int, j: int,
@@ -167,15 +154,12 @@ def _make_kernel(tile: int, colours: tuple, max_registers: int | None, step: boo
         delta: wp.array(dtype=wp.vec3),
         velocity_scale: float,
         accel_offset: wp.vec3,
-        tether_pin: wp.array2d(dtype=int),
-        tether_length: wp.array2d(dtype=float),
     ):
         """One sweep of every colour over the tiles of one tile colour (tile row parity, tile column parity):
         block k takes tile (parity_row + 2 (k // tiles_across), parity_col + 2 (k % tiles_across)). ``layout``
         is any colour's (the kernel reads the cloth's first particle, row length and weights from it). The
-        arguments from ``x_inertial`` on are read only by a kernel that folds in the Verlet step (the State's
-        prediction and increment, and the step's factors, as verlet_step takes them) or the tethers (the tether
-        table's pins and lengths, whose rows are the cloth's free particles in order)."""
+        arguments from ``x_inertial`` on are read only by a kernel that takes the Verlet step: the State's
+        prediction and increment, and the step's factors, as verlet_step takes them."""
         block, lane = wp.tid()
         threads = wp.block_dim()
         first = layout.first_particle
@@ -201,17 +185,14 @@ def _make_kernel(tile: int, colours: tuple, max_registers: int | None, step: boo
                 p = first + gr * grid_cols + gc
                 xp = x[p]
                 w = particle_weight(layout, p, inv_mass, pins)
-                if wp.static(STEP or TETHERS):
-                    # The first tile to stage a free particle moves it as the passes before the sweep would
-                    # have: no launch before this one read it, and every later one reads it from here.
+                if wp.static(STEP):
+                    # The first tile to stage a free particle steps it: no launch before this one read it, and
+                    # every later one reads it from here.
                     if w != 0.0 and first_tile_colour(gr, gc, grid_cols) == 2 * tile_row_parity + tile_col_parity:
-                        if wp.static(STEP):
-                            move = implicit_move(p, x, x_inertial, delta) * velocity_scale + accel_offset
-                            xp = xp + move
-                            x_inertial[p] = xp
-                            delta[p] = move
-                        if wp.static(TETHERS):
-                            xp = tethered(xp, x, tether_pin, tether_length, tether_row(p, first, pins))
+                        move = implicit_move(p, x, x_inertial, delta) * velocity_scale + accel_offset
+                        xp = xp + move
+                        x_inertial[p] = xp
+                        delta[p] = move
                 put_point(region, rr, rc, xp)
                 put_weight(weight, rr, rc, w)
             e += threads

@@ -160,9 +160,9 @@ class GridTiles(ConstraintSet):
     """Implicit grid sticks swept tile by tile (kernels/grid_tiles.py): a block holds a tile of the cloth and
     its halo in shared memory and projects every colour of the tile's sticks there; four launches a sweep, one
     per tile colour. Rigid sticks, float32 positions. The same projections as GridSticks in another order
-    (block Gauss-Seidel), so not the same positions bit for bit. Where stages.tiles_take_tethers and
-    stages.tiles_take_step allow, the tiles also run the tether pass in every sweep, and the Verlet step in the
-    first, as they stage each particle: the same positions as the separate launches, bit for bit."""
+    (block Gauss-Seidel), so not the same positions bit for bit. Where stages.tiles_take_step allows, the first
+    sweep's tiles also take the Verlet step as they stage each particle: the same positions as the step's own
+    launch, bit for bit."""
 
     name = "grid tiles"
 
@@ -175,24 +175,19 @@ class GridTiles(ConstraintSet):
     def bind(self, model, state, solver) -> BoundStage:
         import warp as wp
 
-        from warp_verlet.core.stages import step_factors, tiles_take_step, tiles_take_tethers
+        from warp_verlet.core.stages import step_factors, tiles_take_step
         from warp_verlet.kernels.grid_tiles import relax_grid_tiles
 
         g, x, tile = model.grid, state.particle_q, GRID_TILE
         geometry = tuple((c.layout.dr, c.layout.dc, c.layout.col_first, int(c.layout.row_q == 0),
                           c.layout.row_q or c.layout.col_q, c.layout.parity) for c in g.colours)
         registers = GRID_TILE_MAX_REGISTERS if g.rows * g.cols >= GRID_TILE_CAPPED_FROM else None
-        tethers, step = tiles_take_tethers(solver), tiles_take_step(solver)
-        if tethers:  # a tiled cloth cannot tear, so its tethers keep the model's lengths
-            tether_inputs = [model.tether_pin, model.tether_length]
-        else:
-            tether_inputs = [wp.empty((0, 0), dtype=int, device=model.device),
-                             wp.empty((0, 0), dtype=float, device=model.device)]
+        step = tiles_take_step(solver)
         tiles_down, tiles_across = -(-g.rows // tile), -(-g.cols // tile)
 
         def sweep(steps: bool) -> list:
             """One sweep's launches, one per tile colour, that take the Verlet step (``steps``) or not."""
-            kernel = relax_grid_tiles(tile, geometry, registers, step=steps, tethers=tethers)
+            kernel = relax_grid_tiles(tile, geometry, registers, step=steps)
             tasks = []
             for row_parity in (0, 1):
                 for col_parity in (0, 1):
@@ -203,7 +198,7 @@ class GridTiles(ConstraintSet):
                         kernel, dim=[down * across], block_dim=tile * tile // 2, record_cmd=True,
                         inputs=[x, model.inv_mass, g.colours[0].layout, g.colours[0].pins, g.col_rest1, g.col_rest2,
                                 g.row_rest1, g.row_rest2, g.col_sq1, g.row_sq1, g.rows, row_parity, col_parity, across,
-                                state.particle_q_inertial, state.particle_dq, 1.0, wp.vec3(), *tether_inputs])
+                                state.particle_q_inertial, state.particle_dq, 1.0, wp.vec3()])
                     tasks.append(PhaseTask(kernel.key, launch.launch, launch))
             return tasks
 

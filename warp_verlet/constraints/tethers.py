@@ -88,8 +88,7 @@ def cut_tethers(table: TetherTable, particle_count: int, intact_sticks: np.ndarr
 
 class Tethers(ConstraintSet):
     """Long-range attachments (kernels/tether.py): one launch per sweep, before the sticks, so that every sweep
-    starts from particles within reach of their pins (none where the tiled sweep runs the pass as it stages each
-    particle: stages.tiles_take_tethers). When the torn set changes, tethers cut off from their
+    starts from particles within reach of their pins. When the torn set changes, tethers cut off from their
     pin are dropped (cut_tethers above)."""
 
     name = "tethers"
@@ -103,11 +102,8 @@ class Tethers(ConstraintSet):
         return req.tethered * (per_particle + live)
 
     def bind(self, model, state, solver) -> BoundStage:
-        from warp_verlet.core.stages import tiles_take_tethers
         from warp_verlet.kernels.tether import pull_tethers
 
-        if tiles_take_tethers(solver):
-            return BoundStage(None, [])  # the tiled sweep runs the pass as it stages each particle
         length = state.tether_length if state.tether_length is not None else model.tether_length
         x, n = state.particle_q, model.tether_particle.shape[0]
 

@@ -327,8 +327,6 @@ def tethers_in_integrate(solver) -> bool:
     the first sweep's tethers that reads or moves the positions (the air's forces, the global correction, a
     constraint kind's per-substep set-up such as the multilevel pass or the self-contact search)."""
     req, model = solver.req, solver.model
-    if tiles_take_tethers(solver):
-        return False
     if not (FOLD_TETHERS_INTO_INTEGRATE["cuda" if model.device.is_cuda else "cpu"] and req.free_particles
             and RELAX.needed(req) and not AERODYNAMICS.needed(req) and not GLOBAL.needed(req)
             and any(isinstance(c, Tethers) and c.needed(req) for c in constraint_kinds())
@@ -338,46 +336,27 @@ def tethers_in_integrate(solver) -> bool:
     return model.tether_table.count == free
 
 
-FOLD_INTO_TILES = {"cpu": True, "cuda": True}
-"""Per device kind: whether tiled sweeps take the passes that run before them into their staging, where
-tiles_take_tethers and tiles_take_step allow (kernels/grid_tiles.py, "Folded passes"). The positions are the
-separate launches' bit for bit (tests/test_grid_tiles.py, on the CPU and on CUDA); on a GPU it saves the step's
-and the tether pass's trips of every position through memory (bench/results/grid_tiles/tiles-take-step.md).
-``bench.implicit_grid --tethers-apart`` turns it off to measure the difference."""
-
-
-def tiles_take_tethers(solver) -> bool:
-    """Whether the tiled sweep runs the tether table's pass in its staging, in every sweep: where the device kind's
-    FOLD_INTO_TILES says so, the scene runs both (the tethers come right before the tiles in sweep order, with no
-    kind between them: the stick kinds that could are the tiles' alternatives), the table's rows are the cloth's
-    free particles in order, and the cloth's pins are the few the tiles know (Requirements.weight_pins), from
-    which a particle's row follows: its index less the pins before it."""
-    req, model = solver.req, solver.model
-    kinds = [c for c in constraint_kinds() if c.needed(req)]
-    if not (FOLD_INTO_TILES["cuda" if model.device.is_cuda else "cpu"] and RELAX.needed(req) and req.weight_pins
-            and any(isinstance(c, GridTiles) for c in kinds) and any(isinstance(c, Tethers) for c in kinds)):
-        return False
-    return model.tether_table.count == model.particle_count - req.weight_pins
+STEP_IN_TILES = {"cpu": True, "cuda": True}
+"""Per device kind: whether the first tiled sweep of a substep takes the Verlet step into its staging, where
+tiles_take_step allows (kernels/grid_tiles.py, "The Verlet step in the staging"). The positions are the step's own
+launch's bit for bit (tests/test_grid_tiles.py, on the CPU and on CUDA); on a GPU it saves the step's trip of every
+position through memory (bench/results/grid_tiles/tiles-take-step.md). ``bench.implicit_grid --tethers-apart``
+turns it off."""
 
 
 def tiles_take_step(solver) -> bool:
     """Whether the first tiled sweep of a substep also takes the Verlet step, in its staging: where the device
-    kind's FOLD_INTO_TILES says so, the step is the plain one (no air), nothing runs between the step and that
-    sweep (no global correction, no kind's per-substep set-up that reads positions: the multilevel pass, the
-    self-contact search), and every kind the sweep runs before the tiles is taken into them too (the tethers)."""
+    kind's STEP_IN_TILES says so, the step is the plain one (no air), and nothing runs between the step and the
+    tiles: no global correction, no kind's per-substep set-up that reads positions (the multilevel pass, the
+    self-contact search), and no kind the sweep runs before the tiles (the tethers)."""
     req, model = solver.req, solver.model
-    if not (FOLD_INTO_TILES["cuda" if model.device.is_cuda else "cpu"] and req.free_particles and RELAX.needed(req)
+    if not (STEP_IN_TILES["cuda" if model.device.is_cuda else "cpu"] and req.free_particles and RELAX.needed(req)
             and not AERODYNAMICS.needed(req) and not GLOBAL.needed(req)):
         return False
     kinds = [c for c in constraint_kinds() if c.needed(req)]
     if any(c.reads_positions_before_sweeps for c in kinds):
         return False
-    for c in kinds:
-        if isinstance(c, GridTiles):
-            return True
-        if not (isinstance(c, Tethers) and tiles_take_tethers(solver)):
-            return False
-    return False
+    return bool(kinds) and isinstance(kinds[0], GridTiles)
 
 
 class GlobalSolve:
