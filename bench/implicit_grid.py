@@ -158,15 +158,13 @@ def main(argv=None) -> int:
     p.add_argument("--max-registers", type=int, default=None,
                    help="registers a thread of the tiled sweep may use (0: the compiler's choice)")
     p.add_argument("--tethers-apart", action="store_true",
-                   help="run the Verlet step and the first sweep's tether pass as launches of their own, not the "
-                        "pass inside the step, nor the step inside the tiled sweep's staging")
+                   help="run the first sweep's tether pass as its own launch, not inside the Verlet step")
     args = p.parse_args(argv)
     quiet_warp()
     if args.tethers_apart:
         from warp_verlet.core import stages
 
         stages.FOLD_TETHERS_INTO_INTEGRATE = dict.fromkeys(stages.FOLD_TETHERS_INTO_INTEGRATE, False)
-        stages.STEP_IN_TILES = dict.fromkeys(stages.STEP_IN_TILES, False)
     if args.tile:
         from warp_verlet.constraints import sticks
 

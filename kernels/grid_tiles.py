@@ -25,16 +25,9 @@ uninitialised (``tile_empty``): a projection reads only cells of its own sticks,
 staged first, so zero-filling them (a loop and barriers per tile) bought nothing
 (bench/results/grid_tiles/barriers-and-fold.md).
 
-The Verlet step in the staging: where nothing runs between the Verlet step and the first sweep's tiles (no tether
-pass, no global correction, no air), the first sweep's kernel can take the step itself. The step moves one free
-particle and reads nothing else, so it may run at any time before the first read of that particle. The first tile
-colour whose launch stages a particle is found from its grid coordinates (``first_tile_colour``; the regions of one
-tile colour share no particle, so exactly one tile of that colour stages it): that tile steps the particle as it
-stages it, and every later launch reads the result from memory. So the positions are the separate launch's bit
-for bit, and the step's own trip of every position through memory is gone (warp_verlet/core/stages.tiles_take_step
-says where). Taking the tether pass in as well (the table's, or tethers computed from the grid) was measured
-slower than the launches it replaced: the staging then waits on chains of dependent loads
-(bench/results/grid_tiles/tiles-take-step.md).
+The Verlet step and the tether pass before a sweep stay launches of their own. Taken into the staging (the first
+tile to stage a particle moving it, bit for bit the same), they made each staged cell wait on a chain of dependent
+loads, and measured slower (bench/results/grid_tiles/tiles-take-step.md).
 
 The projection is ``stick_correction`` with the rest lengths and weights the implicit grid sticks use
 (kernels/grid_relax.py), so every stick sees exactly the arithmetic of the other forms; only the order of the
@@ -45,7 +38,6 @@ runs literally (one lane per block) and a GPU runs with the independent projecti
 import warp as wp
 
 from .grid_relax import GridColour, anchor_index, particle_weight
-from .integrate import implicit_move
 from .positions import scaled
 from .relax import stick_correction
 
@@ -58,24 +50,22 @@ def block_barrier():
     ...
 
 
-def relax_grid_tiles(tile: int, colours: tuple, max_registers: int | None = None, step: bool = False):
+def relax_grid_tiles(tile: int, colours: tuple, max_registers: int | None = None):
     """The tiled sweep's kernel for tiles of ``tile`` x ``tile`` cells and the given colours, each
     ``(dr, dc, col_first, parity_axis, q, parity)`` (parity_axis 0: rows, 1: columns), in sweep order. One
-    kernel per (tile, colours, max_registers, step): the shared tiles' shapes and each colour's geometry are
+    kernel per (tile, colours, max_registers): the shared tiles' shapes and each colour's geometry are
     compile-time constants, so a colour's step unrolls to its own index arithmetic. ``max_registers`` caps a
-    CUDA thread's registers (None: the compiler's choice), so that more blocks fit on a multiprocessor.
-    ``step``: the kernel also takes the Verlet step (kernels/integrate.verlet_step) of each free particle, as the
-    first tile that stages it (the module docstring, "The Verlet step in the staging")."""
+    CUDA thread's registers (None: the compiler's choice), so that more blocks fit on a multiprocessor."""
     if tile < 4 or tile % 4:
         raise AssertionError(f"a tile's side must be a multiple of 4 (a bend colour's parity repeats every 4 rows or "
                              f"columns, and two tiles apart must share no particle), got {tile}")
-    key = (tile, tuple(colours), max_registers, bool(step))
+    key = (tile, tuple(colours), max_registers)
     if key not in _KERNELS:
-        _KERNELS[key] = _make_kernel(tile, tuple(colours), max_registers, bool(step))
+        _KERNELS[key] = _make_kernel(tile, tuple(colours), max_registers)
     return _KERNELS[key]
 
 
-def _make_kernel(tile: int, colours: tuple, max_registers: int | None, step: bool):
+def _make_kernel(tile: int, colours: tuple, max_registers: int | None):
     TILE_SIDE = tile
     HALF = tile // 2
     REGION_ROWS = tile + 2
@@ -83,30 +73,11 @@ def _make_kernel(tile: int, colours: tuple, max_registers: int | None, step: boo
     REGION = REGION_ROWS * REGION_COLS
     STICKS = tile * tile // 2  # a colour's sticks in a tile: one axis keeps half its anchors
     COLOURS = colours
-    STEP = step
 
     @wp.func
     def region_cell(e: int):
         """Row and column, in the tile's region, of the region's e-th cell (row-major)."""
         return e // REGION_COLS, e % REGION_COLS
-
-    @wp.func
-    def first_tile_colour(gr: int, gc: int, grid_cols: int):
-        """The first tile colour (2 x tile row parity + tile column parity, the launch order) whose launch stages
-        the cloth's particle in row gr, column gc: the least over the tiles whose regions hold it. Its own tile's
-        region holds it; so does the region of the tile row above where gr is one of that region's last two rows
-        (gr % TILE <= 1), that of the tile column to the left where gc is one of its last two columns, and that of
-        the tile column to the right where gc is its first (halo) column and that tile exists. Two candidates
-        along an axis are neighbouring tiles, so their least parity is 0."""
-        tr = gr // TILE_SIDE
-        tc = gc // TILE_SIDE
-        row_parity = tr % 2
-        if tr > 0 and gr % TILE_SIDE <= 1:
-            row_parity = 0
-        col_parity = tc % 2
-        if (tc > 0 and gc % TILE_SIDE <= 1) or (gc % TILE_SIDE == TILE_SIDE - 1 and gc + 1 < grid_cols):
-            col_parity = 0
-        return 2 * row_parity + col_parity
 
     @wp.func_native("t.data(wp::tile_coord(i, j)) = value;")
     def put_point(t: wp.tile(dtype=wp.vec3, shape=(REGION_ROWS, REGION_COLS), storage="shared"), i: int, j: int,
@@ -150,16 +121,10 @@ def _make_kernel(tile: int, colours: tuple, max_registers: int | None, step: boo
         tile_row_parity: int,
         tile_col_parity: int,
         tiles_across: int,
-        x_inertial: wp.array(dtype=wp.vec3),
-        delta: wp.array(dtype=wp.vec3),
-        velocity_scale: float,
-        accel_offset: wp.vec3,
     ):
         """One sweep of every colour over the tiles of one tile colour (tile row parity, tile column parity):
         block k takes tile (parity_row + 2 (k // tiles_across), parity_col + 2 (k % tiles_across)). ``layout``
-        is any colour's (the kernel reads the cloth's first particle, row length and weights from it). The
-        arguments from ``x_inertial`` on are read only by a kernel that takes the Verlet step: the State's
-        prediction and increment, and the step's factors, as verlet_step takes them."""
+        is any colour's (the kernel reads the cloth's first particle, row length and weights from it)."""
         block, lane = wp.tid()
         threads = wp.block_dim()
         first = layout.first_particle
@@ -182,19 +147,8 @@ def _make_kernel(tile: int, colours: tuple, max_registers: int | None, step: boo
             gr = r0 + rr
             gc = c0 - 1 + rc
             if gr < grid_rows and gc >= 0 and gc < grid_cols:
-                p = first + gr * grid_cols + gc
-                xp = x[p]
-                w = particle_weight(layout, p, inv_mass, pins)
-                if wp.static(STEP):
-                    # The first tile to stage a free particle steps it: no launch before this one read it, and
-                    # every later one reads it from here.
-                    if w != 0.0 and first_tile_colour(gr, gc, grid_cols) == 2 * tile_row_parity + tile_col_parity:
-                        move = implicit_move(p, x, x_inertial, delta) * velocity_scale + accel_offset
-                        xp = xp + move
-                        x_inertial[p] = xp
-                        delta[p] = move
-                put_point(region, rr, rc, xp)
-                put_weight(weight, rr, rc, w)
+                put_point(region, rr, rc, x[first + gr * grid_cols + gc])
+                put_weight(weight, rr, rc, particle_weight(layout, first + gr * grid_cols + gc, inv_mass, pins))
             e += threads
         k = lane
         while k < REGION_COLS:

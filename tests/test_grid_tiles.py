@@ -11,10 +11,8 @@ import warp as wp
 
 from conftest import make_scene
 from warp_verlet.constraints.sticks import GridTiles
-from warp_verlet.core import stages
 from warp_verlet.core.simulator import Simulator
 from warp_verlet.errors import ArgumentError
-from warp_verlet.input.scene import parse_scene
 from warp_verlet.constraints import sticks
 from warp_verlet.kernels.relax import relax_colour
 
@@ -49,8 +47,6 @@ def perturbed(sim: Simulator, seed: int = 3) -> np.ndarray:
 ])
 def test_a_tiled_sweep_is_the_sequential_sweep_in_tile_order_bit_for_bit(tile, cloth, monkeypatch):
     monkeypatch.setattr(sticks, "GRID_TILE", tile)
-    # The sticks alone: the Verlet step a tiled sweep can take in is tested below.
-    monkeypatch.setattr(stages, "STEP_IN_TILES", {"cpu": False, "cuda": False})
     scene = sheet(**cloth)
     tiled = Simulator(scene, "cpu", threads=1, sticks="tiled")
     explicit = Simulator(scene, "cpu", threads=1, sticks="explicit")
@@ -149,67 +145,3 @@ def test_tiled_sweeps_refuse_what_they_do_not_cover(cloth, simulation, words):
     scene = make_scene(simulation, **spec)
     with pytest.raises(ArgumentError, match=words):
         Simulator(scene, "cpu", sticks="tiled")
-
-
-APART = {"cpu": False, "cuda": False}
-TAKEN = {"cpu": True, "cuda": True}
-# A sheet released from a horizontal pose, which a ball under its middle catches: it falls, swings from its pins
-# and drapes, so that every particle moves between the staging of one tile colour and the next.
-BALL = {"type": "sphere", "centre": [0.5, -0.3, 0.6], "radius": 0.25}
-
-
-@pytest.mark.parametrize("tile, simulation, cloth, threads", [
-    (16, {"substeps": 2, "iterations": 3}, {}, 1),  # two pins, no tethers: the step in the first of three sweeps
-    (4, {"substeps": 3, "iterations": 1}, {}, 1),  # the smallest tile: a particle in up to four regions
-    (8, {"substeps": 2, "iterations": 2}, {"pins": [], "particle_masses": [[3, 4, 0.5], [20, 30, 0.01]]}, 2),
-    (16, {"substeps": 2, "iterations": 2, "contact_projection": "every_sweep"}, {"pins": []}, 1),
-])
-def test_tiles_that_take_the_verlet_step_leave_its_own_launchs_positions(tile, simulation, cloth, threads, device,
-                                                                        monkeypatch):
-    """The first tiled sweep that takes the Verlet step as it stages each particle leaves every position as the
-    step's own launch before it does, bit for bit, on every device (weights found from the pins or read from the
-    array, a CPU thread team, contact in every sweep): each particle is stepped once, by the first tile colour's
-    launch that stages it (one stepped by a later tile colour instead, or twice, shows at the first substep)."""
-    monkeypatch.setattr(sticks, "GRID_TILE", tile)
-    spec = {"resolution": [ROWS, COLS], "size": [1.0, 1.2], "pins": ["top-left", "top-right"], "tethers": False,
-            "orientation": "horizontal", "sticks": ["structural", "shear", "bend"], **cloth}
-    scene = parse_scene({"simulation": simulation, "cloth": [spec], "collider": [BALL]}, file="<test>")
-    runs = []
-    for fold in (TAKEN, APART):
-        monkeypatch.setattr(stages, "STEP_IN_TILES", fold)
-        sim = Simulator(scene, device, threads=threads if device == "cpu" else None, sticks="tiled")
-        assert stages.tiles_take_step(sim.solver) == fold["cpu"]
-        for _ in range(10):
-            sim.step_frame()
-        runs.append(sim.positions())
-    assert np.abs(runs[0] - sim.model.rest_positions).max() > 0.05  # it fell
-    np.testing.assert_array_equal(runs[0], runs[1])
-
-
-def test_tiles_that_take_the_verlet_step_are_all_a_substeps_launches(launches, monkeypatch):
-    k = 3
-    scene = make_scene({"iterations": k}, resolution=[ROWS, COLS], pins=["top-left", "top-right"], tethers=False)
-    names = {}
-    for fold in (TAKEN, APART):
-        monkeypatch.setattr(stages, "STEP_IN_TILES", fold)
-        sim = Simulator(scene, "cpu", threads=1, use_graph=False, sticks="tiled")
-        sim.step()  # the first step also runs verlet_start
-        names[fold["cpu"]] = launches.of(sim.step)
-    assert len(names[True]) == 4 * k and all(name.endswith("relax_grid_tiles") for name in names[True])
-    assert names[False] == ["verlet_step"] + names[True]
-
-
-@pytest.mark.parametrize("simulation, cloth", [
-    ({}, {"tethers": True}),  # the tether pass runs between the step and the tiles (inside the step on a GPU)
-    ({"multilevel": True}, {}),  # its pass measures moves from the Verlet prediction, before the first sweep
-    ({"global_iterations": 3}, {}),  # the global correction runs between the step and the sweeps
-    ({"air": {"velocity": [0.0, 0.0, 5.0]}}, {}),  # the air's step gathers each particle's force
-    ({}, {"self_collision": True}),  # the self-contact search reads the positions before the first sweep
-])
-def test_the_tiles_leave_the_step_alone_where_something_runs_before_their_first_sweep(simulation, cloth,
-                                                                                     monkeypatch):
-    monkeypatch.setattr(stages, "STEP_IN_TILES", TAKEN)
-    scene = make_scene(simulation, **{"resolution": [12, 10], "pins": ["top-left", "top-right"], "tethers": False,
-                                      **cloth})
-    sim = Simulator(scene, "cpu", sticks="tiled")
-    assert not stages.tiles_take_step(sim.solver)

@@ -33,7 +33,6 @@ class BoundStage:
 
     run: Callable[[Any, float], None] | None  # (a State, dt)
     phases: list[list[PhaseTask | None]] | None = None
-    first_phases: list[list[PhaseTask | None]] | None = None  # the first sweep's, where they differ (None: phases)
 
 
 def recorded(kernel, dim: int, inputs: list, outputs: list | None = None, block_dim: int = 256) -> PhaseTask:

@@ -160,9 +160,7 @@ class GridTiles(ConstraintSet):
     """Implicit grid sticks swept tile by tile (kernels/grid_tiles.py): a block holds a tile of the cloth and
     its halo in shared memory and projects every colour of the tile's sticks there; four launches a sweep, one
     per tile colour. Rigid sticks, float32 positions. The same projections as GridSticks in another order
-    (block Gauss-Seidel), so not the same positions bit for bit. Where stages.tiles_take_step allows, the first
-    sweep's tiles also take the Verlet step as they stage each particle: the same positions as the step's own
-    launch, bit for bit."""
+    (block Gauss-Seidel), so not the same positions bit for bit."""
 
     name = "grid tiles"
 
@@ -175,47 +173,26 @@ class GridTiles(ConstraintSet):
     def bind(self, model, state, solver) -> BoundStage:
         import warp as wp
 
-        from warp_verlet.core.stages import step_factors, tiles_take_step
         from warp_verlet.kernels.grid_tiles import relax_grid_tiles
 
         g, x, tile = model.grid, state.particle_q, GRID_TILE
         geometry = tuple((c.layout.dr, c.layout.dc, c.layout.col_first, int(c.layout.row_q == 0),
                           c.layout.row_q or c.layout.col_q, c.layout.parity) for c in g.colours)
         registers = GRID_TILE_MAX_REGISTERS if g.rows * g.cols >= GRID_TILE_CAPPED_FROM else None
-        step = tiles_take_step(solver)
+        kernel = relax_grid_tiles(tile, geometry, registers)
         tiles_down, tiles_across = -(-g.rows // tile), -(-g.cols // tile)
-
-        def sweep(steps: bool) -> list:
-            """One sweep's launches, one per tile colour, that take the Verlet step (``steps``) or not."""
-            kernel = relax_grid_tiles(tile, geometry, registers, step=steps)
-            tasks = []
-            for row_parity in (0, 1):
-                for col_parity in (0, 1):
-                    down, across = (tiles_down - row_parity + 1) // 2, (tiles_across - col_parity + 1) // 2
-                    if down * across == 0:
-                        continue
-                    launch = wp.launch_tiled(
-                        kernel, dim=[down * across], block_dim=tile * tile // 2, record_cmd=True,
-                        inputs=[x, model.inv_mass, g.colours[0].layout, g.colours[0].pins, g.col_rest1, g.col_rest2,
-                                g.row_rest1, g.row_rest2, g.col_sq1, g.row_sq1, g.rows, row_parity, col_parity, across,
-                                state.particle_q_inertial, state.particle_dq, 1.0, wp.vec3()])
-                    tasks.append(PhaseTask(kernel.key, launch.launch, launch))
-            return tasks
-
+        tasks = []
+        for row_parity in (0, 1):
+            for col_parity in (0, 1):
+                down, across = (tiles_down - row_parity + 1) // 2, (tiles_across - col_parity + 1) // 2
+                if down * across == 0:
+                    continue
+                launch = wp.launch_tiled(
+                    kernel, dim=[down * across], block_dim=tile * tile // 2, record_cmd=True,
+                    inputs=[x, model.inv_mass, g.colours[0].layout, g.colours[0].pins, g.col_rest1, g.col_rest2,
+                            g.row_rest1, g.row_rest2, g.col_sq1, g.row_sq1, g.rows, row_parity, col_parity, across])
+                tasks.append(PhaseTask(kernel.key, launch.launch, launch))
         # One thread runs a tile colour: on the CPU a tiled launch's shared memory is one buffer for the process,
         # so two threads' launches would write over each other. The CPU thread team's other threads wait.
         idle = [None] * (solver.threads - 1)
-        if not step:
-            return BoundStage(None, [[task, *idle] for task in sweep(False)])
-        first = sweep(True)
-        # The later sweeps' kernel, compiled only where there are later sweeps.
-        tasks = sweep(False) if solver.settings.iterations > 1 else first
-
-        def set_step(state, dt: float) -> None:
-            """This substep's step factors into the first sweep's launches (the Verlet stage launches nothing)."""
-            velocity_scale, accel_offset = step_factors(solver, state, dt)
-            for task in first:
-                task.launch.set_param_by_name("velocity_scale", velocity_scale)
-                task.launch.set_param_by_name("accel_offset", accel_offset)
-
-        return BoundStage(set_step, [[task, *idle] for task in tasks], [[task, *idle] for task in first])
+        return BoundStage(None, [[task, *idle] for task in tasks])

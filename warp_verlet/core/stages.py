@@ -28,7 +28,6 @@ if TYPE_CHECKING:  # pragma: no cover
     from .aerodynamics import AirCounts
 
 from ..constraints import kinds as constraint_kinds
-from ..constraints.sticks import GridTiles
 from ..constraints.tethers import Tethers
 from ..launches import FLOAT, VEC2I, VEC3, VEC3D, BoundStage, recorded
 
@@ -184,8 +183,7 @@ def grid_counts(scene: "Scene", sticks: str) -> dict:
                   "bend": r * max(c - 2, 0) + max(r - 2, 0) * c}
     soft = sum(per_family[f] for f in cloth.sticks if cloth.compliance.get(f, 0.0) > 0.0)
     # Implicit tethers only when asked for: on an H100 the tether table's pass measured faster than computing
-    # each particle's nearest pins and their float64 distances in every sweep (bench/results/implicit_grid), and
-    # so did a tiled sweep that computed them in its staging (bench/results/grid_tiles/tiles-take-step.md).
+    # each particle's nearest pins and their float64 distances in every sweep (bench/results/implicit_grid).
     pins = cloth.pin_count if (sticks == "implicit" and cloth.uses_tethers
                                and 0 < cloth.pin_count <= MAX_GRID_TETHER_PINS) else 0
     weight_pins = cloth.pin_count if not cloth.particle_masses and 0 < cloth.pin_count <= MAX_UNIFORM_MASS_PINS else 0
@@ -238,19 +236,6 @@ class Aerodynamics:
         return BoundStage(run)
 
 
-def step_factors(solver, state, dt: float) -> tuple:
-    """The Verlet step's ``velocity_scale`` and ``accel_offset`` (kernels/integrate.py) for a substep of ``dt``
-    after one of ``state.dt_prev``, in the positions' type (accel is one too): a float32 factor would cost float64
-    its precision."""
-    settings, real = solver.settings, solver.model.position_scalar
-    ratio = min(dt / state.dt_prev, settings.max_dt_ratio)
-    return real(math.exp(-settings.damping * dt) * ratio), solver.accel * real(dt * (dt + state.dt_prev) * 0.5)
-
-
-def _taken_by_the_tiles(state, dt: float) -> None:
-    """The Verlet step where the first tiled sweep takes it (tiles_take_step): nothing to launch here."""
-
-
 class Integrate:
     """The Verlet step (kernels/integrate.py): gravity and wind in one acceleration, damping per second; with air,
     each particle's share of its faces' forces too (Aerodynamics)."""
@@ -266,8 +251,6 @@ class Integrate:
     def bind(self, model, state, solver) -> BoundStage:
         if AERODYNAMICS.needed(solver.req):
             return self._bind_air(model, state, solver)
-        if tiles_take_step(solver):
-            return BoundStage(_taken_by_the_tiles)
         import warp as wp
 
         from warp_verlet.kernels.integrate import verlet_step, verlet_step_tethered
@@ -286,7 +269,10 @@ class Integrate:
             kernel, tethers, weights = instance(verlet_step, model.position_dtype), [], [inv_mass]
 
         def run(state, dt: float) -> None:
-            velocity_scale, accel_offset = step_factors(solver, state, dt)
+            ratio = min(dt / state.dt_prev, settings.max_dt_ratio)
+            # In the positions' type (accel is one too): a float32 factor would cost float64 its precision.
+            velocity_scale = real(math.exp(-settings.damping * dt) * ratio)
+            accel_offset = accel * real(dt * (dt + state.dt_prev) * 0.5)
             wp.launch(kernel, n, inputs=[x, x_inertial, dq, *weights, velocity_scale, accel_offset, *tethers])
 
         return BoundStage(run)
@@ -336,29 +322,6 @@ def tethers_in_integrate(solver) -> bool:
     return model.tether_table.count == free
 
 
-STEP_IN_TILES = {"cpu": True, "cuda": True}
-"""Per device kind: whether the first tiled sweep of a substep takes the Verlet step into its staging, where
-tiles_take_step allows (kernels/grid_tiles.py, "The Verlet step in the staging"). The positions are the step's own
-launch's bit for bit (tests/test_grid_tiles.py, on the CPU and on CUDA); on a GPU it saves the step's trip of every
-position through memory (bench/results/grid_tiles/tiles-take-step.md). ``bench.implicit_grid --tethers-apart``
-turns it off."""
-
-
-def tiles_take_step(solver) -> bool:
-    """Whether the first tiled sweep of a substep also takes the Verlet step, in its staging: where the device
-    kind's STEP_IN_TILES says so, the step is the plain one (no air), and nothing runs between the step and the
-    tiles: no global correction, no kind's per-substep set-up that reads positions (the multilevel pass, the
-    self-contact search), and no kind the sweep runs before the tiles (the tethers)."""
-    req, model = solver.req, solver.model
-    if not (STEP_IN_TILES["cuda" if model.device.is_cuda else "cpu"] and req.free_particles and RELAX.needed(req)
-            and not AERODYNAMICS.needed(req) and not GLOBAL.needed(req)):
-        return False
-    kinds = [c for c in constraint_kinds() if c.needed(req)]
-    if any(c.reads_positions_before_sweeps for c in kinds):
-        return False
-    return bool(kinds) and isinstance(kinds[0], GridTiles)
-
-
 class GlobalSolve:
     """The global correction (warp_verlet/core/global_solve.py): Gauss-Newton steps on the sticks with contact
     inside, between the prediction and the sweeps, when ``simulation.global_iterations`` > 0."""
@@ -402,11 +365,10 @@ class Relax:
         kinds = [c for c in constraint_kinds() if c.needed(solver.req)]
         sets = [c.bind(model, state, solver) for c in kinds]
         phases = [phase for bound in sets for phase in bound.phases]
-        # The phases of the first sweep: without the tether pass where the Verlet step has run it, and a kind's own
-        # first sweep where it differs (the tiled sweep that takes the Verlet step).
+        # The phases of the first sweep: without the tether pass where the Verlet step has run it.
         folded = tethers_in_integrate(solver)
         first = [phase for c, bound in zip(kinds, sets) if not (folded and isinstance(c, Tethers))
-                 for phase in (bound.phases if bound.first_phases is None else bound.first_phases)]
+                 for phase in bound.phases]
         before = [bound.run for bound in sets if bound.run is not None]  # per-substep set-up (dt, zeroing)
         collide_first = ()
         if contact_every_sweep(solver):
