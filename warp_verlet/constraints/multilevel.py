@@ -30,7 +30,7 @@ import numpy as np
 from .kind import ConstraintSet
 from ..geometry.colouring import grid_colouring
 from ..launches import FLOAT, INT, VEC2I, BoundStage, recorded
-from ..geometry.topology import SHEAR_ANTI, SHEAR_DIAG, STRUCT_H, STRUCT_V
+from ..geometry.topology import CLASS_ORDER, SHEAR_ANTI, SHEAR_DIAG, STRUCT_H, STRUCT_V
 
 
 def coarser(index: np.ndarray) -> np.ndarray:
@@ -121,7 +121,9 @@ def grid_hierarchy(rows: int, cols: int, positions: np.ndarray, first: int = 0) 
     levels = []
     for fine, coarse in zip(finer, axes):
         ends, classes, anchors = _coarse_sticks(*coarse, cols)
-        colouring = grid_colouring(classes, anchors)
+        # Structural sticks first: a smooth stretch is then taken out exactly (the shear sticks, projected
+        # first, would pull the particles sideways), so the coarse levels keep the classes' own order.
+        colouring = grid_colouring(classes, anchors, order=CLASS_ORDER)
         order = np.argsort(colouring.colour, kind="stable")
         ends = ends[order]
         sizes = colouring.sizes

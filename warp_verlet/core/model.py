@@ -29,6 +29,7 @@ from .stages import AERODYNAMICS, MAX_UNIFORM_MASS_PINS, Requirements
 from ..geometry.faces import edge_faces
 from ..geometry.mesh_cloth import STRUCTURAL
 from ..geometry.particle_order import inverse_order, locality_order, reorder_topology, wants_locality_order
+from ..geometry import topology as topology_module
 from ..geometry.topology import (BEND_H, BEND_V, FAMILY_OF_CLASS, SHEAR_ANTI, SHEAR_DIAG, STRUCT_H, STRUCT_V,
                                  ClothTopology, build_cloth)
 
@@ -139,8 +140,8 @@ GRID_DIRECTIONS = {
 
 
 class GridDevice:
-    """The implicit grid sticks of one grid cloth: its colours in the analytic colouring's order (class, then
-    parity: warp_verlet/geometry/colouring.grid_colouring) and the tables their rest lengths come from: per column for 1
+    """The implicit grid sticks of one grid cloth: its colours in the analytic colouring's order (class in the sweep's
+    order, topology.SWEEP_ORDER, then parity: warp_verlet/geometry/colouring.grid_colouring) and the tables their rest lengths come from: per column for 1
     and 2 columns apart and per row for 1 and 2 rows apart, the squared steps (float64) and their roots (the
     rest lengths of sticks along one axis, float32)."""
 
@@ -169,7 +170,7 @@ class GridDevice:
             self.pins = wp.array((pinned + slot.first).astype(np.int32), dtype=int, device=device)
         no_pins = wp.empty(0, dtype=int, device=device)
         colours, soft = [], 0
-        for cls in sorted(GRID_DIRECTIONS):
+        for cls in topology_module.SWEEP_ORDER:
             family = FAMILY_OF_CLASS[cls]
             if family not in spec.sticks:
                 continue
@@ -361,6 +362,7 @@ class Model:
         self.host_sticks = sticks
         self.host_rest = rest
         self.host_compliance = compliance  # m/N per stick (0: rigid), for the global correction's springs
+        self.host_family = family  # family code per stick (geometry/mesh_cloth: STRUCTURAL, SHEAR, BEND)
         self.structural = family == STRUCTURAL
         self.tears = scene.tears
         self.tension_tears = scene.tears_by_tension  # the scene check keeps it to the coloured solver

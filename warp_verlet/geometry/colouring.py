@@ -5,7 +5,8 @@ sees "sticks sorted by colour, with offsets". Two colourings are offered:
 
 - :func:`grid_colouring`, the analytic fast path for regular grids: each of the six stick directions gets
   two colours by the parity of its anchor row or column, so structural + shear + bend needs 12 colours,
-  the minimum (a grid particle touches 12 sticks).
+  the minimum (a grid particle touches 12 sticks); the directions come in the order a sweep projects them,
+  longest sticks first (topology.SWEEP_ORDER).
 - :func:`graph_colouring`, for any topology: Warp's ``wp.utils.graph_coloring_assign`` on the
   stick-conflict graph (nodes are sticks, edges join sticks that share a particle), then
   ``graph_coloring_balance`` to even out colour sizes.
@@ -23,6 +24,7 @@ import numpy as np
 
 from ..errors import ArgumentError
 
+from . import topology
 from .topology import BEND_H, BEND_V, SHEAR_ANTI, SHEAR_DIAG, STRUCT_H, STRUCT_V
 
 
@@ -44,9 +46,13 @@ class Colouring:
         return float(sizes.max() / sizes.min()) if sizes.size else 1.0
 
 
-def grid_colouring(grid_class: np.ndarray, anchor: np.ndarray) -> Colouring:
-    """Analytic colouring of grid sticks. A stick's colour is 2 * class + parity, where parity is that of
-    the coordinate along which neighbouring sticks of the same direction would share a particle."""
+def grid_colouring(grid_class: np.ndarray, anchor: np.ndarray, order: tuple[int, ...] | None = None) -> Colouring:
+    """Analytic colouring of grid sticks. A stick's colour is 2 * (its class's place in ``order``) + parity, where
+    parity is that of the coordinate along which neighbouring sticks of the same direction would share a
+    particle: the colours come in the order a sweep projects them. ``order``: the six grid classes, by default
+    topology.SWEEP_ORDER (read at the call)."""
+    rank = np.empty(6, np.int32)
+    rank[list(topology.SWEEP_ORDER if order is None else order)] = np.arange(6)
     row, col = anchor[:, 0], anchor[:, 1]
     parity = np.select(
         [grid_class == STRUCT_H, grid_class == STRUCT_V, np.isin(grid_class, (SHEAR_DIAG, SHEAR_ANTI)),
@@ -54,7 +60,7 @@ def grid_colouring(grid_class: np.ndarray, anchor: np.ndarray) -> Colouring:
         # A bend stick spans two cells, so sticks 2 apart share a particle: colour by pairs of columns/rows.
         [col % 2, row % 2, row % 2, (col // 2) % 2, (row // 2) % 2],
     )
-    raw = 2 * grid_class.astype(np.int32) + parity.astype(np.int32)
+    raw = 2 * rank[grid_class] + parity.astype(np.int32)
     return _compact(raw, "grid analytic")
 
 
