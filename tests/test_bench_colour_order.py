@@ -1,4 +1,4 @@
-"""bench.colour_order: both orders on the same scene, the order put back after, a bad budget refused."""
+"""bench.colour_order: every order on the same scene, the sweep order put back after, bad arguments refused."""
 
 from __future__ import annotations
 
@@ -10,19 +10,25 @@ from bench import colour_order
 from warp_verlet.geometry import topology
 
 
-def test_both_orders_run_and_the_sweep_order_is_put_back(tmp_path):
+def test_the_orders_run_on_a_bench_scene_and_a_shipped_one_and_the_sweep_order_is_put_back(tmp_path):
     before = topology.SWEEP_ORDER
     assert colour_order.main(["--device", "cpu", "--scenes", "hanging", "--sizes", "12", "--budgets", "4x2",
-                              "--repeats", "1", "--out", str(tmp_path)]) == 0
+                              "--shipped", "rope", "--orders", "all", "--repeats", "1", "--out", str(tmp_path)]) == 0
     assert topology.SWEEP_ORDER is before
     rows = list(csv.DictReader(open(tmp_path / "colour-order.csv")))
-    assert [r["order"] for r in rows] == ["longest first", "classes' order"]
-    rms = [float(r["structural rms"].rstrip("%")) for r in rows]
-    assert rms[0] < rms[1]  # the same launches, less stretch
+    assert [r["order"] for r in rows] == list(colour_order.ORDERS) * 2
+    assert [r["scene"] for r in rows] == ["hanging"] * 6 + ["rope"] * 6
+    hanging = {r["order"]: float(r["structural rms"].rstrip("%")) for r in rows[:6]}
+    assert len(set(hanging.values())) > 1  # the order changes the result
     assert "command: `python -m bench.colour_order" in (tmp_path / "colour-order.md").read_text()
 
 
-def test_a_bad_budget_is_a_usage_error(capsys):
+@pytest.mark.parametrize("args, words", [
+    (["--budgets", "4by2"], "--budgets takes SxK pairs"),
+    (["--orders", "shear first"], "--orders: unknown"),
+    (["--shipped", "no_such_scene"], "no scenes/no_such_scene.toml"),
+])
+def test_bad_arguments_are_usage_errors(args, words, capsys):
     with pytest.raises(SystemExit):
-        colour_order.main(["--device", "cpu", "--sizes", "12", "--budgets", "4by2"])
-    assert "--budgets takes SxK pairs" in capsys.readouterr().err
+        colour_order.main(["--device", "cpu", "--sizes", "12", *args])
+    assert words in capsys.readouterr().err

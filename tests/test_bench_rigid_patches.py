@@ -45,10 +45,9 @@ def test_both_methods_on_the_same_cloth(tmp_path):
         for r in (shape, pairs):
             assert int(r["launches / sweep"]) == int(free["launches / sweep"]) + int(r["patch launches / sweep"])
         assert float(shape["worst pair error m"]) <= RIGID
-        # The patch-less cloth bends the same particles: the measurement sees what the constraints prevent (the
-        # all-pairs sticks, four sweeps from converged on a 4 x 4 patch, only part of it).
-        assert float(free["worst pair error m"]) > 10 * float(shape["worst pair error m"])
-        assert float(free["worst pair error m"]) > 2 * float(pairs["worst pair error m"])
+        # The patch-less cloth bends the same particles: the measurement sees what the constraints prevent.
+        assert float(free["worst pair error m"]) > 10 * max(float(shape["worst pair error m"]),
+                                                            float(pairs["worst pair error m"]))
     assert "command: `" in (tmp_path / "rigid_patches.md").read_text()
 
 

@@ -1,6 +1,6 @@
 """The Model/State/Solver split changed no bit: every shipped scene, with its sticks rigid, gives the same
 positions at every frame as the code before the split (tests/data/golden_rigid.json, recorded by
-tests/data/record_golden_rigid.py with that code), in the recording's sweep order of a grid's stick classes.
+tests/data/record_golden_rigid.py with that code).
 
 Rigid sticks and no tethers (new since), because soft sticks changed meaning on purpose (a per-sweep stiffness became an XPBD
 compliance; tests/test_compliance.py checks the new meaning against the spring it models). The old per-substep
@@ -23,7 +23,6 @@ import warp as wp
 
 from warp_verlet.input.scene import parse_scene
 from warp_verlet.core.simulator import Simulator
-from warp_verlet.geometry import topology
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -71,11 +70,7 @@ def rigid_scene(case: str):
 
 
 @pytest.mark.parametrize("case", [pytest.param(c, marks=pytest.mark.slow) if c.startswith("big_grid") else c for c in CASES])
-def test_shipped_scene_with_rigid_sticks_is_unchanged(case, monkeypatch):
-    # The recording swept a grid's stick classes in their own order (structural first); the sweep now projects
-    # the longest sticks first (topology.SWEEP_ORDER), on purpose, and tests/test_colour_order.py checks what
-    # that buys. Everything else must still give the recording's bits.
-    monkeypatch.setattr(topology, "SWEEP_ORDER", topology.CLASS_ORDER)
+def test_shipped_scene_with_rigid_sticks_is_unchanged(case):
     record = GOLDEN[case]
     scene = rigid_scene(case)
     assert scene.simulation.dt == pytest.approx(record["dt"], rel=1e-15)

@@ -159,7 +159,7 @@ def test_implicit_sticks_allocate_no_stick_arrays_and_issue_one_launch_per_colou
     assert len(soft) == 4 and model.grid.soft_sticks == sum(soft) == 8 * 7 + 6 * 9  # the bend sticks
     sim.step()
     assert sim.solver._scratch["grid_tension"].shape == (model.grid.soft_sticks,)
-    colours = ["relax_grid_colour_compliant"] * 4 + ["relax_grid_colour"] * 8  # bend sticks first
+    colours = ["relax_grid_colour"] * 8 + ["relax_grid_colour_compliant"] * 4
     assert launches.of(sim.step) == ["verlet_step", "zero"] + (["pull_grid_tethers"] + colours) * k
     assert model.grid.pins.numpy().tolist() == [0, 8]  # the pins a projection checks: the free weigh alike
 

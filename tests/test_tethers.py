@@ -35,11 +35,11 @@ def test_a_tethered_cloth_stays_within_its_tether_lengths(device):
     # The tether pass runs before the sticks in each sweep, so the last sweep's stick corrections (the residual
     # stretch, about 1e-5 here) may carry a particle that far past its tether: 1e-4 relative bounds it.
     assert excess_over_tether(sim, table).max() < 1e-4
-    # The same cloth without tethers ends far beyond those lengths (about 1%): the bound above is not vacuous.
+    # The same cloth without tethers ends far beyond those lengths: the bound above is not vacuous.
     plain = Simulator(hanging(False), device)
     for _ in range(60):
         plain.step_frame()
-    assert excess_over_tether(plain, table).max() > 5e-3
+    assert excess_over_tether(plain, table).max() > 1e-2
 
 
 def test_tethers_cut_the_stretch_of_a_big_hanging_cloth():

@@ -140,10 +140,10 @@ GRID_DIRECTIONS = {
 
 
 class GridDevice:
-    """The implicit grid sticks of one grid cloth: its colours in the analytic colouring's order (class in the sweep's
-    order, topology.SWEEP_ORDER, then parity: warp_verlet/geometry/colouring.grid_colouring) and the tables their rest lengths come from: per column for 1
-    and 2 columns apart and per row for 1 and 2 rows apart, the squared steps (float64) and their roots (the
-    rest lengths of sticks along one axis, float32)."""
+    """The implicit grid sticks of one grid cloth: its colours in the analytic colouring's order (class in the
+    sweep's order, topology.SWEEP_ORDER, then parity: warp_verlet/geometry/colouring.grid_colouring) and the tables
+    their rest lengths come from: per column for 1 and 2 columns apart and per row for 1 and 2 rows apart, the
+    squared steps (float64) and their roots (the rest lengths of sticks along one axis, float32)."""
 
     def __init__(self, slot: "ClothSlot", spec, device, uniform: bool):
         from warp_verlet.kernels.grid_relax import GridColour
