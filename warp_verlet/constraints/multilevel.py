@@ -121,8 +121,8 @@ def grid_hierarchy(rows: int, cols: int, positions: np.ndarray, first: int = 0) 
     levels = []
     for fine, coarse in zip(finer, axes):
         ends, classes, anchors = _coarse_sticks(*coarse, cols)
-        # Structural sticks first: a smooth stretch is then taken out exactly (the shear sticks, projected
-        # first, would pull the particles sideways), so the coarse levels keep the classes' own order.
+        # Structural sticks first, whatever the fine sweep's order: a smooth stretch is then taken out exactly
+        # (shear sticks projected first pull the particles sideways; tests/test_multilevel.py).
         colouring = grid_colouring(classes, anchors, order=CLASS_ORDER)
         order = np.argsort(colouring.colour, kind="stable")
         ends = ends[order]

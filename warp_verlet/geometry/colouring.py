@@ -5,8 +5,8 @@ sees "sticks sorted by colour, with offsets". Two colourings are offered:
 
 - :func:`grid_colouring`, the analytic fast path for regular grids: each of the six stick directions gets
   two colours by the parity of its anchor row or column, so structural + shear + bend needs 12 colours,
-  the minimum (a grid particle touches 12 sticks); the directions come in the order a sweep projects them,
-  longest sticks first (topology.SWEEP_ORDER).
+  the minimum (a grid particle touches 12 sticks); the directions come in the order a sweep projects them
+  (topology.SWEEP_ORDER).
 - :func:`graph_colouring`, for any topology: Warp's ``wp.utils.graph_coloring_assign`` on the
   stick-conflict graph (nodes are sticks, edges join sticks that share a particle), then
   ``graph_coloring_balance`` to even out colour sizes.
