@@ -219,10 +219,11 @@ def reorder_seconds(the_scene: Scene) -> float:
 
 
 def measure(variant: str, n: int, the_scene: Scene, load_s: float, device: str, repeats: int, use_graph: bool,
-            threads: int | None, frames: int = FRAMES, order: str = "reordered") -> dict:
+            threads: int | None, frames: int = FRAMES, order: str = "reordered", sticks: str = "auto",
+            label: str | None = None) -> dict:
     mesh = variant != "grid"
     start = time.perf_counter()
-    sim = Simulator(the_scene, device, use_graph=use_graph, threads=threads,
+    sim = Simulator(the_scene, device, use_graph=use_graph, threads=threads, sticks=sticks,
                     particle_order="morton" if order == "reordered" else "input")
     build_s = time.perf_counter() - start
     try:
@@ -238,7 +239,8 @@ def measure(variant: str, n: int, the_scene: Scene, load_s: float, device: str, 
         colouring = sim.model.colouring
         return {
             "size": f"{n}x{n}",
-            "variant": variant,
+            "variant": label or variant,
+            "sticks form": sim.model.sticks_form,
             "particle order": ORDER_NAMES[order] if mesh else "row-major",
             "particles": sim.model.particle_count,
             "sticks": sim.model.stick_count,
@@ -327,6 +329,9 @@ def main(argv=None) -> int:
     p.add_argument("--orders", choices=ORDERS, nargs="+", default=["reordered"],
                    help="the mesh cloths' particle order on the device: reordered (Morton, the default) and/or input; "
                         "each order given is one row per mesh variant")
+    p.add_argument("--sticks", choices=("auto", "explicit", "clustered"), nargs="+", default=["auto"],
+                   help="the mesh variants' stick forms (Simulator's sticks; the grid always takes auto): with "
+                        "several, a row per form")
     p.add_argument("--shuffle", action="store_true", help="the mesh files list their vertices in a random order")
     p.add_argument("--setup-only", action="store_true",
                    help="time the reordering's host-side setup at each size instead of simulating")
@@ -351,11 +356,14 @@ def main(argv=None) -> int:
                                      args.shuffle)
             for variant in VARIANTS:
                 the_scene, load_s = scenes[variant]
+                forms = list(dict.fromkeys(args.sticks)) if variant != "grid" else ["auto"]
                 for order in orders if variant != "grid" else orders[:1]:
-                    row = measure(variant, n, the_scene, load_s, str(device), args.repeats, not args.no_graph,
-                                  args.threads, args.frames, order)
-                    rows.append(row)
-                    print(row, flush=True)
+                    for form in forms:
+                        label = f"{variant}, {form}" if len(forms) > 1 else variant
+                        row = measure(variant, n, the_scene, load_s, str(device), args.repeats, not args.no_graph,
+                                      args.threads, args.frames, order, form, label)
+                        rows.append(row)
+                        print(row, flush=True)
     where = machine(device)
     pins = "its two top corners" if args.pins == "corners" else "its top row"
     title = (f"Mesh cloth beside the grid: hanging cloth pinned at {pins}, {args.frames} frames, "
@@ -373,6 +381,9 @@ def main(argv=None) -> int:
              "shear sticks, and its bend sticks join the corners opposite each edge. Its stretch is over those "
              "structural sticks, diagonals included, so it is not the same measure as the grid's and quad "
              "mesh's.\n"
+             "- sticks form: how the sweep runs (Simulator's sticks): explicit, a launch per colour of stick "
+             "arrays; clustered, stick arrays swept cluster by cluster in shared memory; implicit or tiled, a "
+             "grid's sticks computed in the kernel, a launch per colour or tile by tile.\n"
              "- balance: largest colour over smallest. load s: parse_scene (the mesh read, welded, checked; "
              "files written beforehand, not counted). build s: the Simulator's construction (colouring "
              "included). Mproj/s: sticks x substeps x iterations per second. Stretch |D - L|/L over the "

@@ -24,6 +24,7 @@ def _kinds() -> tuple:
     from .multilevel import Multilevel
     from .rigid_patches import RigidPatches
     from .self_contact import SelfContact
+    from .stick_clusters import StickClusters
     from .sticks import GridSticks, GridTiles, Sticks
     from .tethers import GridTethers, Tethers
 
@@ -32,7 +33,7 @@ def _kinds() -> tuple:
     # (on lengths the sticks have just set), then the contacts (after the sticks, so that a sweep's last word on
     # a pair is to keep it apart, the sticks' pull being what brings layers together), and the rigid patches
     # last, so that a sweep ends with each rigid.
-    return (Multilevel(), Tethers(), GridTethers(), Sticks(), GridSticks(), GridTiles(), AngleJoints(), AngleHinges(),
+    return (Multilevel(), Tethers(), GridTethers(), Sticks(), StickClusters(), GridSticks(), GridTiles(), AngleJoints(), AngleHinges(),
             SelfContact(), RigidPatches())
 
 

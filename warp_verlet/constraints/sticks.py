@@ -19,7 +19,7 @@ class Sticks(ConstraintSet):
     name = "sticks"
 
     def needed(self, req) -> bool:
-        return req.sticks > 0 and not req.implicit_grid
+        return req.sticks > 0 and not req.implicit_grid and not req.stick_clusters
 
     def device_bytes(self, req) -> int:
         if req.relaxation == "coloured":

@@ -274,7 +274,8 @@ class Model:
         req = requirements if requirements is not None else Requirements.of(scene, sticks)
         self.precision = req.precision
         self.stick_request = sticks  # what Requirements.of was asked: the solver's Requirements must be asked the same
-        self.sticks_form = ("tiled" if req.grid_tiles else "implicit") if req.implicit_grid else "explicit"
+        self.sticks_form = (("tiled" if req.grid_tiles else "implicit") if req.implicit_grid
+                            else "clustered" if req.stick_clusters else "explicit")
         double = self.precision == "float64"
         self.position_dtype = wp.vec3d if double else wp.vec3
         self.position_scalar = wp.float64 if double else wp.float32

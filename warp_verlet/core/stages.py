@@ -54,6 +54,7 @@ class Requirements:
     soft_sticks: int = 0  # implicit grid sticks of families with a compliance (each keeps an XPBD tension)
     grid_pins: int = 0  # implicit grid tethers: the cloth's pins (0: the tethers are arrays)
     grid_tiles: bool = False  # implicit grid sticks swept tile by tile in shared memory (kernels/grid_tiles.py)
+    stick_clusters: bool = False  # stick arrays swept cluster by cluster in shared memory (kernels/stick_clusters.py)
     weight_pins: int = 0  # implicit grid sticks of a cloth whose free particles weigh alike: its pins
     elements: tuple[tuple[str, object], ...] = ()  # (kind name, its count(scene)) of the kinds a scene uses
     global_iterations: int = 0  # the global correction's conjugate-gradient iterations (0: no correction)
@@ -112,6 +113,14 @@ class Requirements:
 
             raise ArgumentError("sticks = 'tiled' holds float32 positions in shared memory, but the scene's positions "
                                 "are float64 (simulation.precision)")
+        if sticks == "clustered":
+            from ..errors import ArgumentError
+
+            obstacle = cluster_obstacle(scene, req)
+            if obstacle is not None:
+                raise ArgumentError(f"sticks = 'clustered' sweeps rigid float32 stick arrays of the coloured solver "
+                                    f"that cannot tear, but {obstacle}")
+            req = replace(req, stick_clusters=True)
         return req
 
 
@@ -127,7 +136,7 @@ def global_levels(scene: "Scene") -> tuple[tuple[int, int, int], ...]:
     return tuple(coarse_level_counts([tuple(c.resolution) for c in scene.cloths]))
 
 
-STICK_FORMS = ("auto", "explicit", "implicit", "tiled")
+STICK_FORMS = ("auto", "explicit", "implicit", "tiled", "clustered")
 MIN_TILED_PARTICLES = 512 * 512
 """Where "auto" sweeps a grid's rigid float32 sticks tile by tile (kernels/grid_tiles.py) on a GPU: from this
 many particles on. On an H100 the tiles reached the same stretch as a launch per colour in less time at 512^2,
@@ -162,6 +171,21 @@ def implicit_grid_obstacle(scene: "Scene") -> str | None:
     return None
 
 
+def cluster_obstacle(scene: "Scene", req: Requirements) -> str | None:
+    """Why the scene's sticks cannot be swept cluster by cluster (constraints/stick_clusters.py), or None."""
+    if scene.simulation.relaxation != "coloured":
+        return "the Jacobi solver gathers each particle's sticks from a neighbour list"
+    if req.sticks == 0:
+        return "the scene has no sticks"
+    if scene.tears:
+        return "a cloth can tear (the sweep reads no stick's weight)"
+    if scene.compliant:
+        return "a cloth gives a stick family a compliance"
+    if req.precision != "float32":
+        return "the positions are float64 (simulation.precision)"
+    return None
+
+
 def grid_counts(scene: "Scene", sticks: str) -> dict:
     """Requirements's implicit-grid fields: all 0 when the sticks are arrays ("explicit", or "auto" where
     :func:`implicit_grid_obstacle` names one); "implicit" where one is named raises ArgumentError. "auto"
@@ -175,7 +199,7 @@ def grid_counts(scene: "Scene", sticks: str) -> dict:
     if sticks in ("implicit", "tiled") and obstacle is not None:
         raise ArgumentError(f"sticks = {sticks!r} needs one grid cloth that cannot tear and the coloured solver, "
                             f"but {obstacle}")
-    if sticks == "explicit" or obstacle is not None:
+    if sticks in ("explicit", "clustered") or obstacle is not None:
         return {}
     cloth = scene.cloths[0]
     r, c = cloth.resolution

@@ -1,0 +1,99 @@
+"""Clustered sweeps over stick arrays (warp_verlet/constraints/stick_clusters.py): the mesh's form of the grid's
+tiled sweep (kernels/grid_tiles.py), block Gauss-Seidel over clusters of particles held in shared memory.
+
+A cluster owns the sticks whose first particle it holds; its *region* is its particles and the other ends of its
+sticks. A block stages its cluster's region (positions and weights) in shared memory, projects the cluster's
+sticks colour by colour in the stick colouring's order, a thread per stick of the colour (a colour's sticks share
+no particle; a barrier separates the colours), and writes the region back. Clusters are coloured so that the
+regions of one cluster colour share no particle: a launch per cluster colour, Gauss-Seidel across them.
+
+Each stick is stored once, in the order the blocks read it (cluster colour, cluster, stick colour), with its two
+ends as indices into its cluster's region, so that a block reads its sticks as one contiguous run. The
+projection is ``stick_correction``, as in every other form; only the order of the projections differs, and that
+order is fixed (cluster colour, cluster, stick colour, stick), which the CPU runs literally (one lane per block).
+"""
+
+import warp as wp
+
+from .grid_tiles import block_barrier
+from .positions import scaled
+from .relax import stick_correction
+
+_KERNELS: dict = {}
+
+
+def relax_stick_clusters(region_capacity: int, max_registers: int | None = None):
+    """The clustered sweep's kernel for regions of at most ``region_capacity`` particles (the shared arrays'
+    length, a compile-time constant); ``max_registers`` caps a CUDA thread's registers (None: the compiler's)."""
+    key = (region_capacity, max_registers)
+    if key not in _KERNELS:
+        _KERNELS[key] = _make_kernel(region_capacity, max_registers)
+    return _KERNELS[key]
+
+
+def _make_kernel(region_capacity: int, max_registers: int | None):
+    CAPACITY = region_capacity
+
+    @wp.func_native("t.data(wp::tile_coord(i)) = value;")
+    def put_point(t: wp.tile(dtype=wp.vec3, shape=(CAPACITY,), storage="shared"), i: int, value: wp.vec3): ...
+
+    @wp.func_native("t.data(wp::tile_coord(i)) = value;")
+    def put_weight(t: wp.tile(dtype=float, shape=(CAPACITY,), storage="shared"), i: int, value: float): ...
+
+    options = {} if max_registers is None else {"cuda_max_registers": max_registers}
+
+    @wp.kernel(module="unique", **options)
+    def relax_stick_clusters(
+        x: wp.array(dtype=wp.vec3),
+        inv_mass: wp.array(dtype=float),
+        region_start: wp.array(dtype=int),
+        region: wp.array(dtype=int),
+        stick_start: wp.array(dtype=int),
+        stick_local: wp.array(dtype=wp.vec2i),
+        stick_rest: wp.array(dtype=float),
+        colours: int,
+        first_cluster: int,
+    ):
+        """One sweep over the clusters first_cluster, first_cluster + 1, ... (one cluster colour; block k takes
+        cluster first_cluster + k). Cluster c's region is region[region_start[c] : region_start[c + 1]]; its
+        sticks of colour n are stick_start[c * colours + n] .. stick_start[c * colours + n + 1] - 1, each given
+        by its ends' places in the region."""
+        block, lane = wp.tid()
+        threads = wp.block_dim()
+        c = first_cluster + block
+        r0 = region_start[c]
+        count = region_start[c + 1] - r0
+        points = wp.tile_empty(shape=CAPACITY, dtype=wp.vec3, storage="shared")
+        weights = wp.tile_empty(shape=CAPACITY, dtype=float, storage="shared")
+        e = lane
+        while e < count:
+            p = region[r0 + e]
+            put_point(points, e, x[p])
+            put_weight(weights, e, inv_mass[p])
+            e += threads
+        block_barrier()
+
+        base = c * colours
+        for n in range(colours):
+            s = stick_start[base + n] + lane
+            stop = stick_start[base + n + 1]
+            while s < stop:
+                ends = stick_local[s]
+                a = ends[0]
+                b = ends[1]
+                wa = weights[a]
+                wb = weights[b]
+                xa = points[a]
+                xb = points[b]
+                d = stick_correction(xa, xb, wa, wb, stick_rest[s], 1.0)
+                put_point(points, a, xa + scaled(d, wa))
+                put_point(points, b, xb - scaled(d, wb))
+                s += threads
+            block_barrier()  # the next colour reads this one's moves
+
+        e = lane
+        while e < count:
+            x[region[r0 + e]] = points[e]
+            e += threads
+
+    return relax_stick_clusters

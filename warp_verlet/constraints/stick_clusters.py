@@ -1,0 +1,196 @@
+"""Stick arrays swept cluster by cluster in shared memory (kernels/stick_clusters.py): what the tiled sweep is to a
+grid, for any cloth whose sticks are arrays (a mesh, or several cloths).
+
+A sweep of stick arrays is otherwise one launch per colour, and each launch streams its sticks' ends, rest lengths
+and both ends' positions through memory; a graph colour of a mesh scatters its sticks over the cloth, so a
+launch also reads positions out of order. Here the particles are cut into clusters of about
+``CLUSTER_PARTICLES`` consecutive particles in Morton order of their rest positions (a compact patch of cloth),
+each cluster owns the sticks whose first particle it holds, and a block projects every colour of its cluster's
+sticks on positions held in shared memory: a sweep reads and writes each position about once, in a few launches
+(one per cluster colour) instead of one per stick colour.
+
+Everything here is host-side numpy, built once per model.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .kind import ConstraintSet
+from ..launches import FLOAT, INT, VEC2I, BoundStage, PhaseTask
+
+CLUSTER_PARTICLES = 256
+"""Particles a cluster owns: with 128 threads a block, about one stick of each colour a thread."""
+CLUSTER_BLOCK = 128
+"""Threads per block of the clustered sweep."""
+MAX_REGION = 2048
+"""The most particles a cluster's region (its own and its sticks' other ends) may hold: 32 KiB of shared memory
+for their positions and weights."""
+
+
+@dataclass
+class ClusterLayout:
+    """The clustered sweep's order, on the host: clusters numbered in cluster-colour order; per cluster its region
+    (``region_start`` (C + 1,), ``region`` the particles) and its sticks by stick colour (``stick_start``
+    (C * colours + 1,)); per stored stick its ends as places in its cluster's region (``stick_local``), its rest
+    length and its index in the Model's stick arrays (``stick``); ``launches`` (first cluster, clusters) per cluster
+    colour; ``capacity`` the shared arrays' length."""
+
+    region_start: np.ndarray
+    region: np.ndarray
+    stick_start: np.ndarray
+    stick_local: np.ndarray
+    rest: np.ndarray
+    stick: np.ndarray
+    colours: int
+    launches: list[tuple[int, int]]
+    capacity: int
+
+
+def _regions(cluster_of: np.ndarray, sticks: np.ndarray, clusters: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(keys, region_start, stick_cluster): each cluster's region as sorted keys cluster * N + particle, the
+    regions' starts, and each stick's cluster (its first particle's)."""
+    n = len(cluster_of)
+    stick_cluster = cluster_of[sticks[:, 0]].astype(np.int64)
+    keys = np.unique(np.concatenate([cluster_of.astype(np.int64) * n + np.arange(n),
+                                     stick_cluster * n + sticks[:, 1]]))
+    start = np.zeros(clusters + 1, np.int64)
+    np.cumsum(np.bincount(keys // n, minlength=clusters), out=start[1:])
+    return keys, start, stick_cluster
+
+
+def colour_clusters(keys: np.ndarray, particles: int, clusters: int) -> np.ndarray:
+    """A colour per cluster such that the regions (``keys``: cluster * particles + particle) of one colour share
+    no particle: greedy, in cluster order (the lowest colour no coloured neighbour holds)."""
+    cluster, particle = keys // particles, keys % particles
+    order = np.argsort(particle, kind="stable")
+    cluster, particle = cluster[order], particle[order]
+    pairs = []
+    for d in range(1, int(np.bincount(particle).max())):
+        same = particle[d:] == particle[:-d]
+        pairs.append(np.stack([cluster[:-d][same], cluster[d:][same]], axis=1))
+    pairs = np.concatenate(pairs) if pairs else np.zeros((0, 2), np.int64)
+    pairs = np.unique(np.concatenate([pairs, pairs[:, ::-1]]), axis=0)
+    pairs = pairs[pairs[:, 0] != pairs[:, 1]]
+    offsets = np.searchsorted(pairs[:, 0], np.arange(clusters + 1))
+    colour = np.full(clusters, -1, np.int64)
+    for c in range(clusters):
+        taken = colour[pairs[offsets[c]:offsets[c + 1], 1]]
+        free = np.ones(len(taken) + 2, bool)
+        free[taken[(taken >= 0) & (taken < len(free))]] = False
+        colour[c] = int(np.argmax(free))
+    return colour
+
+
+def cluster_layout(sticks: np.ndarray, rest: np.ndarray, stick_colour: np.ndarray, colours: int,
+                   rest_positions: np.ndarray, cluster_particles: int = CLUSTER_PARTICLES) -> ClusterLayout:
+    """The clustered sweep's layout of ``sticks`` (S, 2) (device particle indices, each with its ``rest`` length
+    and its colour, no two sticks of a colour sharing a particle) over particles at ``rest_positions`` (N, 3)."""
+    from ..geometry.particle_order import morton_codes
+
+    n = len(rest_positions)
+    sticks = np.asarray(sticks, np.int64)
+    clusters = -(-n // cluster_particles)
+    cluster_of = np.empty(n, np.int64)
+    cluster_of[np.argsort(morton_codes(rest_positions), kind="stable")] = np.arange(n) // cluster_particles
+    keys, _, _ = _regions(cluster_of, sticks, clusters)
+    colour = colour_clusters(keys, n, clusters)
+    # Renumber the clusters in colour order, so that a cluster colour is one run of consecutive clusters.
+    renumber = np.empty(clusters, np.int64)
+    renumber[np.lexsort((np.arange(clusters), colour))] = np.arange(clusters)
+    cluster_of = renumber[cluster_of]
+    keys, region_start, stick_cluster = _regions(cluster_of, sticks, clusters)
+    order = np.lexsort((np.arange(len(sticks)), stick_colour, stick_cluster))
+    sticks, stick_cluster = sticks[order], stick_cluster[order]
+    local = np.stack([np.searchsorted(keys, stick_cluster * n + sticks[:, e]) - region_start[stick_cluster]
+                      for e in (0, 1)], axis=1)
+    stick_start = np.zeros(clusters * colours + 1, np.int64)
+    np.cumsum(np.bincount(stick_cluster * colours + stick_colour[order], minlength=clusters * colours),
+              out=stick_start[1:])
+    sizes = np.bincount(colour, minlength=int(colour.max()) + 1)
+    firsts = np.r_[0, np.cumsum(sizes)[:-1]]
+    largest = int(np.diff(region_start).max())
+    layout = ClusterLayout(region_start.astype(np.int32), (keys % n).astype(np.int32), stick_start.astype(np.int32),
+                           local.astype(np.int32), np.asarray(rest, np.float32)[order], order,
+                           colours, [(int(f), int(s)) for f, s in zip(firsts, sizes)], -(-largest // 32) * 32)
+    check_layout(layout, sticks)
+    return layout
+
+
+def check_layout(layout: ClusterLayout, sticks: np.ndarray) -> None:
+    """Raise AssertionError unless the layout is a race-free sweep of every stick once: each stored stick's local
+    ends are its ends, and the regions of one cluster colour share no particle."""
+    owner = np.repeat(np.arange(len(layout.region_start) - 1), np.diff(layout.region_start))
+    first = layout.region_start[:-1]
+    stick_owner = np.repeat(np.arange(len(layout.stick_start) - 1) // layout.colours, np.diff(layout.stick_start))
+    for e in (0, 1):
+        if not np.array_equal(layout.region[first[stick_owner] + layout.stick_local[:, e]], sticks[:, e]):
+            raise AssertionError("a clustered stick's local end is not its particle")
+    if not np.array_equal(np.sort(layout.stick), np.arange(len(sticks))):
+        raise AssertionError("the clusters do not hold every stick exactly once")
+    for start, count in layout.launches:
+        mine = (owner >= start) & (owner < start + count)
+        if np.bincount(layout.region[mine]).max(initial=0) > 1:
+            raise AssertionError("two clusters of one cluster colour share a particle")
+
+
+class StickClusters(ConstraintSet):
+    """Rigid stick arrays swept cluster by cluster in shared memory (``sticks = "clustered"``; kernels/
+    stick_clusters.py): one launch per cluster colour. The same projections as Sticks in another order (block
+    Gauss-Seidel), so not the same positions bit for bit."""
+
+    name = "stick clusters"
+
+    def needed(self, req) -> bool:
+        return req.sticks > 0 and req.stick_clusters
+
+    def device_bytes(self, req) -> int:
+        # per stick its local ends and rest (the Model's stick arrays stay, for tearing checks and readback);
+        # per particle about 1.5 region entries, and the cluster tables
+        return req.sticks * (VEC2I + FLOAT) + req.particles * 2 * INT + req.sticks * INT // 8
+
+    def build(self, model, scene, device):
+        import warp as wp
+
+        if model.colouring is None or model.colouring.overflow:
+            raise AssertionError("clustered sticks need a colouring without an overflow colour")
+        colour = np.repeat(np.arange(len(model.colour_ranges)), [n for _, n in model.colour_ranges])
+        layout = cluster_layout(model.host_sticks, model.host_rest, colour, len(model.colour_ranges),
+                                model.rest_positions, CLUSTER_PARTICLES)
+        if layout.capacity > MAX_REGION:
+            raise AssertionError(f"a cluster's region holds {layout.capacity} particles, above {MAX_REGION}")
+        return DeviceClusters(layout, device, wp)
+
+    def bind(self, model, state, solver) -> BoundStage:
+        import warp as wp
+
+        from warp_verlet.kernels.stick_clusters import relax_stick_clusters
+
+        data = model.constraints[self.name]
+        kernel = relax_stick_clusters(data.capacity)
+        tasks = []
+        for first, count in data.launches:
+            launch = wp.launch_tiled(kernel, dim=[count], block_dim=CLUSTER_BLOCK, record_cmd=True,
+                                     inputs=[state.particle_q, model.inv_mass, data.region_start, data.region,
+                                             data.stick_start, data.stick_local, data.rest, data.colours, first])
+            tasks.append(PhaseTask(kernel.key, launch.launch, launch))
+        # One thread runs a cluster colour: on the CPU a tiled launch's shared memory is one buffer for the
+        # process, so two threads' launches would write over each other. The CPU thread team's other threads wait.
+        idle = [None] * (solver.threads - 1)
+        return BoundStage(None, [[task, *idle] for task in tasks])
+
+
+class DeviceClusters:
+    """A ClusterLayout's arrays on the device."""
+
+    def __init__(self, layout: ClusterLayout, device, wp):
+        self.region_start = wp.array(layout.region_start, dtype=int, device=device)
+        self.region = wp.array(layout.region, dtype=int, device=device)
+        self.stick_start = wp.array(layout.stick_start, dtype=int, device=device)
+        self.stick_local = wp.array(layout.stick_local, dtype=wp.vec2i, device=device)
+        self.rest = wp.array(layout.rest, dtype=float, device=device)
+        self.colours = layout.colours
+        self.launches = layout.launches
+        self.capacity = layout.capacity
