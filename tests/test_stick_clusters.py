@@ -44,7 +44,8 @@ def sweep(sim: Simulator, start: np.ndarray, times: int = 1) -> np.ndarray:
     """``times`` sweeps of the sticks' phases alone, from ``start``."""
     sim.state.set_positions(start)
     kind = StickClusters() if sim.model.sticks_form == "clustered" else Sticks()
-    bound = kind.bind(sim.model, sim.state, sim.solver)
+    with wp.ScopedDevice(sim.device):  # as the solver binds (Sticks' launches take the current device)
+        bound = kind.bind(sim.model, sim.state, sim.solver)
     for _ in range(times):
         for phase in bound.phases:
             for task in phase:

@@ -173,7 +173,7 @@ class StickClusters(ConstraintSet):
         tasks = []
         for first, count in data.launches:
             launch = wp.launch_tiled(kernel, dim=[count], block_dim=CLUSTER_BLOCK, record_cmd=True,
-                                     inputs=[state.particle_q, model.inv_mass, data.region_start, data.region,
+                                     device=model.device, inputs=[state.particle_q, model.inv_mass, data.region_start, data.region,
                                              data.stick_start, data.stick_local, data.rest, data.colours, first])
             tasks.append(PhaseTask(kernel.key, launch.launch, launch))
         # One thread runs a cluster colour: on the CPU a tiled launch's shared memory is one buffer for the

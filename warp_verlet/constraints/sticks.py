@@ -188,7 +188,7 @@ class GridTiles(ConstraintSet):
                 if down * across == 0:
                     continue
                 launch = wp.launch_tiled(
-                    kernel, dim=[down * across], block_dim=tile * tile // 2, record_cmd=True,
+                    kernel, dim=[down * across], block_dim=tile * tile // 2, record_cmd=True, device=model.device,
                     inputs=[x, model.inv_mass, g.colours[0].layout, g.colours[0].pins, g.col_rest1, g.col_rest2,
                             g.row_rest1, g.row_rest2, g.col_sq1, g.row_sq1, g.rows, row_parity, col_parity, across])
                 tasks.append(PhaseTask(kernel.key, launch.launch, launch))
