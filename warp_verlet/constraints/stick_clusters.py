@@ -172,9 +172,10 @@ class StickClusters(ConstraintSet):
         kernel = relax_stick_clusters(data.capacity)
         tasks = []
         for first, count in data.launches:
+            inputs = [state.particle_q, model.inv_mass, data.region_start, data.region, data.stick_start,
+                      data.stick_local, data.rest, data.colours, first]
             launch = wp.launch_tiled(kernel, dim=[count], block_dim=CLUSTER_BLOCK, record_cmd=True,
-                                     device=model.device, inputs=[state.particle_q, model.inv_mass, data.region_start, data.region,
-                                             data.stick_start, data.stick_local, data.rest, data.colours, first])
+                                     device=model.device, inputs=inputs)
             tasks.append(PhaseTask(kernel.key, launch.launch, launch))
         # One thread runs a cluster colour: on the CPU a tiled launch's shared memory is one buffer for the
         # process, so two threads' launches would write over each other. The CPU thread team's other threads wait.
