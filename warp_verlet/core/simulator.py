@@ -180,7 +180,8 @@ class Simulator:
         arrays otherwise and on the CPU (model.stick_form says why), and sweeps rigid float32 ones of a large grid
         tile by tile in shared memory (kernels/grid_tiles.py); "explicit" always keeps them; "implicit" insists on
         a launch per colour, in the explicit sticks' order and with their positions bit for bit; "tiled" insists
-        on tiles. ``constraint_sets`` says what was chosen. ``particle_order``: "auto" holds a mesh cloth's
+        on tiles; "clustered" sweeps stick arrays (a mesh's) cluster by cluster in shared memory
+        (constraints/stick_clusters.py). ``constraint_sets`` says what was chosen. ``particle_order``: "auto" holds a mesh cloth's
         particles in Morton order on the device where the scene's order scatters its sticks across memory, so
         that a launch reads memory forward (warp_verlet/geometry/particle_order.py); "morton" always does;
         "input" holds them as the scene numbers them. Either way every
