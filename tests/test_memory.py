@@ -125,7 +125,12 @@ TILED = ["coloured", "tethers", "multilevel", "moving-sphere", "planes", "angle-
          "self-contact", "global"]
 
 
-@pytest.mark.parametrize("case", list(CASES) + [f"{c}/implicit" for c in IMPLICIT] + [f"{c}/tiled" for c in TILED])
+# The rigid float32 cases of the coloured solver that cannot tear, which allow clustered sweeps of stick arrays.
+CLUSTERED = ["coloured", "tethers", "multilevel", "moving-sphere", "planes", "self-contact", "global"]
+
+
+@pytest.mark.parametrize("case", list(CASES) + [f"{c}/implicit" for c in IMPLICIT] + [f"{c}/tiled" for c in TILED]
+                         + [f"{c}/clustered" for c in CLUSTERED])
 def test_estimate_matches_the_arrays_allocated(case):
     case, _, sticks = case.partition("/")
     simulation, cloth, *colliders = CASES[case]
@@ -143,7 +148,17 @@ def test_estimate_matches_the_arrays_allocated(case):
     contact = Requirements.of(scene).count("self contact")
     native = hash_grid_bytes(scene.particle_count, contact[1]) if contact else 0
     allocated = simulator_bytes(sim) + native + mesh_native_bytes(sim)
-    assert allocated - estimate(scene, sim.model.sticks_form).device_bytes == counters
+    # Clustered sticks are estimated before their layout is built, by a bound: every particle and one other end
+    # per stick in the regions, MAX_COLOURS stick colours per cluster. What the layout left of it is exact.
+    slack = 0
+    if sticks == "clustered":
+        from warp_verlet.geometry.colouring import MAX_COLOURS
+
+        data = sim.model.constraints["stick clusters"]
+        clusters = data.region_start.shape[0] - 1
+        slack = 4 * (scene.particle_count + sim.model.stick_count - data.region.shape[0]
+                     + clusters * (MAX_COLOURS - data.colours))
+    assert allocated - estimate(scene, sim.model.sticks_form).device_bytes == counters - slack
 
 
 def test_a_scene_too_big_for_the_machine_is_refused_before_allocating():

@@ -174,3 +174,11 @@ def test_a_clustered_sweep_on_cuda_is_repeatable_and_agrees_with_the_cpu(tmp_pat
     again = sweep(gpu, start, 3)
     np.testing.assert_array_equal(first, again)
     np.testing.assert_allclose(first, on_cpu, atol=1e-5)
+
+
+def test_a_region_larger_than_shared_memory_is_refused_with_the_reason(tmp_path, monkeypatch):
+    from warp_verlet.constraints import stick_clusters
+
+    monkeypatch.setattr(stick_clusters, "MAX_REGION", 64)
+    with pytest.raises(ArgumentError, match="shared memory"):
+        Simulator(triangle_scene(tmp_path), "cpu", sticks="clustered")

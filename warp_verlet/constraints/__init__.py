@@ -33,8 +33,8 @@ def _kinds() -> tuple:
     # (on lengths the sticks have just set), then the contacts (after the sticks, so that a sweep's last word on
     # a pair is to keep it apart, the sticks' pull being what brings layers together), and the rigid patches
     # last, so that a sweep ends with each rigid.
-    return (Multilevel(), Tethers(), GridTethers(), Sticks(), StickClusters(), GridSticks(), GridTiles(), AngleJoints(), AngleHinges(),
-            SelfContact(), RigidPatches())
+    return (Multilevel(), Tethers(), GridTethers(), Sticks(), StickClusters(), GridSticks(), GridTiles(), AngleJoints(),
+            AngleHinges(), SelfContact(), RigidPatches())
 
 
 CONSTRAINT_KINDS: tuple = _kinds()

@@ -147,20 +147,32 @@ class StickClusters(ConstraintSet):
         return req.sticks > 0 and req.stick_clusters
 
     def device_bytes(self, req) -> int:
-        # per stick its local ends and rest (the Model's stick arrays stay, for tearing checks and readback);
-        # per particle about 1.5 region entries, and the cluster tables
-        return req.sticks * (VEC2I + FLOAT) + req.particles * 2 * INT + req.sticks * INT // 8
+        """An upper bound, known before the layout is built: the Model's stick arrays (ends, rest, weight; the
+        stretch readback reads them); per stored stick its local ends and rest; the regions, at most every particle
+        and one other end per stick; the region starts; and a stick start per cluster and colour, for at most
+        MAX_COLOURS colours."""
+        from ..geometry.colouring import MAX_COLOURS
+
+        clusters = -(-req.particles // CLUSTER_PARTICLES)
+        return (req.sticks * (VEC2I + 2 * FLOAT) + req.sticks * (VEC2I + FLOAT) + (req.particles + req.sticks) * INT
+                + (clusters + 1) * INT + (clusters * MAX_COLOURS + 1) * INT)
 
     def build(self, model, scene, device):
         import warp as wp
 
+        from ..errors import ArgumentError
+
         if model.colouring is None or model.colouring.overflow:
-            raise AssertionError("clustered sticks need a colouring without an overflow colour")
+            raise ArgumentError("sticks = 'clustered' needs a colouring whose every colour's sticks share no "
+                                "particle, but the graph colouring put some sticks in its overflow colour: use "
+                                "sticks = 'explicit'")
         colour = np.repeat(np.arange(len(model.colour_ranges)), [n for _, n in model.colour_ranges])
         layout = cluster_layout(model.host_sticks, model.host_rest, colour, len(model.colour_ranges),
                                 model.rest_positions, CLUSTER_PARTICLES)
         if layout.capacity > MAX_REGION:
-            raise AssertionError(f"a cluster's region holds {layout.capacity} particles, above {MAX_REGION}")
+            raise ArgumentError(f"sticks = 'clustered': a cluster's region (its particles and its sticks' other ends) "
+                                f"holds {layout.capacity} particles, above the {MAX_REGION} that fit in shared "
+                                "memory (sticks reach far across the cloth): use sticks = 'explicit'")
         return DeviceClusters(layout, device, wp)
 
     def bind(self, model, state, solver) -> BoundStage:
