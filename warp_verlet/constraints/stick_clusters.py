@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .kind import ConstraintSet
+from ..geometry.colouring import shared_particle_pairs
 from ..launches import FLOAT, INT, VEC2I, BoundStage, PhaseTask
 
 CLUSTER_PARTICLES = 256
@@ -49,31 +50,20 @@ class ClusterLayout:
     capacity: int
 
 
-def _regions(cluster_of: np.ndarray, sticks: np.ndarray, clusters: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(keys, region_start, stick_cluster): each cluster's region as sorted keys cluster * N + particle, the
-    regions' starts, and each stick's cluster (its first particle's)."""
+def _regions(cluster_of: np.ndarray, sticks: np.ndarray) -> np.ndarray:
+    """Each cluster's region as sorted keys cluster * N + particle: its particles and its sticks' (those whose first
+    particle it holds) other ends."""
     n = len(cluster_of)
-    stick_cluster = cluster_of[sticks[:, 0]].astype(np.int64)
-    keys = np.unique(np.concatenate([cluster_of.astype(np.int64) * n + np.arange(n),
-                                     stick_cluster * n + sticks[:, 1]]))
-    start = np.zeros(clusters + 1, np.int64)
-    np.cumsum(np.bincount(keys // n, minlength=clusters), out=start[1:])
-    return keys, start, stick_cluster
+    return np.unique(np.concatenate([cluster_of * n + np.arange(n), cluster_of[sticks[:, 0]] * n + sticks[:, 1]]))
 
 
 def colour_clusters(keys: np.ndarray, particles: int, clusters: int) -> np.ndarray:
     """A colour per cluster such that the regions (``keys``: cluster * particles + particle) of one colour share
     no particle: greedy, in cluster order (the lowest colour no coloured neighbour holds)."""
-    cluster, particle = keys // particles, keys % particles
-    order = np.argsort(particle, kind="stable")
-    cluster, particle = cluster[order], particle[order]
-    pairs = []
-    for d in range(1, int(np.bincount(particle).max())):
-        same = particle[d:] == particle[:-d]
-        pairs.append(np.stack([cluster[:-d][same], cluster[d:][same]], axis=1))
-    pairs = np.concatenate(pairs) if pairs else np.zeros((0, 2), np.int64)
-    pairs = np.unique(np.concatenate([pairs, pairs[:, ::-1]]), axis=0)
+    pairs = np.unique(shared_particle_pairs(keys // particles, keys % particles), axis=0)
     pairs = pairs[pairs[:, 0] != pairs[:, 1]]
+    pairs = np.concatenate([pairs, pairs[:, ::-1]])
+    pairs = pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))]
     offsets = np.searchsorted(pairs[:, 0], np.arange(clusters + 1))
     colour = np.full(clusters, -1, np.int64)
     for c in range(clusters):
@@ -95,13 +85,17 @@ def cluster_layout(sticks: np.ndarray, rest: np.ndarray, stick_colour: np.ndarra
     clusters = -(-n // cluster_particles)
     cluster_of = np.empty(n, np.int64)
     cluster_of[np.argsort(morton_codes(rest_positions), kind="stable")] = np.arange(n) // cluster_particles
-    keys, _, _ = _regions(cluster_of, sticks, clusters)
+    keys = _regions(cluster_of, sticks)
     colour = colour_clusters(keys, n, clusters)
-    # Renumber the clusters in colour order, so that a cluster colour is one run of consecutive clusters.
+    # Renumber the clusters in colour order, so that a cluster colour is one run of consecutive clusters: the
+    # regions keep their particles, so their keys are renumbered and sorted again rather than rebuilt.
     renumber = np.empty(clusters, np.int64)
     renumber[np.lexsort((np.arange(clusters), colour))] = np.arange(clusters)
     cluster_of = renumber[cluster_of]
-    keys, region_start, stick_cluster = _regions(cluster_of, sticks, clusters)
+    keys = np.sort(renumber[keys // n] * n + keys % n)
+    region_start = np.zeros(clusters + 1, np.int64)
+    np.cumsum(np.bincount(keys // n, minlength=clusters), out=region_start[1:])
+    stick_cluster = cluster_of[sticks[:, 0]]
     order = np.lexsort((np.arange(len(sticks)), stick_colour, stick_cluster))
     sticks, stick_cluster = sticks[order], stick_cluster[order]
     local = np.stack([np.searchsorted(keys, stick_cluster * n + sticks[:, e]) - region_start[stick_cluster]
@@ -158,8 +152,6 @@ class StickClusters(ConstraintSet):
                 + (clusters + 1) * INT + (clusters * MAX_COLOURS + 1) * INT)
 
     def build(self, model, scene, device):
-        import warp as wp
-
         from ..errors import ArgumentError
 
         if model.colouring is None or model.colouring.overflow:
@@ -173,7 +165,7 @@ class StickClusters(ConstraintSet):
             raise ArgumentError(f"sticks = 'clustered': a cluster's region (its particles and its sticks' other ends) "
                                 f"holds {layout.capacity} particles, above the {MAX_REGION} that fit in shared "
                                 "memory (sticks reach far across the cloth): use sticks = 'explicit'")
-        return DeviceClusters(layout, device, wp)
+        return DeviceClusters(layout, device)
 
     def bind(self, model, state, solver) -> BoundStage:
         import warp as wp
@@ -198,7 +190,9 @@ class StickClusters(ConstraintSet):
 class DeviceClusters:
     """A ClusterLayout's arrays on the device."""
 
-    def __init__(self, layout: ClusterLayout, device, wp):
+    def __init__(self, layout: ClusterLayout, device):
+        import warp as wp
+
         self.region_start = wp.array(layout.region_start, dtype=int, device=device)
         self.region = wp.array(layout.region, dtype=int, device=device)
         self.stick_start = wp.array(layout.stick_start, dtype=int, device=device)

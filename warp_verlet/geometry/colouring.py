@@ -68,10 +68,21 @@ def stick_conflict_edges(sticks: np.ndarray) -> np.ndarray:
     """Edges of the graph whose nodes are sticks (or elements of k particles, (M, k)), joining every pair that
     shares a particle."""
     m, k = sticks.shape if sticks.ndim == 2 else (len(sticks), 2)
-    stick_of_end = np.repeat(np.arange(m, dtype=np.int64), k)
-    particle = sticks.reshape(-1).astype(np.int64)
+    edges = shared_particle_pairs(np.repeat(np.arange(m, dtype=np.int64), k), sticks.reshape(-1))
+    # Two distinct sticks share at most one particle, so no pair comes out twice: a lexicographic sort gives
+    # what np.unique(axis=0) gave, many times faster on large grids (bench/results/code_choices.md). Elements
+    # of more particles may share several, so their pairs are made unique.
+    if k > 2:
+        return np.unique(edges, axis=0).astype(np.int32)
+    return edges[np.lexsort((edges[:, 1], edges[:, 0]))].astype(np.int32)
+
+
+def shared_particle_pairs(element: np.ndarray, particle: np.ndarray) -> np.ndarray:
+    """(a, b), a < b, for every two entries (element[e], particle[e]) of distinct entries with the same particle:
+    the pairs of elements that share it, once per particle they share (unsorted), as int64."""
+    particle = np.asarray(particle, np.int64)
     order = np.argsort(particle, kind="stable")
-    particle, stick_of_end = particle[order], stick_of_end[order]
+    particle, element = particle[order], np.asarray(element, np.int64)[order]
     starts = np.flatnonzero(np.r_[True, particle[1:] != particle[:-1]])
     counts = np.diff(np.r_[starts, particle.size])
     pairs = []
@@ -80,18 +91,12 @@ def stick_conflict_edges(sticks: np.ndarray) -> np.ndarray:
         if degree < 2:
             continue
         group = starts[counts == degree][:, None] + np.arange(degree)[None, :]
-        members = stick_of_end[group]  # (particles, degree)
+        members = element[group]  # (particles, degree)
         a, b = np.triu_indices(degree, k=1)
         pairs.append(np.stack([members[:, a].ravel(), members[:, b].ravel()], axis=1))
     if not pairs:
-        return np.zeros((0, 2), np.int32)
-    # Two distinct sticks share at most one particle, so no pair comes out twice: a lexicographic sort gives
-    # what np.unique(axis=0) gave, many times faster on large grids (bench/results/code_choices.md). Elements
-    # of more particles may share several, so their pairs are made unique.
-    edges = np.sort(np.concatenate(pairs), axis=1)
-    if k > 2:
-        return np.unique(edges, axis=0).astype(np.int32)
-    return edges[np.lexsort((edges[:, 1], edges[:, 0]))].astype(np.int32)
+        return np.zeros((0, 2), np.int64)
+    return np.sort(np.concatenate(pairs), axis=1)
 
 
 def graph_colouring(sticks: np.ndarray, balance: bool = True) -> Colouring:
