@@ -8,8 +8,13 @@ no particle; a barrier separates the colours), and writes the region back. Clust
 regions of one cluster colour share no particle: a launch per cluster colour, Gauss-Seidel across them.
 
 Each stick is stored once, in the order the blocks read it (cluster colour, cluster, stick colour), with its two
-ends as indices into its cluster's region, so that a block reads its sticks as one contiguous run. The
-projection is ``stick_correction``, as in every other form; only the order of the projections differs, and that
+ends as places in its cluster's region packed into one int (``a | b << 16``; a region holds at most 2048
+particles), so that a block reads its sticks as one contiguous run. A block stages its sticks (ends, rest lengths
+and the colours' starts) in shared memory with its region, before the first barrier: every load of the block is
+then issued at once, and the colour loop, which runs a projection, a barrier and the next colour, touches shared
+memory only. Read from global memory inside the loop, each colour waited on its own sticks' loads.
+
+The projection is ``stick_correction``, as in every other form; only the order of the projections differs, and that
 order is fixed (cluster colour, cluster, stick colour, stick), which the CPU runs literally (one lane per block).
 """
 
@@ -22,23 +27,36 @@ from .relax import stick_correction
 _KERNELS: dict = {}
 
 
-def relax_stick_clusters(region_capacity: int, max_registers: int | None = None):
-    """The clustered sweep's kernel for regions of at most ``region_capacity`` particles (the shared arrays'
-    length, a compile-time constant); ``max_registers`` caps a CUDA thread's registers (None: the compiler's)."""
-    key = (region_capacity, max_registers)
+def relax_stick_clusters(region_capacity: int, stick_capacity: int, colours: int, max_registers: int | None = None):
+    """The clustered sweep's kernel for regions of at most ``region_capacity`` particles, clusters of at most
+    ``stick_capacity`` sticks, and ``colours`` stick colours (the shared arrays' lengths and the colour loop's
+    bound, compile-time constants); ``max_registers`` caps a CUDA thread's registers (None: the compiler's)."""
+    key = (region_capacity, stick_capacity, colours, max_registers)
     if key not in _KERNELS:
-        _KERNELS[key] = _make_kernel(region_capacity, max_registers)
+        _KERNELS[key] = _make_kernel(*key)
     return _KERNELS[key]
 
 
-def _make_kernel(region_capacity: int, max_registers: int | None):
+def _make_kernel(region_capacity: int, stick_capacity: int, colours: int, max_registers: int | None):
     CAPACITY = region_capacity
+    STICKS = stick_capacity
+    COLOURS = colours
+    STARTS = colours + 1
 
     @wp.func_native("t.data(wp::tile_coord(i)) = value;")
     def put_point(t: wp.tile(dtype=wp.vec3, shape=(CAPACITY,), storage="shared"), i: int, value: wp.vec3): ...
 
     @wp.func_native("t.data(wp::tile_coord(i)) = value;")
     def put_weight(t: wp.tile(dtype=float, shape=(CAPACITY,), storage="shared"), i: int, value: float): ...
+
+    @wp.func_native("t.data(wp::tile_coord(i)) = value;")
+    def put_ends(t: wp.tile(dtype=int, shape=(STICKS,), storage="shared"), i: int, value: int): ...
+
+    @wp.func_native("t.data(wp::tile_coord(i)) = value;")
+    def put_rest(t: wp.tile(dtype=float, shape=(STICKS,), storage="shared"), i: int, value: float): ...
+
+    @wp.func_native("t.data(wp::tile_coord(i)) = value;")
+    def put_start(t: wp.tile(dtype=int, shape=(STARTS,), storage="shared"), i: int, value: int): ...
 
     options = {} if max_registers is None else {"cuda_max_registers": max_registers}
 
@@ -49,43 +67,56 @@ def _make_kernel(region_capacity: int, max_registers: int | None):
         region_start: wp.array(dtype=int),
         region: wp.array(dtype=int),
         stick_start: wp.array(dtype=int),
-        stick_local: wp.array(dtype=wp.vec2i),
+        stick_ends: wp.array(dtype=int),
         stick_rest: wp.array(dtype=float),
-        colours: int,
         first_cluster: int,
     ):
         """One sweep over the clusters first_cluster, first_cluster + 1, ... (one cluster colour; block k takes
         cluster first_cluster + k). Cluster c's region is region[region_start[c] : region_start[c + 1]]; its
-        sticks of colour n are stick_start[c * colours + n] .. stick_start[c * colours + n + 1] - 1, each given
-        by its ends' places in the region."""
+        sticks of colour n are stick_start[c * COLOURS + n] .. stick_start[c * COLOURS + n + 1] - 1, each given
+        by its ends' places in the region, packed a | b << 16."""
         block, lane = wp.tid()
         threads = wp.block_dim()
         c = first_cluster + block
         r0 = region_start[c]
         count = region_start[c + 1] - r0
+        base = c * COLOURS
+        s0 = stick_start[base]
+        sticks = stick_start[base + COLOURS] - s0
         points = wp.tile_empty(shape=CAPACITY, dtype=wp.vec3, storage="shared")
         weights = wp.tile_empty(shape=CAPACITY, dtype=float, storage="shared")
+        ends = wp.tile_empty(shape=STICKS, dtype=int, storage="shared")
+        rests = wp.tile_empty(shape=STICKS, dtype=float, storage="shared")
+        starts = wp.tile_empty(shape=STARTS, dtype=int, storage="shared")
         e = lane
         while e < count:
             p = region[r0 + e]
             put_point(points, e, x[p])
             put_weight(weights, e, inv_mass[p])
             e += threads
+        e = lane
+        while e < sticks:
+            put_ends(ends, e, stick_ends[s0 + e])
+            put_rest(rests, e, stick_rest[s0 + e])
+            e += threads
+        e = lane
+        while e < STARTS:
+            put_start(starts, e, stick_start[base + e] - s0)
+            e += threads
         block_barrier()
 
-        base = c * colours
-        for n in range(colours):
-            s = stick_start[base + n] + lane
-            stop = stick_start[base + n + 1]
+        for n in range(COLOURS):
+            s = starts[n] + lane
+            stop = starts[n + 1]
             while s < stop:
-                ends = stick_local[s]
-                a = ends[0]
-                b = ends[1]
+                packed = ends[s]
+                a = packed & 0xFFFF
+                b = packed >> 16
                 wa = weights[a]
                 wb = weights[b]
                 xa = points[a]
                 xb = points[b]
-                d = stick_correction(xa, xb, wa, wb, stick_rest[s], 1.0)
+                d = stick_correction(xa, xb, wa, wb, rests[s], 1.0)
                 put_point(points, a, xa + scaled(d, wa))
                 put_point(points, b, xb - scaled(d, wb))
                 s += threads

@@ -105,6 +105,10 @@ def test_the_layout_holds_every_stick_once_and_no_cluster_colour_shares_a_partic
     check_layout(layout, sticks)  # passes as built
     assert layout.capacity >= np.diff(layout.region_start).max() and layout.capacity % 32 == 0
     assert np.all(layout.stick_local >= 0) and np.all(layout.stick_local < layout.capacity)
+    per_cluster = np.diff(layout.stick_start[::layout.colours])
+    assert layout.stick_capacity >= per_cluster.max() and layout.stick_capacity % 64 == 0
+    packed = layout.packed_ends
+    np.testing.assert_array_equal(np.stack([packed & 0xFFFF, packed >> 16], axis=1), layout.stick_local)
 
     # Each way of breaking it is caught.
     merged = dataclasses.replace(layout, launches=[(0, sum(n for _, n in layout.launches))])
@@ -176,9 +180,21 @@ def test_a_clustered_sweep_on_cuda_is_repeatable_and_agrees_with_the_cpu(tmp_pat
     np.testing.assert_allclose(first, on_cpu, atol=1e-5)
 
 
-def test_a_region_larger_than_shared_memory_is_refused_with_the_reason(tmp_path, monkeypatch):
+def test_a_region_larger_than_packed_ends_can_name_is_refused_with_the_reason(tmp_path, monkeypatch):
     from warp_verlet.constraints import stick_clusters
 
     monkeypatch.setattr(stick_clusters, "MAX_REGION", 64)
+    with pytest.raises(ArgumentError, match="packed ends"):
+        Simulator(triangle_scene(tmp_path), "cpu", sticks="clustered")
+
+
+def test_a_cluster_larger_than_shared_memory_is_refused_with_the_reason(tmp_path, monkeypatch):
+    from warp_verlet.constraints import stick_clusters
+
+    data = Simulator(triangle_scene(tmp_path), "cpu", sticks="clustered").model.constraints["stick clusters"]
+    needed = stick_clusters.shared_bytes(data.capacity, data.stick_capacity, data.colours)
+    monkeypatch.setattr(stick_clusters, "MAX_SHARED_BYTES", needed)
+    Simulator(triangle_scene(tmp_path), "cpu", sticks="clustered")  # exactly at the limit: taken
+    monkeypatch.setattr(stick_clusters, "MAX_SHARED_BYTES", needed - 1)
     with pytest.raises(ArgumentError, match="shared memory"):
         Simulator(triangle_scene(tmp_path), "cpu", sticks="clustered")

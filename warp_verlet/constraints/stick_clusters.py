@@ -27,8 +27,16 @@ CLUSTER_PARTICLES = 256
 CLUSTER_BLOCK = 128
 """Threads per block of the clustered sweep."""
 MAX_REGION = 2048
-"""The most particles a cluster's region (its own and its sticks' other ends) may hold: 32 KiB of shared memory
-for their positions and weights."""
+"""The most particles a cluster's region (its own and its sticks' other ends) may hold: a stick's two places in it
+are packed into one int, 16 bits each."""
+MAX_SHARED_BYTES = 48 * 1024
+"""The most shared memory a block of the clustered sweep may take (a CUDA block's static limit): its region's
+positions and weights, its sticks' packed ends and rest lengths, and its colours' starts."""
+
+
+def shared_bytes(region_capacity: int, stick_capacity: int, colours: int) -> int:
+    """The clustered kernel's shared memory a block: 16 bytes a region particle, 8 a stick, 4 a colour start."""
+    return region_capacity * 16 + stick_capacity * 8 + (colours + 1) * 4
 
 
 @dataclass
@@ -37,7 +45,8 @@ class ClusterLayout:
     (``region_start`` (C + 1,), ``region`` the particles) and its sticks by stick colour (``stick_start``
     (C * colours + 1,)); per stored stick its ends as places in its cluster's region (``stick_local``), its rest
     length and its index in the Model's stick arrays (``stick``); ``launches`` (first cluster, clusters) per cluster
-    colour; ``capacity`` the shared arrays' length."""
+    colour; ``capacity`` and ``stick_capacity`` the shared arrays' lengths (the largest region and the most sticks
+    a cluster holds, rounded up to 32 and 64, so that near sizes share a kernel)."""
 
     region_start: np.ndarray
     region: np.ndarray
@@ -48,6 +57,12 @@ class ClusterLayout:
     colours: int
     launches: list[tuple[int, int]]
     capacity: int
+    stick_capacity: int
+
+    @property
+    def packed_ends(self) -> np.ndarray:
+        """Each stored stick's two places in its region as one int, ``a | b << 16`` (the kernel's form)."""
+        return (self.stick_local[:, 0] | self.stick_local[:, 1] << 16).astype(np.int32)
 
 
 def _regions(cluster_of: np.ndarray, sticks: np.ndarray) -> np.ndarray:
@@ -106,9 +121,11 @@ def cluster_layout(sticks: np.ndarray, rest: np.ndarray, stick_colour: np.ndarra
     sizes = np.bincount(colour, minlength=int(colour.max()) + 1)
     firsts = np.r_[0, np.cumsum(sizes)[:-1]]
     largest = int(np.diff(region_start).max())
+    most_sticks = int(np.diff(stick_start[::colours]).max())
     layout = ClusterLayout(region_start.astype(np.int32), (keys % n).astype(np.int32), stick_start.astype(np.int32),
                            local.astype(np.int32), np.asarray(rest, np.float32)[order], order,
-                           colours, [(int(f), int(s)) for f, s in zip(firsts, sizes)], -(-largest // 32) * 32)
+                           colours, [(int(f), int(s)) for f, s in zip(firsts, sizes)], -(-largest // 32) * 32,
+                           -(-most_sticks // 64) * 64)
     check_layout(layout, sticks)
     return layout
 
@@ -142,13 +159,13 @@ class StickClusters(ConstraintSet):
 
     def device_bytes(self, req) -> int:
         """An upper bound, known before the layout is built: the Model's stick arrays (ends, rest, weight; the
-        stretch readback reads them); per stored stick its local ends and rest; the regions, at most every particle
+        stretch readback reads them); per stored stick its packed local ends and rest; the regions, at most every particle
         and one other end per stick; the region starts; and a stick start per cluster and colour, for at most
         MAX_COLOURS colours."""
         from ..geometry.colouring import MAX_COLOURS
 
         clusters = -(-req.particles // CLUSTER_PARTICLES)
-        return (req.sticks * (VEC2I + 2 * FLOAT) + req.sticks * (VEC2I + FLOAT) + (req.particles + req.sticks) * INT
+        return (req.sticks * (VEC2I + 2 * FLOAT) + req.sticks * (INT + FLOAT) + (req.particles + req.sticks) * INT
                 + (clusters + 1) * INT + (clusters * MAX_COLOURS + 1) * INT)
 
     def build(self, model, scene, device):
@@ -163,8 +180,14 @@ class StickClusters(ConstraintSet):
                                 model.rest_positions, CLUSTER_PARTICLES)
         if layout.capacity > MAX_REGION:
             raise ArgumentError(f"sticks = 'clustered': a cluster's region (its particles and its sticks' other ends) "
-                                f"holds {layout.capacity} particles, above the {MAX_REGION} that fit in shared "
-                                "memory (sticks reach far across the cloth): use sticks = 'explicit'")
+                                f"holds {layout.capacity} particles, above the {MAX_REGION} a stick's packed ends "
+                                "can name (sticks reach far across the cloth): use sticks = 'explicit'")
+        shared = shared_bytes(layout.capacity, layout.stick_capacity, layout.colours)
+        if shared > MAX_SHARED_BYTES:
+            raise ArgumentError(f"sticks = 'clustered': a cluster's region of {layout.capacity} particles and "
+                                f"{layout.stick_capacity} sticks take {shared} bytes of shared memory, above the "
+                                f"{MAX_SHARED_BYTES} a block may hold (sticks reach far across the cloth, or many "
+                                "sticks meet at a particle): use sticks = 'explicit'")
         return DeviceClusters(layout, device)
 
     def bind(self, model, state, solver) -> BoundStage:
@@ -173,11 +196,11 @@ class StickClusters(ConstraintSet):
         from warp_verlet.kernels.stick_clusters import relax_stick_clusters
 
         data = model.constraints[self.name]
-        kernel = relax_stick_clusters(data.capacity)
+        kernel = relax_stick_clusters(data.capacity, data.stick_capacity, data.colours)
         tasks = []
         for first, count in data.launches:
             inputs = [state.particle_q, model.inv_mass, data.region_start, data.region, data.stick_start,
-                      data.stick_local, data.rest, data.colours, first]
+                      data.stick_ends, data.rest, first]
             launch = wp.launch_tiled(kernel, dim=[count], block_dim=CLUSTER_BLOCK, record_cmd=True,
                                      device=model.device, inputs=inputs)
             tasks.append(PhaseTask(kernel.key, launch.launch, launch))
@@ -196,8 +219,9 @@ class DeviceClusters:
         self.region_start = wp.array(layout.region_start, dtype=int, device=device)
         self.region = wp.array(layout.region, dtype=int, device=device)
         self.stick_start = wp.array(layout.stick_start, dtype=int, device=device)
-        self.stick_local = wp.array(layout.stick_local, dtype=wp.vec2i, device=device)
+        self.stick_ends = wp.array(layout.packed_ends, dtype=int, device=device)
         self.rest = wp.array(layout.rest, dtype=float, device=device)
         self.colours = layout.colours
         self.launches = layout.launches
         self.capacity = layout.capacity
+        self.stick_capacity = layout.stick_capacity
