@@ -198,3 +198,66 @@ def test_a_cluster_larger_than_shared_memory_is_refused_with_the_reason(tmp_path
     monkeypatch.setattr(stick_clusters, "MAX_SHARED_BYTES", needed - 1)
     with pytest.raises(ArgumentError, match="shared memory"):
         Simulator(triangle_scene(tmp_path), "cpu", sticks="clustered")
+
+
+def test_auto_chooses_clustered_stick_arrays_from_a_size_on_and_only_where_they_apply(tmp_path):
+    from warp_verlet.core import stages
+    from warp_verlet.core.stages import Requirements
+
+    mesh = triangle_scene(tmp_path)
+    large = mesh.particle_count >= stages.MIN_CLUSTERED_PARTICLES
+    assert not large  # the test meshes are below the size on which "auto" clusters
+    assert not Requirements.of(mesh, "auto").stick_clusters
+    threshold = mesh.particle_count
+    original = stages.MIN_CLUSTERED_PARTICLES
+    try:
+        stages.MIN_CLUSTERED_PARTICLES = threshold
+        assert Requirements.of(mesh, "auto").stick_clusters
+        assert not Requirements.of(mesh, "explicit").stick_clusters  # asked for a launch per colour
+        assert not Requirements.of(triangle_scene(tmp_path, tear_threshold=1.5), "auto").stick_clusters
+        grid = make_scene({"substeps": 2, "iterations": 4}, resolution=[ROWS, COLS])
+        assert not Requirements.of(grid, "auto").stick_clusters  # one grid cloth: implicit sticks or tiles
+        stages.MIN_CLUSTERED_PARTICLES = threshold + 1
+        assert not Requirements.of(mesh, "auto").stick_clusters
+    finally:
+        stages.MIN_CLUSTERED_PARTICLES = original
+
+
+def test_auto_keeps_a_launch_per_colour_where_the_clustered_layout_is_refused(tmp_path, monkeypatch):
+    from warp_verlet.constraints import stick_clusters
+    from warp_verlet.core import model as model_module, stages
+
+    scene = triangle_scene(tmp_path)
+    # As on a GPU ("auto" reaches Requirements.of), with the scene above the size "auto" clusters from.
+    monkeypatch.setattr(model_module, "stick_form", lambda sticks, colouring, device: sticks)
+    monkeypatch.setattr(stages, "MIN_CLUSTERED_PARTICLES", 1)
+    chosen = Simulator(scene, "cpu", threads=1)
+    assert chosen.model.sticks_form == "clustered" and "stick clusters" in chosen.constraint_sets
+
+    monkeypatch.setattr(stick_clusters, "MAX_SHARED_BYTES", 1024)
+    kept = Simulator(scene, "cpu", threads=1)
+    assert kept.model.sticks_form == "explicit" and kept.model.stick_request == "explicit"
+    assert "sticks" in kept.constraint_sets and "stick clusters" not in kept.constraint_sets
+    assert "shared memory" in kept.model.clusters_refused
+    explicit = Simulator(scene, "cpu", threads=1, sticks="explicit")
+    for _ in range(3):
+        kept.step_frame()
+        explicit.step_frame()
+    np.testing.assert_array_equal(kept.state.positions(), explicit.state.positions())
+    kept.retune(iterations=2)  # a later Requirements asks for the form the model kept
+    kept.step_frame()
+    with pytest.raises(ArgumentError, match="shared memory"):  # asked for by name, the refusal stands
+        Simulator(scene, "cpu", threads=1, sticks="clustered")
+
+
+@pytest.mark.cuda
+@pytest.mark.skipif(not wp.is_cuda_available(), reason="no CUDA device")
+def test_auto_sweeps_a_large_mesh_cluster_by_cluster_on_cuda(tmp_path, monkeypatch):
+    from warp_verlet.core import stages
+
+    monkeypatch.setattr(stages, "MIN_CLUSTERED_PARTICLES", ROWS * COLS)
+    sim = Simulator(triangle_scene(tmp_path), "cuda")
+    assert sim.model.sticks_form == "clustered" and sim.model.clusters_refused is None
+    sim.step_frame()
+    assert np.isfinite(sim.state.positions()).all()
+    assert Simulator(triangle_scene(tmp_path), "cpu").model.sticks_form == "explicit"  # the CPU keeps arrays

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .kind import ConstraintSet
+from ..errors import ArgumentError
 from ..geometry.colouring import shared_particle_pairs
 from ..launches import FLOAT, INT, VEC2I, BoundStage, PhaseTask
 
@@ -37,6 +38,11 @@ positions and weights, its sticks' packed ends and rest lengths, and its colours
 def shared_bytes(region_capacity: int, stick_capacity: int, colours: int) -> int:
     """The clustered kernel's shared memory a block: 16 bytes a region particle, 8 a stick, 4 a colour start."""
     return region_capacity * 16 + stick_capacity * 8 + (colours + 1) * 4
+
+
+class ClustersRefused(ArgumentError):
+    """The clustered sweep cannot take this model's sticks (the reason in the message). Asked for, it is the
+    caller's error; chosen by "auto", the model keeps a launch per colour instead."""
 
 
 @dataclass
@@ -169,25 +175,23 @@ class StickClusters(ConstraintSet):
                 + (clusters + 1) * INT + (clusters * MAX_COLOURS + 1) * INT)
 
     def build(self, model, scene, device):
-        from ..errors import ArgumentError
-
         if model.colouring is None or model.colouring.overflow:
-            raise ArgumentError("sticks = 'clustered' needs a colouring whose every colour's sticks share no "
-                                "particle, but the graph colouring put some sticks in its overflow colour: use "
-                                "sticks = 'explicit'")
+            raise ClustersRefused("sticks = 'clustered' needs a colouring whose every colour's sticks share no "
+                                   "particle, but the graph colouring put some sticks in its overflow colour: use "
+                                   "sticks = 'explicit'")
         colour = np.repeat(np.arange(len(model.colour_ranges)), [n for _, n in model.colour_ranges])
         layout = cluster_layout(model.host_sticks, model.host_rest, colour, len(model.colour_ranges),
                                 model.rest_positions, CLUSTER_PARTICLES)
         if layout.capacity > MAX_REGION:
-            raise ArgumentError(f"sticks = 'clustered': a cluster's region (its particles and its sticks' other ends) "
-                                f"holds {layout.capacity} particles, above the {MAX_REGION} a stick's packed ends "
-                                "can name (sticks reach far across the cloth): use sticks = 'explicit'")
+            raise ClustersRefused(f"sticks = 'clustered': a cluster's region (its particles and its sticks' other "
+                                   f"ends) holds {layout.capacity} particles, above the {MAX_REGION} a stick's packed ends "
+                                   "can name (sticks reach far across the cloth): use sticks = 'explicit'")
         shared = shared_bytes(layout.capacity, layout.stick_capacity, layout.colours)
         if shared > MAX_SHARED_BYTES:
-            raise ArgumentError(f"sticks = 'clustered': a cluster's region of {layout.capacity} particles and "
-                                f"{layout.stick_capacity} sticks take {shared} bytes of shared memory, above the "
-                                f"{MAX_SHARED_BYTES} a block may hold (sticks reach far across the cloth, or many "
-                                "sticks meet at a particle): use sticks = 'explicit'")
+            raise ClustersRefused(f"sticks = 'clustered': a cluster's region of {layout.capacity} particles and "
+                                   f"{layout.stick_capacity} sticks take {shared} bytes of shared memory, above the "
+                                   f"{MAX_SHARED_BYTES} a block may hold (sticks reach far across the cloth, or many "
+                                   "sticks meet at a particle): use sticks = 'explicit'")
         return DeviceClusters(layout, device)
 
     def bind(self, model, state, solver) -> BoundStage:

@@ -14,7 +14,7 @@ cloth can tear.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import warp as wp
@@ -23,6 +23,7 @@ from ..colliders import ColliderModel
 from ..geometry.colouring import Colouring, check_partition, graph_colouring, grid_colouring, stick_order
 from ..errors import ArgumentError
 from ..constraints import kinds as constraint_kinds
+from ..constraints.stick_clusters import ClustersRefused
 from ..constraints.tethers import TetherTable, build_tethers
 from ..input.scene import Scene
 from .stages import AERODYNAMICS, MAX_UNIFORM_MASS_PINS, Requirements
@@ -387,13 +388,29 @@ class Model:
 
             self.air = AirModel(self, scene, req.air, device)
             self._hold(self.air, "air")
+        self.clusters_refused = None  # why "auto" kept a launch per colour where it chose clustered sticks
+        try:
+            self._build_constraints(scene, device, req)
+        except ClustersRefused as refusal:
+            if self.stick_request != "auto":
+                raise
+            # "auto" chose clustered sticks from the scene alone; the layout (the colouring's overflow, a region's
+            # size) is known only now. A launch per colour takes any stick arrays, in less memory.
+            self.clusters_refused = str(refusal)
+            req = replace(req, stick_clusters=False)
+            self.stick_request, self.sticks_form = "explicit", "explicit"
+            self._build_constraints(scene, device, req)
+        self.requirements = req  # the scene's Requirements for this model's stick form: the solver's
+        self._frozen = True
+
+    def _build_constraints(self, scene: Scene, device, req: Requirements) -> None:
+        """Every constraint kind's device data that ``req`` needs, on ``self.constraints``."""
         self.constraints = {}  # constraint kind name -> the device data its build made (kinds with data only)
         for kind in constraint_kinds():
             data = kind.build(self, scene, device) if kind.needed(req) else None
             if data is not None:
                 self.constraints[kind.name] = data
                 self._hold(data, kind.name.replace(" ", "_"))
-        self._frozen = True
 
     def _hold(self, part, prefix: str) -> None:
         """Name ``part``'s device arrays on the Model too (``prefix_name``), where whatever lists the Model's

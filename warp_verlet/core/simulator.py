@@ -160,7 +160,7 @@ def build_model(scene: Scene, device, colouring: str = "auto", sticks: str = "au
                         form, req)
     with wp.ScopedDevice(device):
         model = Model(scene, device, colouring, sticks, req, particle_order)
-    return model, req, memory
+    return model, model.requirements, memory
 
 
 class Simulator:

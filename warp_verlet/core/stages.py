@@ -113,6 +113,9 @@ class Requirements:
 
             raise ArgumentError("sticks = 'tiled' holds float32 positions in shared memory, but the scene's positions "
                                 "are float64 (simulation.precision)")
+        if (sticks == "auto" and not req.implicit_grid and req.particles >= MIN_CLUSTERED_PARTICLES
+                and cluster_obstacle(scene, req) is None):
+            req = replace(req, stick_clusters=True)
         if sticks == "clustered":
             from ..errors import ArgumentError
 
@@ -142,6 +145,12 @@ MIN_TILED_PARTICLES = 512 * 512
 many particles on. On an H100 the tiles reached the same stretch as a launch per colour in less time at 512^2,
 1024^2 and 2048^2, and took longer at 256^2, where a launch of a quarter of the tiles leaves most of the GPU idle
 (bench/results/grid_tiles)."""
+MIN_CLUSTERED_PARTICLES = 256 * 256
+"""Where "auto" sweeps rigid float32 stick arrays (a mesh cloth's, or several cloths') cluster by cluster on a GPU
+(constraints/stick_clusters.py): from this many particles on. On an H100 the clustered sweep took half the time
+of a launch per colour at 512^2 and 1024^2, and as long at 256^2, for the same stretch (bench/results/mesh).
+A layout the clustered sweep refuses (an overflow colour, a region too large for shared memory) keeps a launch
+per colour (Model)."""
 MAX_UNIFORM_MASS_PINS = 8
 """Implicit grid sticks find a particle's weight without reading it (0 for a pin, the free particles' for any
 other) when the cloth sets no particle masses and has at most this many pins, which each projection checks."""
