@@ -157,18 +157,20 @@ def shuffled(points: np.ndarray, faces: Faces, seed: int = SHUFFLE_SEED) -> tupl
 
 
 def grid_and_meshes(n: int, substeps: int, iterations: int, pins: str, triangles: str, folder: Path,
-                    shuffle: bool = False):
+                    shuffle: bool = False, compliance: dict | None = None):
     """The three variants' scenes, each with the seconds its parse_scene took (mesh files written into
-    ``folder`` first, not counted). ``shuffle``: the mesh files list their vertices in a random order."""
+    ``folder`` first, not counted). ``shuffle``: the mesh files list their vertices in a random order.
+    ``compliance``: every variant's stick families given these compliances (m/N; none: all rigid)."""
     import trimesh  # noqa: F401  (imported now, so that "load s" times the reading and not the import)
 
     simulation = simulation_table(substeps, iterations)
     start = time.perf_counter()
-    if pins == "corners":
+    soft = {"compliance": compliance} if compliance else {}
+    if pins == "corners" and not soft:
         sheet, grid = hanging_sheet(n), hanging_cloth(n, substeps, iterations)  # the benchmark scene itself
     else:
-        sheet = hanging_sheet(n, pins=["top-edge"])
-        grid = scene(simulation, sheet, name=f"<hanging cloth {n}x{n}, top edge pinned>")
+        sheet = hanging_sheet(n, **soft) if pins == "corners" else hanging_sheet(n, pins=["top-edge"], **soft)
+        grid = scene(simulation, sheet, name=f"<hanging cloth {n}x{n}, {pins}{', soft' if soft else ''}>")
     out = {"grid": (grid, time.perf_counter() - start)}
 
     spec = grid.cloths[0]
@@ -182,7 +184,7 @@ def grid_and_meshes(n: int, substeps: int, iterations: int, pins: str, triangles
     files = {"quad mesh": write_usd(folder / f"grid{n}.usdc", points_q, quads)}
     writer = write_ply if triangles == "ply" else write_obj
     files["triangle mesh"] = writer(folder / f"grid{n}.{triangles}", points_t, triangle_faces.as_uniform())
-    keep = {k: sheet[k] for k in ("name", "mass", "sticks", "tethers")}
+    keep = {k: sheet[k] for k in ("name", "mass", "sticks", "tethers", "compliance") if k in sheet}
     for variant, path in files.items():
         cloth = {**keep, "mesh": path.name, "pins": pin_boxes(grid), "mass_distribution": "even"}
         if path.suffix == ".usdc":
@@ -333,6 +335,8 @@ def main(argv=None) -> int:
                    help="the mesh variants' stick forms (Simulator's sticks; the grid always takes auto): with "
                         "several, a row per form")
     p.add_argument("--shuffle", action="store_true", help="the mesh files list their vertices in a random order")
+    p.add_argument("--compliance", nargs="+", default=[], metavar="FAMILY=M_PER_N",
+                   help="soft stick families in every variant, e.g. bend=1.0 (default: all rigid)")
     p.add_argument("--setup-only", action="store_true",
                    help="time the reordering's host-side setup at each size instead of simulating")
     p.add_argument("--no-colouring", action="store_true", help="with --setup-only: leave Warp's graph colouring out")
@@ -343,6 +347,10 @@ def main(argv=None) -> int:
         p.error("--sizes: a mesh needs at least 2 x 2 particles")
     if args.frames - WARM_UP < args.repeats:
         p.error(f"--frames: {WARM_UP} warm-up frames and at least one per repeat")
+    try:
+        compliance = {family: float(value) for family, value in (c.split("=") for c in args.compliance)}
+    except ValueError:
+        p.error("--compliance: give FAMILY=M_PER_N, e.g. bend=1.0")
     quiet_warp()
     device = wp.get_device(args.device)
     command = ["bench.mesh_throughput", *(argv if argv is not None else sys.argv[1:])]
@@ -353,7 +361,7 @@ def main(argv=None) -> int:
     for n in args.sizes:
         with tempfile.TemporaryDirectory(prefix="mesh_throughput-") as tmp:
             scenes = grid_and_meshes(n, args.substeps, args.iterations, args.pins, args.triangles, Path(tmp),
-                                     args.shuffle)
+                                     args.shuffle, compliance)
             for variant in VARIANTS:
                 the_scene, load_s = scenes[variant]
                 forms = list(dict.fromkeys(args.sticks)) if variant != "grid" else ["auto"]
@@ -368,6 +376,7 @@ def main(argv=None) -> int:
     pins = "its two top corners" if args.pins == "corners" else "its top row"
     title = (f"Mesh cloth beside the grid: hanging cloth pinned at {pins}, {args.frames} frames, "
              f"{args.substeps} substeps x {args.iterations} iterations, coloured Gauss-Seidel"
+             f"{', compliance ' + ', '.join(args.compliance) + ' m/N' if compliance else ''}"
              f"{', no graph capture' if args.no_graph else ''}: "
              f"{where}\n\n" + "\n".join(where.lines(command)) + "\n\n"
              "- grid: the grid cloth (analytic colouring). quad mesh: its exact points and quads from a .usdc, "

@@ -14,7 +14,8 @@ and the colours' starts) in shared memory with its region, before the first barr
 then issued at once, and the colour loop, which runs a projection, a barrier and the next colour, touches shared
 memory only. Read from global memory inside the loop, each colour waited on its own sticks' loads.
 
-The projection is ``stick_correction``, as in every other form; only the order of the projections differs, and that
+The projection is ``stick_correction`` (``compliant_correction`` for soft sticks, whose tensions are staged and
+written back with them), as in every other form; only the order of the projections differs, and that
 order is fixed (cluster colour, cluster, stick colour, stick), which the CPU runs literally (one lane per block).
 """
 
@@ -22,24 +23,30 @@ import warp as wp
 
 from .grid_tiles import block_barrier
 from .positions import scaled
-from .relax import stick_correction
+from .relax import compliant_correction, stick_correction
 
 _KERNELS: dict = {}
 
 
-def relax_stick_clusters(region_capacity: int, stick_capacity: int, colours: int, max_registers: int | None = None):
+def relax_stick_clusters(region_capacity: int, stick_capacity: int, colours: int, compliant: bool = False,
+                         max_registers: int | None = None):
     """The clustered sweep's kernel for regions of at most ``region_capacity`` particles, clusters of at most
     ``stick_capacity`` sticks, and ``colours`` stick colours (the shared arrays' lengths and the colour loop's
-    bound, compile-time constants); ``max_registers`` caps a CUDA thread's registers (None: the compiler's)."""
-    key = (region_capacity, stick_capacity, colours, max_registers)
+    bound, compile-time constants). ``compliant``: XPBD sticks (kernels/relax.py), each with its compliance and
+    the tension it has accumulated over the substep's sweeps, staged and written back with the sticks; otherwise
+    the compliance and tension arrays are not read. ``max_registers`` caps a CUDA thread's registers (None: the
+    compiler's)."""
+    key = (region_capacity, stick_capacity, colours, compliant, max_registers)
     if key not in _KERNELS:
         _KERNELS[key] = _make_kernel(*key)
     return _KERNELS[key]
 
 
-def _make_kernel(region_capacity: int, stick_capacity: int, colours: int, max_registers: int | None):
+def _make_kernel(region_capacity: int, stick_capacity: int, colours: int, compliant: bool, max_registers: int | None):
     CAPACITY = region_capacity
     STICKS = stick_capacity
+    COMPLIANT = compliant
+    SOFT_STICKS = stick_capacity if compliant else 1  # the compliances' and tensions' shared arrays
     COLOURS = colours
     STARTS = colours + 1
 
@@ -56,6 +63,9 @@ def _make_kernel(region_capacity: int, stick_capacity: int, colours: int, max_re
     def put_rest(t: wp.tile(dtype=float, shape=(STICKS,), storage="shared"), i: int, value: float): ...
 
     @wp.func_native("t.data(wp::tile_coord(i)) = value;")
+    def put_soft(t: wp.tile(dtype=float, shape=(SOFT_STICKS,), storage="shared"), i: int, value: float): ...
+
+    @wp.func_native("t.data(wp::tile_coord(i)) = value;")
     def put_start(t: wp.tile(dtype=int, shape=(STARTS,), storage="shared"), i: int, value: int): ...
 
     options = {} if max_registers is None else {"cuda_max_registers": max_registers}
@@ -69,12 +79,16 @@ def _make_kernel(region_capacity: int, stick_capacity: int, colours: int, max_re
         stick_start: wp.array(dtype=int),
         stick_ends: wp.array(dtype=int),
         stick_rest: wp.array(dtype=float),
+        stick_compliance: wp.array(dtype=float),
+        inv_dt2: float,
+        tension: wp.array(dtype=float),
         first_cluster: int,
     ):
         """One sweep over the clusters first_cluster, first_cluster + 1, ... (one cluster colour; block k takes
         cluster first_cluster + k). Cluster c's region is region[region_start[c] : region_start[c + 1]]; its
         sticks of colour n are stick_start[c * COLOURS + n] .. stick_start[c * COLOURS + n + 1] - 1, each given
-        by its ends' places in the region, packed a | b << 16."""
+        by its ends' places in the region, packed a | b << 16. Compliant: stick_compliance (m/N) and tension (the
+        substep's mu so far, updated) are in the same order as the sticks."""
         block, lane = wp.tid()
         threads = wp.block_dim()
         c = first_cluster + block
@@ -88,6 +102,8 @@ def _make_kernel(region_capacity: int, stick_capacity: int, colours: int, max_re
         ends = wp.tile_empty(shape=STICKS, dtype=int, storage="shared")
         rests = wp.tile_empty(shape=STICKS, dtype=float, storage="shared")
         starts = wp.tile_empty(shape=STARTS, dtype=int, storage="shared")
+        alphas = wp.tile_empty(shape=SOFT_STICKS, dtype=float, storage="shared")
+        tensions = wp.tile_empty(shape=SOFT_STICKS, dtype=float, storage="shared")
         e = lane
         while e < count:
             p = region[r0 + e]
@@ -98,6 +114,9 @@ def _make_kernel(region_capacity: int, stick_capacity: int, colours: int, max_re
         while e < sticks:
             put_ends(ends, e, stick_ends[s0 + e])
             put_rest(rests, e, stick_rest[s0 + e])
+            if wp.static(COMPLIANT):
+                put_soft(alphas, e, stick_compliance[s0 + e])
+                put_soft(tensions, e, tension[s0 + e])
             e += threads
         e = lane
         while e < STARTS:
@@ -116,7 +135,11 @@ def _make_kernel(region_capacity: int, stick_capacity: int, colours: int, max_re
                 wb = weights[b]
                 xa = points[a]
                 xb = points[b]
-                d = stick_correction(xa, xb, wa, wb, rests[s], 1.0)
+                if wp.static(COMPLIANT):
+                    d, mu = compliant_correction(xa, xb, wa, wb, rests[s], 1.0, alphas[s], inv_dt2, tensions[s])
+                    put_soft(tensions, s, mu)
+                else:
+                    d = stick_correction(xa, xb, wa, wb, rests[s], 1.0)
                 put_point(points, a, xa + scaled(d, wa))
                 put_point(points, b, xb - scaled(d, wb))
                 s += threads
@@ -126,5 +149,10 @@ def _make_kernel(region_capacity: int, stick_capacity: int, colours: int, max_re
         while e < count:
             x[region[r0 + e]] = points[e]
             e += threads
+        if wp.static(COMPLIANT):
+            e = lane
+            while e < sticks:
+                tension[s0 + e] = tensions[e]
+                e += threads
 
     return relax_stick_clusters

@@ -125,8 +125,9 @@ TILED = ["coloured", "tethers", "multilevel", "moving-sphere", "planes", "angle-
          "self-contact", "global"]
 
 
-# The rigid float32 cases of the coloured solver that cannot tear, which allow clustered sweeps of stick arrays.
-CLUSTERED = ["coloured", "tethers", "multilevel", "moving-sphere", "planes", "self-contact", "global"]
+# The float32 cases of the coloured solver that cannot tear, which allow clustered sweeps of stick arrays (soft
+# sticks too, without the global correction).
+CLUSTERED = ["coloured", "tethers", "compliance", "multilevel", "moving-sphere", "planes", "self-contact", "global"]
 
 
 @pytest.mark.parametrize("case", list(CASES) + [f"{c}/implicit" for c in IMPLICIT] + [f"{c}/tiled" for c in TILED]

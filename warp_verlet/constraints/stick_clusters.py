@@ -21,7 +21,7 @@ import numpy as np
 from .kind import ConstraintSet
 from ..errors import ArgumentError
 from ..geometry.colouring import shared_particle_pairs
-from ..launches import FLOAT, INT, VEC2I, BoundStage, PhaseTask
+from ..launches import FLOAT, INT, VEC2I, BoundStage, PhaseTask, start_compliant_substep
 
 CLUSTER_PARTICLES = 256
 """Particles a cluster owns: with 128 threads a block, about one stick of each colour a thread."""
@@ -35,9 +35,10 @@ MAX_SHARED_BYTES = 48 * 1024
 positions and weights, its sticks' packed ends and rest lengths, and its colours' starts."""
 
 
-def shared_bytes(region_capacity: int, stick_capacity: int, colours: int) -> int:
-    """The clustered kernel's shared memory a block: 16 bytes a region particle, 8 a stick, 4 a colour start."""
-    return region_capacity * 16 + stick_capacity * 8 + (colours + 1) * 4
+def shared_bytes(region_capacity: int, stick_capacity: int, colours: int, compliant: bool = False) -> int:
+    """The clustered kernel's shared memory a block: 16 bytes a region particle, 8 a stick (16 a soft one's: its
+    compliance and tension too), 4 a colour start."""
+    return region_capacity * 16 + stick_capacity * (16 if compliant else 8) + (colours + 1) * 4
 
 
 class ClustersRefused(ArgumentError):
@@ -154,9 +155,9 @@ def check_layout(layout: ClusterLayout, sticks: np.ndarray) -> None:
 
 
 class StickClusters(ConstraintSet):
-    """Rigid stick arrays swept cluster by cluster in shared memory (``sticks = "clustered"``; kernels/
-    stick_clusters.py): one launch per cluster colour. The same projections as Sticks in another order (block
-    Gauss-Seidel), so not the same positions bit for bit."""
+    """Stick arrays swept cluster by cluster in shared memory (``sticks = "clustered"``; kernels/stick_clusters.py):
+    one launch per cluster colour, XPBD where a stick is soft. The same projections as Sticks in another order
+    (block Gauss-Seidel), so not the same positions bit for bit."""
 
     name = "stick clusters"
 
@@ -165,14 +166,15 @@ class StickClusters(ConstraintSet):
 
     def device_bytes(self, req) -> int:
         """An upper bound, known before the layout is built: the Model's stick arrays (ends, rest, weight; the
-        stretch readback reads them); per stored stick its packed local ends and rest; the regions, at most every particle
-        and one other end per stick; the region starts; and a stick start per cluster and colour, for at most
-        MAX_COLOURS colours."""
+        stretch readback reads them); per stored stick its packed local ends and rest (soft sticks: the Model's
+        compliance, the stored one and the tension too); the regions, at most every particle and one other end per
+        stick; the region starts; and a stick start per cluster and colour, for at most MAX_COLOURS colours."""
         from ..geometry.colouring import MAX_COLOURS
 
         clusters = -(-req.particles // CLUSTER_PARTICLES)
+        soft = req.sticks * 3 * FLOAT if req.compliant else 0  # the Model's compliances, the stored ones, tensions
         return (req.sticks * (VEC2I + 2 * FLOAT) + req.sticks * (INT + FLOAT) + (req.particles + req.sticks) * INT
-                + (clusters + 1) * INT + (clusters * MAX_COLOURS + 1) * INT)
+                + (clusters + 1) * INT + (clusters * MAX_COLOURS + 1) * INT + soft)
 
     def build(self, model, scene, device):
         if model.colouring is None or model.colouring.overflow:
@@ -186,13 +188,14 @@ class StickClusters(ConstraintSet):
             raise ClustersRefused(f"sticks = 'clustered': a cluster's region (its particles and its sticks' other "
                                    f"ends) holds {layout.capacity} particles, above the {MAX_REGION} a stick's packed ends "
                                    "can name (sticks reach far across the cloth): use sticks = 'explicit'")
-        shared = shared_bytes(layout.capacity, layout.stick_capacity, layout.colours)
+        shared = shared_bytes(layout.capacity, layout.stick_capacity, layout.colours, model.compliant)
         if shared > MAX_SHARED_BYTES:
             raise ClustersRefused(f"sticks = 'clustered': a cluster's region of {layout.capacity} particles and "
                                    f"{layout.stick_capacity} sticks take {shared} bytes of shared memory, above the "
                                    f"{MAX_SHARED_BYTES} a block may hold (sticks reach far across the cloth, or many "
                                    "sticks meet at a particle): use sticks = 'explicit'")
-        return DeviceClusters(layout, device)
+        compliance = model.stick_compliance.numpy()[layout.stick] if model.compliant else None
+        return DeviceClusters(layout, compliance, device)
 
     def bind(self, model, state, solver) -> BoundStage:
         import warp as wp
@@ -200,24 +203,29 @@ class StickClusters(ConstraintSet):
         from warp_verlet.kernels.stick_clusters import relax_stick_clusters
 
         data = model.constraints[self.name]
-        kernel = relax_stick_clusters(data.capacity, data.stick_capacity, data.colours)
+        soft = data.compliance is not None
+        kernel = relax_stick_clusters(data.capacity, data.stick_capacity, data.colours, soft)
+        # XPBD: the tension of each stick over the substep's sweeps, in the clusters' order of the sticks.
+        tension = solver.scratch("cluster_tension", len(data.rest), float) if soft else data.no_tension
+        compliance = data.compliance if soft else data.no_tension
         tasks = []
         for first, count in data.launches:
             inputs = [state.particle_q, model.inv_mass, data.region_start, data.region, data.stick_start,
-                      data.stick_ends, data.rest, first]
+                      data.stick_ends, data.rest, compliance, 0.0, tension, first]
             launch = wp.launch_tiled(kernel, dim=[count], block_dim=CLUSTER_BLOCK, record_cmd=True,
                                      device=model.device, inputs=inputs)
             tasks.append(PhaseTask(kernel.key, launch.launch, launch))
+        prepare = start_compliant_substep([task.launch for task in tasks], tension) if soft else None
         # One thread runs a cluster colour: on the CPU a tiled launch's shared memory is one buffer for the
         # process, so two threads' launches would write over each other. The CPU thread team's other threads wait.
         idle = [None] * (solver.threads - 1)
-        return BoundStage(None, [[task, *idle] for task in tasks])
+        return BoundStage(prepare, [[task, *idle] for task in tasks])
 
 
 class DeviceClusters:
     """A ClusterLayout's arrays on the device."""
 
-    def __init__(self, layout: ClusterLayout, device):
+    def __init__(self, layout: ClusterLayout, compliance: np.ndarray | None, device):
         import warp as wp
 
         self.region_start = wp.array(layout.region_start, dtype=int, device=device)
@@ -225,6 +233,9 @@ class DeviceClusters:
         self.stick_start = wp.array(layout.stick_start, dtype=int, device=device)
         self.stick_ends = wp.array(layout.packed_ends, dtype=int, device=device)
         self.rest = wp.array(layout.rest, dtype=float, device=device)
+        # Soft sticks' compliances (m/N) in the stored order; None where every stick is rigid.
+        self.compliance = None if compliance is None else wp.array(compliance, dtype=float, device=device)
+        self.no_tension = wp.empty(0, dtype=float, device=device)  # the rigid kernel's unread XPBD arrays
         self.colours = layout.colours
         self.launches = layout.launches
         self.capacity = layout.capacity

@@ -121,8 +121,8 @@ class Requirements:
 
             obstacle = cluster_obstacle(scene, req)
             if obstacle is not None:
-                raise ArgumentError(f"sticks = 'clustered' sweeps rigid float32 stick arrays of the coloured solver "
-                                    f"that cannot tear, but {obstacle}")
+                raise ArgumentError(f"sticks = 'clustered' sweeps float32 stick arrays of the coloured solver that "
+                                    f"cannot tear, but {obstacle}")
             req = replace(req, stick_clusters=True)
         return req
 
@@ -146,7 +146,7 @@ many particles on. On an H100 the tiles reached the same stretch as a launch per
 1024^2 and 2048^2, and took longer at 256^2, where a launch of a quarter of the tiles leaves most of the GPU idle
 (bench/results/grid_tiles)."""
 MIN_CLUSTERED_PARTICLES = 256 * 256
-"""Where "auto" sweeps rigid float32 stick arrays (a mesh cloth's, or several cloths') cluster by cluster on a GPU
+"""Where "auto" sweeps float32 stick arrays (a mesh cloth's, or several cloths') cluster by cluster on a GPU
 (constraints/stick_clusters.py): from this many particles on. On an H100 the clustered sweep took half the time
 of a launch per colour at 512^2 and 1024^2, and as long at 256^2, for the same stretch (bench/results/mesh).
 A layout the clustered sweep refuses (an overflow colour, a region too large for shared memory) keeps a launch
@@ -188,8 +188,8 @@ def cluster_obstacle(scene: "Scene", req: Requirements) -> str | None:
         return "the scene has no sticks"
     if scene.tears:
         return "a cloth can tear (the sweep reads no stick's weight)"
-    if scene.compliant:
-        return "a cloth gives a stick family a compliance"
+    if scene.compliant and scene.simulation.global_iterations:
+        return "the global correction starts each soft stick's tension in the stick arrays' order"
     if req.precision != "float32":
         return "the positions are float64 (simulation.precision)"
     return None
