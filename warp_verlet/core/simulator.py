@@ -181,7 +181,7 @@ class Simulator:
         tile by tile in shared memory (kernels/grid_tiles.py); "explicit" always keeps them; "implicit" insists on
         a launch per colour, in the explicit sticks' order and with their positions bit for bit; "tiled" insists
         on tiles; "clustered" sweeps stick arrays (a mesh's) cluster by cluster in shared memory
-        (constraints/stick_clusters.py), which "auto" chooses for rigid float32 stick arrays on a GPU from
+        (constraints/stick_clusters.py), which "auto" chooses for float32 stick arrays on a GPU from
         stages.MIN_CLUSTERED_PARTICLES on (``model.clusters_refused`` says why where their layout is refused).
         ``constraint_sets`` says what was chosen. ``particle_order``: "auto" holds a mesh cloth's particles in
         Morton order on the device where the scene's order scatters its sticks across memory, so that a launch

@@ -145,10 +145,11 @@ MIN_TILED_PARTICLES = 512 * 512
 many particles on. On an H100 the tiles reached the same stretch as a launch per colour in less time at 512^2,
 1024^2 and 2048^2, and took longer at 256^2, where a launch of a quarter of the tiles leaves most of the GPU idle
 (bench/results/grid_tiles)."""
-MIN_CLUSTERED_PARTICLES = 256 * 256
+MIN_CLUSTERED_PARTICLES = 512 * 512
 """Where "auto" sweeps float32 stick arrays (a mesh cloth's, or several cloths') cluster by cluster on a GPU
-(constraints/stick_clusters.py): from this many particles on. On an H100 the clustered sweep took half the time
-of a launch per colour at 512^2 and 1024^2, and as long at 256^2, for the same stretch (bench/results/mesh).
+(constraints/stick_clusters.py): from this many particles on. On an H100 the clustered sweep took 28-60% less time
+than a launch per colour at 512^2 and 1024^2, rigid or with soft bend sticks, for the same stretch; at 256^2 the
+two were within 3% of each other either way, and below it the clustered sweep was slower (bench/results/mesh).
 A layout the clustered sweep refuses (an overflow colour, a region too large for shared memory) keeps a launch
 per colour (Model)."""
 MAX_UNIFORM_MASS_PINS = 8
