@@ -32,7 +32,8 @@ MAX_REGION = 2048
 are packed into one int, 16 bits each."""
 MAX_SHARED_BYTES = 48 * 1024
 """The most shared memory a block of the clustered sweep may take (a CUDA block's static limit): its region's
-positions and weights, its sticks' packed ends and rest lengths, and its colours' starts."""
+positions and weights, its sticks' packed ends and rest lengths (and soft sticks' compliances and tensions), and
+its colours' starts."""
 
 
 def shared_bytes(region_capacity: int, stick_capacity: int, colours: int, compliant: bool = False) -> int:
@@ -186,8 +187,8 @@ class StickClusters(ConstraintSet):
                                 model.rest_positions, CLUSTER_PARTICLES)
         if layout.capacity > MAX_REGION:
             raise ClustersRefused(f"sticks = 'clustered': a cluster's region (its particles and its sticks' other "
-                                   f"ends) holds {layout.capacity} particles, above the {MAX_REGION} a stick's packed ends "
-                                   "can name (sticks reach far across the cloth): use sticks = 'explicit'")
+                                   f"ends) holds {layout.capacity} particles, above the {MAX_REGION} a stick's "
+                                   "packed ends can name (sticks reach far across the cloth): use sticks = 'explicit'")
         shared = shared_bytes(layout.capacity, layout.stick_capacity, layout.colours, model.compliant)
         if shared > MAX_SHARED_BYTES:
             raise ClustersRefused(f"sticks = 'clustered': a cluster's region of {layout.capacity} particles and "
