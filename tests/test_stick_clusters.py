@@ -323,3 +323,26 @@ def test_every_shipped_scene_a_clustered_sweep_can_take_runs_with_it_as_stretche
             assert ours < 1.5 * theirs + 1e-4 and theirs < 1.5 * ours + 1e-4, (path.name, measure, ours, theirs)
         taken += 1
     assert taken >= 12  # the shipped scenes that cannot tear
+
+
+def test_the_run_summary_says_how_the_sticks_were_swept_and_why_auto_did_not_cluster(tmp_path, monkeypatch):
+    from warp_verlet.apps.runner import SWEEP_FORMS, run_scene, sweep_description
+    from warp_verlet.constraints import stick_clusters
+    from warp_verlet.core import model as model_module, stages
+
+    grid = grid_scene()
+    assert sweep_description(Simulator(grid, "cpu").model) == SWEEP_FORMS["explicit"]  # "auto" on the CPU
+    for form in ("implicit", "tiled"):
+        assert sweep_description(Simulator(grid, "cpu", sticks=form).model) == SWEEP_FORMS[form]
+    jacobi = make_scene({"substeps": 2, "iterations": 4, "relaxation": "jacobi"}, resolution=[8, 8])
+    assert "Jacobi" in sweep_description(Simulator(jacobi, "cpu").model)
+
+    mesh = triangle_scene(tmp_path)
+    summary = run_scene(mesh, tmp_path / "mesh.usdc", device="cpu", frames=2).format()
+    assert f"sweep            {SWEEP_FORMS['explicit']}\n" in summary
+    monkeypatch.setattr(model_module, "stick_form", lambda sticks, colouring, device: sticks)  # as on a GPU
+    monkeypatch.setattr(stages, "MIN_CLUSTERED_PARTICLES", 1)
+    assert sweep_description(Simulator(mesh, "cpu").model) == SWEEP_FORMS["clustered"]
+    monkeypatch.setattr(stick_clusters, "MAX_SHARED_BYTES", 1024)
+    kept = sweep_description(Simulator(mesh, "cpu").model)
+    assert kept.startswith(SWEEP_FORMS["explicit"] + " (clustered refused: ") and "shared memory" in kept

@@ -53,6 +53,7 @@ class RunSummary:
     startup_seconds: float = 0.0  # before the first frame: the model built and the kernels loaded (not in wall)
     unconverged: str | None = None  # where the stretch check failed, and what to change (unconverged_advice)
     kernel_seconds: float = 0.0  # of which Warp's kernel modules, compiled or loaded from its kernel cache
+    sweep: str = ""  # how the relaxation swept the sticks (sweep_description)
 
     def format(self) -> str:
         rate = self.frames / self.wall_seconds if self.wall_seconds > 0 else float("inf")
@@ -69,6 +70,7 @@ class RunSummary:
             f"particles        {self.particles}",
             f"sticks           {self.sticks}",
             f"colours          {colours}",
+            *([f"sweep            {self.sweep}"] if self.sweep else []),
             f"stretch |D-L|/L  max {self.stretch_max:.3e}, rms {self.stretch_rms:.3e} (structural sticks, last frame)",
         ]
         if self.budget is not None:
@@ -151,7 +153,27 @@ def _simulate(scene: Scene, output: Path, target: CacheOutput, device: str | Non
         stretch_max=stretch.max, stretch_rms=stretch.rms, torn=sim.torn_count() if model.tears else None,
         threads=sim.threads, budget=sim.budget.report() if sim.budget is not None else None,
         notes=tuple(target.notes), startup_seconds=startup, kernel_seconds=kernel_seconds, unconverged=unconverged,
+        sweep=sweep_description(model),
     )
+
+
+SWEEP_FORMS = {
+    "explicit": "stick arrays, a launch per colour",
+    "implicit": "grid sticks computed in the kernels, a launch per colour",
+    "tiled": "grid sticks computed in the kernels, tile by tile in shared memory",
+    "clustered": "stick arrays, cluster by cluster in shared memory",
+}
+
+
+def sweep_description(model) -> str:
+    """How the model's sticks are swept (Simulator's ``sticks``, "auto" resolved), and why "auto" did not cluster
+    them where it chose to and the layout was refused."""
+    if model.stick_count == 0:
+        return "no sticks"
+    if model.relaxation == "jacobi":
+        return "stick arrays, a Jacobi gather per particle"
+    form = SWEEP_FORMS[model.sticks_form]
+    return form if model.clusters_refused is None else f"{form} (clustered refused: {model.clusters_refused})"
 
 
 def unconverged_advice(scene: Scene, sim, points: np.ndarray) -> str:
