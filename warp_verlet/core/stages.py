@@ -221,6 +221,9 @@ def grid_counts(scene: "Scene", sticks: str) -> dict:
     pins = cloth.pin_count if (sticks == "implicit" and cloth.uses_tethers
                                and 0 < cloth.pin_count <= MAX_GRID_TETHER_PINS) else 0
     weight_pins = cloth.pin_count if not cloth.particle_masses and 0 < cloth.pin_count <= MAX_UNIFORM_MASS_PINS else 0
+    if sticks == "tiled" and soft:
+        raise ArgumentError("sticks = 'tiled' projects rigid sticks only, but the cloth gives a stick family a "
+                            "compliance")
     return {"grid_rows": r, "grid_cols": c, "soft_sticks": soft, "grid_pins": pins, "weight_pins": weight_pins,
             "grid_tiles": sticks == "tiled"}
 
