@@ -389,28 +389,27 @@ class Model:
             self.air = AirModel(self, scene, req.air, device)
             self._hold(self.air, "air")
         self.clusters_refused = None  # why "auto" kept a launch per colour where it chose clustered sticks
-        try:
-            self._build_constraints(scene, device, req)
-        except ClustersRefused as refusal:
-            if self.stick_request != "auto":
-                raise
-            # "auto" chose clustered sticks from the scene alone; the layout (the colouring's overflow, a region's
-            # size) is known only now. A launch per colour takes any stick arrays, in less memory.
-            self.clusters_refused = str(refusal)
-            req = replace(req, stick_clusters=False)
-            self.stick_request, self.sticks_form = "explicit", "explicit"
-            self._build_constraints(scene, device, req)
-        self.requirements = req  # the scene's Requirements for this model's stick form: the solver's
-        self._frozen = True
-
-    def _build_constraints(self, scene: Scene, device, req: Requirements) -> None:
-        """Every constraint kind's device data that ``req`` needs, on ``self.constraints``."""
         self.constraints = {}  # constraint kind name -> the device data its build made (kinds with data only)
         for kind in constraint_kinds():
-            data = kind.build(self, scene, device) if kind.needed(req) else None
+            if not kind.needed(req):
+                continue
+            try:
+                data = kind.build(self, scene, device)
+            except ClustersRefused as refusal:
+                if self.stick_request != "auto":
+                    raise
+                # "auto" chose clustered sticks from the scene alone; the layout (the colouring's overflow, a
+                # region's size) is known only now. A launch per colour takes any stick arrays, in less memory, and
+                # builds nothing of its own (it sweeps the Model's stick arrays), so the kinds built so far stand.
+                self.clusters_refused = str(refusal)
+                req = replace(req, stick_clusters=False)
+                self.stick_request, self.sticks_form = "explicit", "explicit"
+                continue
             if data is not None:
                 self.constraints[kind.name] = data
                 self._hold(data, kind.name.replace(" ", "_"))
+        self.requirements = req  # the scene's Requirements for this model's stick form: the solver's
+        self._frozen = True
 
     def _hold(self, part, prefix: str) -> None:
         """Name ``part``'s device arrays on the Model too (``prefix_name``), where whatever lists the Model's
