@@ -27,6 +27,20 @@ def arg_parser(module: str, doc: str) -> argparse.ArgumentParser:
                                    formatter_class=argparse.RawDescriptionHelpFormatter)
 
 
+def add_compliance_arg(p: argparse.ArgumentParser) -> None:
+    """``--compliance FAMILY=M_PER_N ...``: soft stick families (read back with ``compliance_of``)."""
+    p.add_argument("--compliance", nargs="+", default=[], metavar="FAMILY=M_PER_N",
+                   help="soft stick families in every variant, e.g. bend=1.0 (default: all rigid)")
+
+
+def compliance_of(p: argparse.ArgumentParser, values: list[str]) -> dict[str, float]:
+    """The families' compliances (m/N) given by ``--compliance``; a malformed entry is the parser's error."""
+    try:
+        return {family: float(value) for family, value in (c.split("=") for c in values)}
+    except ValueError:
+        p.error("--compliance: give FAMILY=M_PER_N, e.g. bend=1.0")
+
+
 def quiet_warp() -> None:
     """Silence Warp's banner and module-load lines: ``config.quiet`` up to Warp 1.x, ``log_level`` after."""
     wp.config.quiet = True

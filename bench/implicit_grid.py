@@ -35,7 +35,7 @@ import warp as wp
 from warp_verlet.input.scene import parse_scene
 from warp_verlet.core.simulator import Simulator
 
-from .common import (HANGING_DAMPING, arg_parser, copy_bandwidth, hanging_sheet, machine, median_spread, quiet_warp,
+from .common import (HANGING_DAMPING, add_compliance_arg, arg_parser, compliance_of, copy_bandwidth, hanging_sheet, machine, median_spread, quiet_warp,
                      scene, time_frames, write_table)
 from .throughput import RELAX_BYTES_PER_PROJECTION
 
@@ -45,9 +45,11 @@ FORMS = ("explicit", "auto", "implicit", "tiled")
 implicit sticks swept tile by tile in shared memory (kernels/grid_tiles.py) with the tether table."""
 
 
-def sheet(n: int, substeps: int, iterations: int, **simulation):
+def sheet(n: int, substeps: int, iterations: int, compliance: dict | None = None, **simulation):
+    """The hanging sheet with tethers; ``compliance``: soft stick families (m/N; none: all rigid)."""
+    soft = {"compliance": compliance} if compliance else {}
     return scene({"frames": FRAMES, "substeps": substeps, "iterations": iterations, "damping": HANGING_DAMPING,
-                  **simulation}, hanging_sheet(n, tethers=True), name=f"<hanging sheet {n}x{n}, tethers>")
+                  **simulation}, hanging_sheet(n, tethers=True, **soft), name=f"<hanging sheet {n}x{n}, tethers>")
 
 
 def explicit_bytes_per_sweep(sim: Simulator) -> int:
@@ -70,12 +72,12 @@ def timed(sim: Simulator, repeats: int) -> tuple[float, float]:
 
 
 def budget_rows(device: str, sizes: list[int], budgets: list[tuple[int, int]], repeats: int,
-                copy_gbs: float | None, forms: tuple[str, ...] = FORMS) -> list[dict]:
+                copy_gbs: float | None, forms: tuple[str, ...] = FORMS, compliance: dict | None = None) -> list[dict]:
     rows = []
     for n in sizes:
         finals = {}
         for form in forms:
-            sim = Simulator(sheet(n, *budgets[0]), device, sticks=form)
+            sim = Simulator(sheet(n, *budgets[0], compliance), device, sticks=form)
             for substeps, iterations in budgets:
                 sim.retune(substeps=substeps, iterations=iterations)
                 sim.reset()
@@ -157,9 +159,11 @@ def main(argv=None) -> int:
     p.add_argument("--tile", type=int, default=None, help="cells per side of the tiled sweep's tiles")
     p.add_argument("--max-registers", type=int, default=None,
                    help="registers a thread of the tiled sweep may use (0: the compiler's choice)")
+    add_compliance_arg(p)
     p.add_argument("--tethers-apart", action="store_true",
                    help="run the first sweep's tether pass as its own launch, not inside the Verlet step")
     args = p.parse_args(argv)
+    compliance = compliance_of(p, args.compliance)
     quiet_warp()
     if args.tethers_apart:
         from warp_verlet.core import stages
@@ -188,10 +192,11 @@ def main(argv=None) -> int:
     rows = []
     for n in args.sizes:
         rows += budget_rows(str(device), [n], parse(args.large_budgets if n >= 2048 else args.budgets), args.repeats,
-                            copy_gbs, tuple(args.forms))
+                            copy_gbs, tuple(args.forms), compliance)
     title = ("Hanging sheet with tethers at 1 s, stick and tether arrays (explicit) against implicit grid sticks: "
              "a launch per colour with implicit tethers (implicit), swept tile by tile with the tether table (tiled), "
-             f"and what the simulator picks (auto): {machine(device)}")
+             f"and what the simulator picks (auto)"
+             f"{', compliance ' + ', '.join(args.compliance) + ' m/N' if compliance else ''}: {machine(device)}")
     if copy_gbs:
         title += f"; device copy {copy_gbs:.0f} GB/s (read + write)"
     write_table(rows, args.out, "implicit-grid", title)

@@ -67,8 +67,8 @@ from warp_verlet.input.scene import Scene, parse_scene
 from warp_verlet.core.simulator import Simulator
 from warp_verlet.geometry.topology import grid_positions
 
-from .common import (HANGING_DAMPING, arg_parser, hanging_cloth, hanging_sheet, machine, median_spread, quiet_warp,
-                     scene, time_frames, write_table)
+from .common import (HANGING_DAMPING, add_compliance_arg, arg_parser, compliance_of, hanging_cloth, hanging_sheet,
+                     machine, median_spread, quiet_warp, scene, time_frames, write_table)
 
 FRAMES, WARM_UP = 60, 2
 PRIM = "/Set/Cloth"
@@ -335,8 +335,7 @@ def main(argv=None) -> int:
                    help="the mesh variants' stick forms (Simulator's sticks; the grid always takes auto): with "
                         "several, a row per form")
     p.add_argument("--shuffle", action="store_true", help="the mesh files list their vertices in a random order")
-    p.add_argument("--compliance", nargs="+", default=[], metavar="FAMILY=M_PER_N",
-                   help="soft stick families in every variant, e.g. bend=1.0 (default: all rigid)")
+    add_compliance_arg(p)
     p.add_argument("--setup-only", action="store_true",
                    help="time the reordering's host-side setup at each size instead of simulating")
     p.add_argument("--no-colouring", action="store_true", help="with --setup-only: leave Warp's graph colouring out")
@@ -347,10 +346,7 @@ def main(argv=None) -> int:
         p.error("--sizes: a mesh needs at least 2 x 2 particles")
     if args.frames - WARM_UP < args.repeats:
         p.error(f"--frames: {WARM_UP} warm-up frames and at least one per repeat")
-    try:
-        compliance = {family: float(value) for family, value in (c.split("=") for c in args.compliance)}
-    except ValueError:
-        p.error("--compliance: give FAMILY=M_PER_N, e.g. bend=1.0")
+    compliance = compliance_of(p, args.compliance)
     quiet_warp()
     device = wp.get_device(args.device)
     command = ["bench.mesh_throughput", *(argv if argv is not None else sys.argv[1:])]

@@ -25,6 +25,10 @@ uninitialised (``tile_empty``): a projection reads only cells of its own sticks,
 staged first, so zero-filling them (a loop and barriers per tile) bought nothing
 (bench/results/grid_tiles/barriers-and-fold.md).
 
+A soft colour (XPBD) projects with its compliance and each stick's tension, which it reads and writes in global
+memory where the launch per colour keeps it (kernels/grid_relax.py): a stick is projected once a sweep, by one
+thread, so its tension needs no staging and no barrier.
+
 The Verlet step and the tether pass before a sweep stay launches of their own. Taken into the staging (the first
 tile to stage a particle moving it, bit for bit the same), they made each staged cell wait on a chain of dependent
 loads, and measured slower (bench/results/grid_tiles/tiles-take-step.md).
@@ -39,7 +43,7 @@ import warp as wp
 
 from .grid_relax import GridColour, anchor_index, particle_weight
 from .positions import scaled
-from .relax import stick_correction
+from .relax import compliant_correction, stick_correction
 
 _KERNELS: dict = {}
 
@@ -50,9 +54,16 @@ def block_barrier():
     ...
 
 
+MAX_TILED_COLOURS = 12
+"""The most stick colours a tiled sweep takes (three families of four): the length of its per-colour vectors."""
+colour_floats = wp.types.vector(length=MAX_TILED_COLOURS, dtype=float)
+colour_ints = wp.types.vector(length=MAX_TILED_COLOURS, dtype=int)
+
+
 def relax_grid_tiles(tile: int, colours: tuple, max_registers: int | None = None):
     """The tiled sweep's kernel for tiles of ``tile`` x ``tile`` cells and the given colours, each
-    ``(dr, dc, col_first, parity_axis, q, parity)`` (parity_axis 0: rows, 1: columns), in sweep order. One
+    ``(dr, dc, col_first, parity_axis, q, parity, soft)`` (parity_axis 0: rows, 1: columns; soft: XPBD, the
+    colour's compliance, its first tension and its anchors per row given at launch), in sweep order. One
     kernel per (tile, colours, max_registers): the shared tiles' shapes and each colour's geometry are
     compile-time constants, so a colour's step unrolls to its own index arithmetic. ``max_registers`` caps a
     CUDA thread's registers (None: the compiler's choice), so that more blocks fit on a multiprocessor."""
@@ -121,10 +132,18 @@ def _make_kernel(tile: int, colours: tuple, max_registers: int | None):
         tile_row_parity: int,
         tile_col_parity: int,
         tiles_across: int,
+        compliance: colour_floats,
+        tension_first: colour_ints,
+        anchors_per_row: colour_ints,
+        inv_dt2: float,
+        tension: wp.array(dtype=float),
     ):
         """One sweep of every colour over the tiles of one tile colour (tile row parity, tile column parity):
         block k takes tile (parity_row + 2 (k // tiles_across), parity_col + 2 (k % tiles_across)). ``layout``
-        is any colour's (the kernel reads the cloth's first particle, row length and weights from it)."""
+        is any colour's (the kernel reads the cloth's first particle, row length and weights from it). A soft
+        colour n's stick with anchor (r, c) keeps its tension (mu, zeroed at the substep's start) where the
+        launch-per-colour form keeps it: tension[tension_first[n] + kr * anchors_per_row[n] + kc], (kr, kc) its
+        place among the colour's anchors (kernels/grid_relax.py)."""
         block, lane = wp.tid()
         threads = wp.block_dim()
         first = layout.first_particle
@@ -209,7 +228,19 @@ def _make_kernel(tile: int, colours: tuple, max_registers: int | None):
                     wj = weight[jr, jc]
                     xi = region[lr, ic]
                     xj = region[jr, jc]
-                    d = stick_correction(xi, xj, wi, wj, rest, 1.0)
+                    if wp.static(COLOURS[n][6]):
+                        # The anchor's place among the colour's: the parity axis keeps q of every 2q indices.
+                        kr = r
+                        kc = c - col_first
+                        if wp.static(COLOURS[n][3] == 0):
+                            kr = q * (r // (2 * q)) + r % q
+                        else:
+                            kc = q * (c // (2 * q)) + c % q
+                        t = tension_first[n] + kr * anchors_per_row[n] + kc
+                        d, mu = compliant_correction(xi, xj, wi, wj, rest, 1.0, compliance[n], inv_dt2, tension[t])
+                        tension[t] = mu
+                    else:
+                        d = stick_correction(xi, xj, wi, wj, rest, 1.0)
                     put_point(region, lr, ic, xi + scaled(d, wi))
                     put_point(region, jr, jc, xj - scaled(d, wj))
                 k += threads

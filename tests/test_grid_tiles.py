@@ -74,6 +74,64 @@ def test_a_tiled_sweep_is_the_sequential_sweep_in_tile_order_bit_for_bit(tile, c
     np.testing.assert_array_equal(tiled.state.positions(), x.numpy())
 
 
+@pytest.mark.parametrize("tile", [8, 16])
+def test_a_soft_tiled_sweep_is_the_sequential_xpbd_sweep_in_tile_order_bit_for_bit(tile, monkeypatch):
+    """Soft families (XPBD): the tiled sweep projects each soft stick with its compliance and the tension it has
+    gathered over the substep's sweeps, kept where the launch per colour keeps it: two sweeps of a substep are
+    the sequential XPBD sweeps in tile order, positions and tensions bit for bit."""
+    from warp_verlet.kernels.relax import relax_colour_compliant
+
+    monkeypatch.setattr(sticks, "GRID_TILE", tile)
+    families = ["structural", "shear", "bend"]
+    scene = sheet(sticks=families, compliance={"shear": 0.01, "bend": 0.05})
+    tiled = Simulator(scene, "cpu", threads=1, sticks="tiled")
+    explicit = Simulator(scene, "cpu", threads=1, sticks="explicit")
+    start = perturbed(tiled)
+    dt = 1.0 / 240.0
+
+    tiled.state.set_positions(start)
+    bound = GridTiles().bind(tiled.model, tiled.state, tiled.solver)
+    bound.run(tiled.state, dt)  # the substep's 1 / dt^2, the tensions zeroed
+    for _ in range(2):
+        for phase in bound.phases:
+            for task in phase:
+                task.run()
+
+    m = explicit.model
+    ends = m.stick_ends.numpy()
+    colour_of = np.repeat(np.arange(len(m.colour_ranges)), [n for _, n in m.colour_ranges])
+    order = tile_order(ends, colour_of, COLS, tile)
+    compliance = m.stick_compliance.numpy()[order]
+    assert 0 < np.count_nonzero(compliance) < len(order)  # soft shear and bend sticks among rigid ones
+    x = wp.array(start, dtype=wp.vec3, device="cpu")
+    tension = wp.zeros(len(order), dtype=float, device="cpu")
+    inputs = [x, m.inv_mass, wp.array(ends[order], dtype=wp.vec2i, device="cpu"),
+              wp.array(m.stick_rest.numpy()[order], dtype=float, device="cpu"),
+              wp.array(m.stick_weight.numpy()[order], dtype=float, device="cpu"),
+              wp.array(compliance, dtype=float, device="cpu"), 1.0 / (dt * dt), 0, 1]
+    for _ in range(2):
+        wp.launch(relax_colour_compliant, len(order), device="cpu", inputs=inputs, outputs=[tension])
+    rigid = Simulator(sheet(sticks=families), "cpu", threads=1, sticks="tiled")
+    rigid.state.set_positions(start)
+    for _ in range(2):
+        for phase in GridTiles().bind(rigid.model, rigid.state, rigid.solver).phases:
+            for task in phase:
+                task.run()
+    assert np.abs(rigid.state.positions() - x.numpy()).max() > 1e-6  # the compliance changed the moves
+    np.testing.assert_array_equal(tiled.state.positions(), x.numpy())
+
+    # Each soft stick's tension, where the launch per colour keeps it: its colour's first tension plus its
+    # place in the colour (the explicit arrays hold a colour's sticks in the order of its anchors).
+    grid = tiled.model.grid
+    sequential = np.empty(len(order), np.float32)
+    sequential[order] = tension.numpy()
+    kept = tiled.solver.scratch("grid_tension", grid.soft_sticks, float).numpy()
+    for colour, (first, count) in zip(grid.colours, m.colour_ranges):
+        if colour.compliance > 0.0:
+            np.testing.assert_array_equal(kept[colour.tension_first:colour.tension_first + count],
+                                          sequential[first:first + count])
+
+
 @pytest.mark.parametrize("threads", [2, 3])
 def test_a_cpu_thread_team_runs_the_tiles_on_one_thread_and_changes_no_bit(threads):
     """With a CPU thread team (the tethers' pass split between the threads), one thread runs each tile colour, whose
@@ -100,8 +158,10 @@ def one_tiled_substep(scene, device: str, start: np.ndarray) -> np.ndarray:
 
 @pytest.mark.cuda
 @pytest.mark.skipif(not wp.is_cuda_available(), reason="no CUDA device")
-@pytest.mark.parametrize("tile", [8, 16])
-def test_a_tiled_sweep_on_cuda_is_the_sequential_sweep(tile, monkeypatch):
+@pytest.mark.parametrize("tile, cloth", [(8, {}), (16, {}),
+                                        (16, {"sticks": ["structural", "shear", "bend"], "compliance": {"bend": 0.05}})],
+                         ids=["8", "16", "16-soft-bend"])
+def test_a_tiled_sweep_on_cuda_is_the_sequential_sweep(tile, cloth, monkeypatch):
     """A GPU block runs a colour's sticks at once and relies on one barrier after each colour (and after the
     staging) for the next colour to read them: a missing barrier reads positions a correction (about the 1 cm
     perturbation) old. The substep must equal the CPU's, which runs the sweep's projections one after another,
@@ -109,7 +169,7 @@ def test_a_tiled_sweep_on_cuda_is_the_sequential_sweep(tile, monkeypatch):
     multiply-adds."""
     monkeypatch.setattr(sticks, "GRID_TILE", tile)
     scene = make_scene({"substeps": 1, "iterations": 1}, resolution=[ROWS, COLS], size=[1.0, 1.2],
-                       pins=["top-left", "top-right"])
+                       pins=["top-left", "top-right"], **cloth)
     start = perturbed(Simulator(scene, "cpu", threads=1, sticks="tiled"))
     sequential = one_tiled_substep(scene, "cpu", start)
     on_gpu = one_tiled_substep(scene, "cuda", start)
@@ -136,7 +196,6 @@ def test_tiled_sweeps_converge_as_the_coloured_sweeps_do(device):
 
 
 @pytest.mark.parametrize("cloth, simulation, words", [
-    ({"compliance": {"structural": 1e-3}}, {}, "rigid sticks only"),
     ({}, {"precision": "float64"}, "float32"),
     ({"tear_threshold": 1.5}, {}, "can tear"),
 ])

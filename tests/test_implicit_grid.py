@@ -124,7 +124,8 @@ def test_the_rule_picks_implicit_sticks_for_one_grid_cloth_that_cannot_tear(devi
 @pytest.mark.parametrize("compliance, smallest_tiled, sets, same_as", [
     ({}, 0, ("tethers", "grid tiles"), "tiled"),  # rigid float32 sticks of a large grid: swept tile by tile
     ({}, 64, ("tethers", "grid sticks"), "explicit"),  # a grid below the tiles' size: a launch per colour
-    ({"bend": 1e-3}, 0, ("tethers", "grid sticks"), "explicit"),  # a soft family: a launch per colour
+    ({"bend": 1e-3}, 0, ("tethers", "grid tiles"), "tiled"),  # a soft family of a large grid: tiled too
+    ({"bend": 1e-3}, 64, ("tethers", "grid sticks"), "explicit"),  # soft, below the tiles' size: a launch per colour
 ])
 def test_auto_on_a_gpu_computes_the_sticks_and_keeps_the_tether_table(compliance, smallest_tiled, sets, same_as,
                                                                       monkeypatch):

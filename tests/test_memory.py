@@ -120,8 +120,8 @@ IMPLICIT = ["coloured", "tethers", "compliance", "multilevel", "float64", "movin
             "rigid-patches", "self-contact", "global"]
 
 
-# The rigid float32 cases that allow tiled sweeps (kernels/grid_tiles.py).
-TILED = ["coloured", "tethers", "multilevel", "moving-sphere", "planes", "angle-limit", "rigid-patches",
+# The float32 cases that allow tiled sweeps (kernels/grid_tiles.py).
+TILED = ["coloured", "tethers", "compliance", "multilevel", "moving-sphere", "planes", "angle-limit", "rigid-patches",
          "self-contact", "global"]
 
 

@@ -159,8 +159,9 @@ compiler's occupancy, so the cap only costs it instructions (bench/results/grid_
 class GridTiles(ConstraintSet):
     """Implicit grid sticks swept tile by tile (kernels/grid_tiles.py): a block holds a tile of the cloth and
     its halo in shared memory and projects every colour of the tile's sticks there; four launches a sweep, one
-    per tile colour. Rigid sticks, float32 positions. The same projections as GridSticks in another order
-    (block Gauss-Seidel), so not the same positions bit for bit."""
+    per tile colour. Float32 positions; XPBD for the colours of a soft family, with their tensions where
+    GridSticks keeps them. The same projections as GridSticks in another order (block Gauss-Seidel), so not the
+    same positions bit for bit."""
 
     name = "grid tiles"
 
@@ -168,16 +169,26 @@ class GridTiles(ConstraintSet):
         return req.sticks > 0 and req.grid_tiles
 
     def device_bytes(self, req) -> int:
-        return grid_table_bytes(req)
+        return grid_table_bytes(req) + req.soft_sticks * FLOAT  # a tension per soft stick (solver scratch)
 
     def bind(self, model, state, solver) -> BoundStage:
         import warp as wp
 
-        from warp_verlet.kernels.grid_tiles import relax_grid_tiles
+        from warp_verlet.kernels.grid_tiles import MAX_TILED_COLOURS, colour_floats, colour_ints, relax_grid_tiles
 
         g, x, tile = model.grid, state.particle_q, GRID_TILE
         geometry = tuple((c.layout.dr, c.layout.dc, c.layout.col_first, int(c.layout.row_q == 0),
-                          c.layout.row_q or c.layout.col_q, c.layout.parity) for c in g.colours)
+                          c.layout.row_q or c.layout.col_q, c.layout.parity, c.compliance > 0.0) for c in g.colours)
+        if len(g.colours) > MAX_TILED_COLOURS or any(c.layout.row_first or (c.layout.col_q and c.layout.col_first)
+                                                     for c in g.colours):
+            raise AssertionError("the tiled kernel expects at most 12 colours, anchored from row 0, with the "
+                                 "column parity counted from column 0")
+        pad = [0] * (MAX_TILED_COLOURS - len(g.colours))
+        soft = (colour_floats(*[c.compliance for c in g.colours], *pad),
+                colour_ints(*[c.tension_first for c in g.colours], *pad),
+                colour_ints(*[c.layout.cols for c in g.colours], *pad))
+        # Rigid, the kernel has no soft colour and reads no tension: any float array fills the argument.
+        tension = solver.scratch("grid_tension", g.soft_sticks, float) if g.soft_sticks else g.col_rest1
         registers = GRID_TILE_MAX_REGISTERS if g.rows * g.cols >= GRID_TILE_CAPPED_FROM else None
         kernel = relax_grid_tiles(tile, geometry, registers)
         tiles_down, tiles_across = -(-g.rows // tile), -(-g.cols // tile)
@@ -190,9 +201,11 @@ class GridTiles(ConstraintSet):
                 launch = wp.launch_tiled(
                     kernel, dim=[down * across], block_dim=tile * tile // 2, record_cmd=True, device=model.device,
                     inputs=[x, model.inv_mass, g.colours[0].layout, g.colours[0].pins, g.col_rest1, g.col_rest2,
-                            g.row_rest1, g.row_rest2, g.col_sq1, g.row_sq1, g.rows, row_parity, col_parity, across])
+                            g.row_rest1, g.row_rest2, g.col_sq1, g.row_sq1, g.rows, row_parity, col_parity, across,
+                            *soft, 0.0, tension])
                 tasks.append(PhaseTask(kernel.key, launch.launch, launch))
         # One thread runs a tile colour: on the CPU a tiled launch's shared memory is one buffer for the process,
         # so two threads' launches would write over each other. The CPU thread team's other threads wait.
         idle = [None] * (solver.threads - 1)
-        return BoundStage(None, [[task, *idle] for task in tasks])
+        prepare = start_compliant_substep([t.launch for t in tasks], tension) if g.soft_sticks else None
+        return BoundStage(prepare, [[task, *idle] for task in tasks])

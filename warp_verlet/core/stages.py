@@ -105,7 +105,7 @@ class Requirements:
         )
         req = replace(req, **grid_counts(scene, sticks))
         req = replace(req, precision=resolve(scene, relaxes=RELAX.needed(req)))
-        if (sticks == "auto" and req.implicit_grid and not req.soft_sticks and req.precision == "float32"
+        if (sticks == "auto" and req.implicit_grid and req.precision == "float32"
                 and req.grid_rows * req.grid_cols >= MIN_TILED_PARTICLES):
             req = replace(req, grid_tiles=True)
         if req.grid_tiles and req.precision != "float32":
@@ -141,10 +141,10 @@ def global_levels(scene: "Scene") -> tuple[tuple[int, int, int], ...]:
 
 STICK_FORMS = ("auto", "explicit", "implicit", "tiled", "clustered")
 MIN_TILED_PARTICLES = 512 * 512
-"""Where "auto" sweeps a grid's rigid float32 sticks tile by tile (kernels/grid_tiles.py) on a GPU: from this
-many particles on. On an H100 the tiles reached the same stretch as a launch per colour in less time at 512^2,
-1024^2 and 2048^2, and took longer at 256^2, where a launch of a quarter of the tiles leaves most of the GPU idle
-(bench/results/grid_tiles)."""
+"""Where "auto" sweeps a grid's float32 sticks, rigid or soft, tile by tile (kernels/grid_tiles.py) on a GPU: from
+this many particles on. On an H100 the tiles reached the same RMS stretch as a launch per colour in less time at
+512^2, 1024^2 and 2048^2, rigid or with soft bend sticks, and took longer at 256^2, where a launch of a quarter of
+the tiles leaves most of the GPU idle (bench/results/grid_tiles)."""
 MIN_CLUSTERED_PARTICLES = 512 * 512
 """Where "auto" sweeps float32 stick arrays (a mesh cloth's, or several cloths') cluster by cluster on a GPU
 (constraints/stick_clusters.py): from this many particles on. On an H100 the clustered sweep took 28-60% less time
@@ -221,9 +221,6 @@ def grid_counts(scene: "Scene", sticks: str) -> dict:
     pins = cloth.pin_count if (sticks == "implicit" and cloth.uses_tethers
                                and 0 < cloth.pin_count <= MAX_GRID_TETHER_PINS) else 0
     weight_pins = cloth.pin_count if not cloth.particle_masses and 0 < cloth.pin_count <= MAX_UNIFORM_MASS_PINS else 0
-    if sticks == "tiled" and soft:
-        raise ArgumentError("sticks = 'tiled' projects rigid sticks only, but the cloth gives a stick family a "
-                            "compliance")
     return {"grid_rows": r, "grid_cols": c, "soft_sticks": soft, "grid_pins": pins, "weight_pins": weight_pins,
             "grid_tiles": sticks == "tiled"}
 
