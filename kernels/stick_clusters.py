@@ -12,11 +12,17 @@ ends as places in its cluster's region packed into one int (``a | b << 16``; a r
 particles), so that a block reads its sticks as one contiguous run. A block stages its sticks (ends, rest lengths
 and the colours' starts) in shared memory with its region, before the first barrier: every load of the block is
 then issued at once, and the colour loop, which runs a projection, a barrier and the next colour, touches shared
-memory only. Read from global memory inside the loop, each colour waited on its own sticks' loads.
+memory only (unless a soft stick's compliance and tension are not staged). Read from global memory inside the loop,
+each colour waited on its own sticks' loads.
 
-The projection is ``stick_correction`` (``compliant_correction`` for soft sticks, whose tensions are staged and
-written back with them), as in every other form; only the order of the projections differs, and that
-order is fixed (cluster colour, cluster, stick colour, stick), which the CPU runs literally (one lane per block).
+The projection is ``stick_correction`` (``compliant_correction`` for soft sticks), as in every other form. A soft
+stick's compliance and tension are either staged with the stick and its tension written back after the colours,
+or read and written in global memory inside the colour loop (a stick is projected once a sweep, by one thread, so
+either is the same arithmetic). Staged, they take a third more shared memory a block: faster while a launch's
+blocks still fit on the GPU at once, slower where that pushes a launch past one wave
+(constraints/stick_clusters.py, ``stage_soft_sticks``). Only the order of the projections differs from the other
+forms, and that order is fixed (cluster colour, cluster, stick colour, stick), which the CPU runs literally (one
+lane per block).
 """
 
 import warp as wp
@@ -29,24 +35,26 @@ _KERNELS: dict = {}
 
 
 def relax_stick_clusters(region_capacity: int, stick_capacity: int, colours: int, compliant: bool = False,
-                         max_registers: int | None = None):
+                         max_registers: int | None = None, stage_soft: bool = True):
     """The clustered sweep's kernel for regions of at most ``region_capacity`` particles, clusters of at most
     ``stick_capacity`` sticks, and ``colours`` stick colours (the shared arrays' lengths and the colour loop's
     bound, compile-time constants). ``compliant``: XPBD sticks (kernels/relax.py), each with its compliance and
-    the tension it has accumulated over the substep's sweeps, staged and written back with the sticks; otherwise
-    the compliance and tension arrays are not read. ``max_registers`` caps a CUDA thread's registers (None: the
-    compiler's)."""
-    key = (region_capacity, stick_capacity, colours, compliant, max_registers)
+    the tension it has accumulated over the substep's sweeps, staged in shared memory and written back with the
+    sticks (``stage_soft``) or read and written in global memory; otherwise the compliance and tension arrays are
+    not read. ``max_registers`` caps a CUDA thread's registers (None: the compiler's)."""
+    key = (region_capacity, stick_capacity, colours, compliant, max_registers, compliant and stage_soft)
     if key not in _KERNELS:
         _KERNELS[key] = _make_kernel(*key)
     return _KERNELS[key]
 
 
-def _make_kernel(region_capacity: int, stick_capacity: int, colours: int, compliant: bool, max_registers: int | None):
+def _make_kernel(region_capacity: int, stick_capacity: int, colours: int, compliant: bool, max_registers: int | None,
+                 stage_soft: bool):
     CAPACITY = region_capacity
     STICKS = stick_capacity
-    COMPLIANT = compliant
-    SOFT_STICKS = stick_capacity if compliant else 1  # the compliances' and tensions' shared arrays
+    STAGED_SOFT = compliant and stage_soft
+    UNSTAGED_SOFT = compliant and not stage_soft
+    SOFT_STICKS = stick_capacity if STAGED_SOFT else 1  # the compliances' and tensions' shared arrays
     COLOURS = colours
     STARTS = colours + 1
 
@@ -114,7 +122,7 @@ def _make_kernel(region_capacity: int, stick_capacity: int, colours: int, compli
         while e < sticks:
             put_ends(ends, e, stick_ends[s0 + e])
             put_rest(rests, e, stick_rest[s0 + e])
-            if wp.static(COMPLIANT):
+            if wp.static(STAGED_SOFT):
                 put_soft(alphas, e, stick_compliance[s0 + e])
                 put_soft(tensions, e, tension[s0 + e])
             e += threads
@@ -135,9 +143,13 @@ def _make_kernel(region_capacity: int, stick_capacity: int, colours: int, compli
                 wb = weights[b]
                 xa = points[a]
                 xb = points[b]
-                if wp.static(COMPLIANT):
+                if wp.static(STAGED_SOFT):
                     d, mu = compliant_correction(xa, xb, wa, wb, rests[s], 1.0, alphas[s], inv_dt2, tensions[s])
                     put_soft(tensions, s, mu)
+                elif wp.static(UNSTAGED_SOFT):
+                    d, mu = compliant_correction(xa, xb, wa, wb, rests[s], 1.0, stick_compliance[s0 + s], inv_dt2,
+                                                 tension[s0 + s])
+                    tension[s0 + s] = mu
                 else:
                     d = stick_correction(xa, xb, wa, wb, rests[s], 1.0)
                 put_point(points, a, xa + scaled(d, wa))
@@ -149,7 +161,7 @@ def _make_kernel(region_capacity: int, stick_capacity: int, colours: int, compli
         while e < count:
             x[region[r0 + e]] = points[e]
             e += threads
-        if wp.static(COMPLIANT):
+        if wp.static(STAGED_SOFT):
             e = lane
             while e < sticks:
                 tension[s0 + e] = tensions[e]

@@ -102,14 +102,17 @@ def test_a_clustered_sweep_is_the_sequential_sweep_in_cluster_order_bit_for_bit(
     np.testing.assert_array_equal(clustered.state.positions(), x.numpy())
 
 
-def test_a_soft_clustered_sweep_is_the_sequential_xpbd_sweep_in_cluster_order_bit_for_bit(tmp_path, monkeypatch):
+@pytest.mark.parametrize("staged", [True, False], ids=["staged", "in global memory"])
+def test_a_soft_clustered_sweep_is_the_sequential_xpbd_sweep_in_cluster_order_bit_for_bit(tmp_path, monkeypatch,
+                                                                                          staged):
     from warp_verlet.constraints import stick_clusters
     from warp_verlet.kernels.relax import relax_colour_compliant
 
     monkeypatch.setattr(stick_clusters, "CLUSTER_PARTICLES", 64)
+    monkeypatch.setattr(stick_clusters, "stage_soft_sticks", lambda layout, device: staged)
     clustered = Simulator(triangle_scene(tmp_path, compliance={"bend": 0.02}), "cpu", threads=1, sticks="clustered")
     m, dt = clustered.model, 1.0 / 240.0  # sweep()'s substep
-    assert m.compliant
+    assert m.compliant and m.constraints["stick clusters"].stage_soft == staged
     start = perturbed(clustered)
     on_clusters = sweep(clustered, start, 3)  # one substep of dt: the tension carries from sweep to sweep
 
@@ -199,10 +202,33 @@ def test_clustered_sticks_are_refused_where_they_do_not_apply(simulation, cloth,
         Simulator(scene, "cpu", sticks="clustered")
 
 
+def test_soft_sticks_are_staged_while_a_launch_fits_on_the_gpu_at_once():
+    from types import SimpleNamespace
+
+    from warp_verlet.constraints.stick_clusters import MAX_SHARED_BYTES, shared_bytes, stage_soft_sticks
+
+    # A 1024^2 triangle mesh's layout on an H100: 30,260 bytes staged, 7 blocks a multiprocessor, 924 resident.
+    layout = SimpleNamespace(capacity=352, stick_capacity=1536, colours=12, launches=[(0, 256), (256, 924)])
+    assert shared_bytes(352, 1536, 12, staged_soft=True) == 30260
+    h100 = SimpleNamespace(is_cpu=False, sm_count=132, max_shared_memory_per_block=227 * 1024)
+    assert stage_soft_sticks(layout, h100)  # the largest launch, 924 blocks, fits at once
+    layout.launches.append((1180, 925))
+    assert not stage_soft_sticks(layout, h100)  # one block past a wave: read in global memory
+    assert stage_soft_sticks(layout, SimpleNamespace(is_cpu=True))
+    big = SimpleNamespace(capacity=MAX_SHARED_BYTES // 16 - 64, stick_capacity=64, colours=12, launches=[(0, 1)])
+    assert shared_bytes(big.capacity, 64, 12) <= MAX_SHARED_BYTES < shared_bytes(big.capacity, 64, 12, True)
+    assert not stage_soft_sticks(big, SimpleNamespace(is_cpu=True))  # staged, it would pass the block's limit
+
+
 @pytest.mark.cuda
 @pytest.mark.skipif(not wp.is_cuda_available(), reason="no CUDA device")
-@pytest.mark.parametrize("cloth", [{}, {"compliance": {"bend": 0.02}}], ids=["rigid", "soft bend"])
-def test_a_clustered_sweep_on_cuda_is_repeatable_and_agrees_with_the_cpu(tmp_path, cloth):
+@pytest.mark.parametrize("cloth, staged", [({}, True), ({"compliance": {"bend": 0.02}}, True),
+                                           ({"compliance": {"bend": 0.02}}, False)],
+                         ids=["rigid", "soft bend", "soft bend in global memory"])
+def test_a_clustered_sweep_on_cuda_is_repeatable_and_agrees_with_the_cpu(tmp_path, monkeypatch, cloth, staged):
+    from warp_verlet.constraints import stick_clusters
+
+    monkeypatch.setattr(stick_clusters, "stage_soft_sticks", lambda layout, device: staged)
     scene = triangle_scene(tmp_path, **cloth)
     cpu = Simulator(scene, "cpu", threads=1, sticks="clustered")
     start = perturbed(cpu)

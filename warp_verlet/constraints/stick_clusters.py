@@ -36,10 +36,32 @@ positions and weights, its sticks' packed ends and rest lengths (and soft sticks
 its colours' starts."""
 
 
-def shared_bytes(region_capacity: int, stick_capacity: int, colours: int, compliant: bool = False) -> int:
-    """The clustered kernel's shared memory a block: 16 bytes a region particle, 8 a stick (16 a soft one's: its
-    compliance and tension too), 4 a colour start."""
-    return region_capacity * 16 + stick_capacity * (16 if compliant else 8) + (colours + 1) * 4
+def shared_bytes(region_capacity: int, stick_capacity: int, colours: int, staged_soft: bool = False) -> int:
+    """The clustered kernel's shared memory a block: 16 bytes a region particle, 8 a stick (16 with a soft stick's
+    compliance and tension staged), 4 a colour start."""
+    return region_capacity * 16 + stick_capacity * (16 if staged_soft else 8) + (colours + 1) * 4
+
+
+BLOCK_RESERVED_SHARED = 1024
+"""Shared memory CUDA reserves per resident block beside the kernel's own (bytes; compute capability 8.0 on)."""
+
+
+def stage_soft_sticks(layout: "ClusterLayout", device) -> bool:
+    """Whether a soft clustered sweep stages each stick's compliance and tension in shared memory (else it reads
+    and writes them in global memory in the colour loop; the two are the same arithmetic, bit for bit). Staged
+    while the largest cluster-colour launch's blocks all fit on the GPU at once with the larger shared arrays:
+    on an H100, staging was faster where a launch was a fraction of a wave (a 512^2 triangle mesh, 256 blocks a
+    launch) and slower where it pushed a launch past one wave (1024^2, 1,024 blocks against 924 resident)
+    (bench/results/mesh/soft-staging.md). On the CPU both run alike; it stages."""
+    staged = shared_bytes(layout.capacity, layout.stick_capacity, layout.colours, staged_soft=True)
+    if staged > MAX_SHARED_BYTES:
+        return False
+    if device.is_cpu:
+        return True
+    # A multiprocessor's shared memory is the opt-in most a block may take plus the one reserved block's share.
+    per_multiprocessor = device.max_shared_memory_per_block + BLOCK_RESERVED_SHARED
+    resident = device.sm_count * (per_multiprocessor // (staged + BLOCK_RESERVED_SHARED))
+    return max(count for _, count in layout.launches) <= resident
 
 
 class ClustersRefused(ArgumentError):
@@ -189,7 +211,7 @@ class StickClusters(ConstraintSet):
             raise ClustersRefused(f"sticks = 'clustered': a cluster's region (its particles and its sticks' other "
                                    f"ends) holds {layout.capacity} particles, above the {MAX_REGION} a stick's "
                                    "packed ends can name (sticks reach far across the cloth): use sticks = 'explicit'")
-        shared = shared_bytes(layout.capacity, layout.stick_capacity, layout.colours, model.compliant)
+        shared = shared_bytes(layout.capacity, layout.stick_capacity, layout.colours)
         if shared > MAX_SHARED_BYTES:
             raise ClustersRefused(f"sticks = 'clustered': a cluster's region of {layout.capacity} particles and "
                                    f"{layout.stick_capacity} sticks take {shared} bytes of shared memory, above the "
@@ -205,7 +227,8 @@ class StickClusters(ConstraintSet):
 
         data = model.constraints[self.name]
         soft = data.compliance is not None
-        kernel = relax_stick_clusters(data.capacity, data.stick_capacity, data.colours, soft)
+        kernel = relax_stick_clusters(data.capacity, data.stick_capacity, data.colours, soft,
+                                      stage_soft=data.stage_soft)
         # XPBD: the tension of each stick over the substep's sweeps, in the clusters' order of the sticks.
         tension = solver.scratch("cluster_tension", len(data.rest), float) if soft else data.no_tension
         compliance = data.compliance if soft else data.no_tension
@@ -241,3 +264,5 @@ class DeviceClusters:
         self.launches = layout.launches
         self.capacity = layout.capacity
         self.stick_capacity = layout.stick_capacity
+        # Soft sticks' compliance and tension in shared memory (True) or read in global memory (stage_soft_sticks).
+        self.stage_soft = compliance is not None and stage_soft_sticks(layout, wp.get_device(device))
