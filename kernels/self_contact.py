@@ -54,14 +54,18 @@ def contact_candidates(
     candidate_count: wp.array(dtype=int),
 ):
     """Once a substep: each colliding particle's pairs within ``reach`` x their thickness, in the grid's order,
-    the first ``max_candidates`` of them."""
-    i = wp.tid()
+    the first ``max_candidates`` of them. Thread k takes the grid's k-th point in cell order, so that a warp's
+    queries walk the same cells; a pair farther than the query radius (reach x the largest thickness) is
+    dropped before its thickness and rest positions are read."""
+    i = wp.hash_grid_point_id(grid, wp.tid())
     count = int(0)
     if thickness[i] > 0.0:
         xi = x[i]
         query = wp.hash_grid_query(grid, xi, query_radius)
         j = int(0)
         while wp.hash_grid_query_next(query, j):
+            if wp.length(xi - x[j]) >= query_radius:
+                continue
             h = pair_thickness(i, j, thickness, rest, cloth, rest_exclusion)
             if h > 0.0 and count < max_candidates:
                 if wp.length(xi - x[j]) < type(query_radius)(reach * h):

@@ -13,7 +13,7 @@ import bench_package  # noqa: F401  (makes the repository's bench/ importable as
 from bench import self_contact as self_contact_bench
 
 from conftest import make_scene
-from warp_verlet.constraints.self_contact import DEFAULT_FRACTION, REST_EXCLUSION
+from warp_verlet.constraints.self_contact import DEFAULT_FRACTION, GRID_CELL, REST_EXCLUSION
 from warp_verlet.core.memory import estimate
 from warp_verlet.core.simulator import Simulator
 from warp_verlet.errors import SceneError
@@ -204,13 +204,15 @@ def test_a_mesh_cloths_default_is_its_median_edge(tmp_path):
 
 
 def grid_candidates(points: np.ndarray, thickness: np.ndarray, dims, reach: float, device: str,
-                    builds: int = 1) -> list[list[int]]:
+                    builds: int = 1, cell_factor: float = GRID_CELL) -> list[list[int]]:
     """Each point's candidate list as the binding finds it: the hash grid built (``builds`` times, the earlier
-    builds from other points, so that nothing of them may survive), then ``contact_candidates``."""
+    builds from other points, so that nothing of them may survive) with cells ``cell_factor`` × the query
+    radius, then ``contact_candidates``."""
     from warp_verlet.kernels.self_contact import contact_candidates
 
     n, cap = len(points), 64
-    cell = reach * float(thickness.max())
+    radius = reach * float(thickness.max())
+    cell = cell_factor * radius
     with wp.ScopedDevice(device):
         x = wp.array(points, dtype=wp.vec3)
         h = wp.array(thickness, dtype=float)
@@ -223,21 +225,22 @@ def grid_candidates(points: np.ndarray, thickness: np.ndarray, dims, reach: floa
         for build in range(builds):
             x.assign(points if build == builds - 1 else rng.permutation(points) + rng.normal(0, 0.05, points.shape))
             grid.build(x, cell)
-        wp.launch(contact_candidates, n, [wp.uint64(grid.id), x, h, rest, cloth, REST_EXCLUSION, reach, cell, cap],
+        wp.launch(contact_candidates, n, [wp.uint64(grid.id), x, h, rest, cloth, REST_EXCLUSION, reach, radius, cap],
                   [candidate, count])
         found, counts = candidate.numpy().reshape(n, cap), count.numpy()
     return [list(found[i, :counts[i]]) for i in range(n)]
 
 
+@pytest.mark.parametrize("cell_factor", [1.0, GRID_CELL])
 @pytest.mark.parametrize("dims", [(8, 8, 8), (40, 9, 23)])
-def test_the_hash_grid_search_finds_every_pair_within_reach_and_no_other(device, dims):
+def test_the_hash_grid_search_finds_every_pair_within_reach_and_no_other(device, dims, cell_factor):
     # Points spread over more than the grid's cells (so far cells wrap onto near ones), some not colliding; the
     # grid is built three times, so anything stale of an earlier build would show as a missing or extra candidate.
     rng = np.random.default_rng(7)
     n, reach = 3000, 1.25
     points = rng.uniform(-0.3, 0.3, (n, 3)).astype(np.float32)
     thickness = np.where(rng.uniform(size=n) < 0.9, rng.uniform(0.02, 0.04, n), 0.0).astype(np.float32)
-    got = grid_candidates(points, thickness, dims, reach, device, builds=3)
+    got = grid_candidates(points, thickness, dims, reach, device, builds=3, cell_factor=cell_factor)
     pair = 0.5 * (thickness[:, None] + thickness[None])
     near = np.linalg.norm(points[:, None].astype(np.float64) - points[None], axis=2) < reach * pair
     near &= (thickness[:, None] > 0) & (thickness[None] > 0)
@@ -246,7 +249,7 @@ def test_the_hash_grid_search_finds_every_pair_within_reach_and_no_other(device,
     for i in range(n):
         assert sorted(got[i]) == list(np.flatnonzero(near[i])), i
     # A fixed order (the grid's), the same however the grid was reached.
-    assert got == grid_candidates(points, thickness, dims, reach, device, builds=1)
+    assert got == grid_candidates(points, thickness, dims, reach, device, builds=1, cell_factor=cell_factor)
 
 
 @pytest.mark.cuda

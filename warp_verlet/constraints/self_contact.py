@@ -9,8 +9,8 @@ inverse mass. Pairs of one cloth whose REST distance is under ``REST_EXCLUSION``
 that excludes the topological neighbours (structural sticks at one spacing apart, and diagonals where the
 thickness reaches them) without a table, so that a cloth at rest is not in contact with itself.
 
-Each substep (``run``) rebuilds a ``wp.HashGrid`` of every particle with cells of ``QUERY_REACH`` × the largest
-thickness and lists each particle's candidate pairs, those within ``QUERY_REACH`` × their thickness (at most
+Each substep (``run``) rebuilds a ``wp.HashGrid`` of every particle with cells of ``GRID_CELL`` × the query
+radius (``QUERY_REACH`` × the largest thickness) and lists each particle's candidate pairs, those within ``QUERY_REACH`` × their thickness (at most
 ``MAX_CANDIDATES``): rebuilt every substep because at the shipped speeds a particle moves up to about a thickness
 per substep, so a list kept for longer would miss new pairs. Each sweep then (``phases``) gathers, per particle,
 the pushes of its candidates closer than the thickness, from the same old positions, into a scratch buffer
@@ -44,13 +44,17 @@ DEFAULT_FRACTION = 0.8
 REST_EXCLUSION = 1.5
 """Pairs of one cloth closer than this × their thickness in the rest pose never collide."""
 QUERY_REACH = 1.25
-"""Candidates are the pairs within this × their thickness at the start of a substep (and the hash grid's cell and
-query radius this × the largest thickness): they are found once per substep and checked in each of its sweeps,
+"""Candidates are the pairs within this × their thickness at the start of a substep (and the hash grid's query
+radius this × the largest thickness): they are found once per substep and checked in each of its sweeps,
 so the margin covers what the sweeps move a pair together after the search."""
 MAX_CANDIDATES = 12
 """Candidate pairs kept per particle and substep, the first found in the grid's order (a fixed order, so which
 ones is repeatable). Particles at least a thickness apart fit about 12 around one within 1.25 × the thickness
 (a dense packing); a particle between two layers of a fold has 2 to 8."""
+GRID_CELL = 2.0
+"""The hash grid's cell, as a multiple of the query radius: a query then visits 2 × 2 × 2 cells instead of the
+3 × 3 × 3 of a cell the radius's size. Fewer, fuller cells take fewer dependent loads from the cell table, which
+is what the search waits on (bench/results/self_contact.md)."""
 THIN_AXIS_CELLS = 8
 """Cells along an axis where the cloths are flat at rest: room for the layers of a fold or a pile."""
 CELLS_PER_PARTICLE = 8
@@ -150,9 +154,9 @@ def _rest_box(spec) -> tuple[np.ndarray, np.ndarray]:
 class ContactData:
     """The contact's device data, per particle of the scene: ``thickness`` (N,) float32 m (0: its cloth does not
     collide), ``rest`` (N,) vec3 float32 m (rest position), ``cloth`` (N,) int32 (its cloth's index) and
-    ``friction`` (N,) vec2 float32 (its cloth's self-contact (μ_k, μ_s)); and for
-    the hash grid, ``cell`` (m, its cell and query radius) and ``dims``. The candidates, rewritten each substep,
-    are the solver's scratch."""
+    ``friction`` (N,) vec2 float32 (its cloth's self-contact (μ_k, μ_s)); and for the hash grid, ``radius`` (m,
+    the query radius), ``cell`` (m, its cell) and ``dims``. The candidates, rewritten each substep, are the
+    solver's scratch."""
 
     def __init__(self, model, scene, device):
         import warp as wp
@@ -167,7 +171,8 @@ class ContactData:
             if h is not None:
                 thickness[slot.particles] = h
                 friction[slot.particles] = friction_of(spec)
-        self.cell = QUERY_REACH * float(thickness.max())
+        self.radius = QUERY_REACH * float(thickness.max())
+        self.cell = GRID_CELL * self.radius
         self.dims = scene_grid_dims(scene)
         self.thickness = wp.array(thickness, dtype=float, device=device)
         self.rest = wp.array(model.rest_positions.astype(np.float32), dtype=wp.vec3, device=device)
@@ -181,7 +186,7 @@ def scene_grid_dims(scene) -> tuple[int, int, int]:
     boxes = [_rest_box(c) for c in cloths]
     lo = np.min([b[0] for b in boxes], axis=0)
     hi = np.max([b[1] for b in boxes], axis=0)
-    cell = QUERY_REACH * max(thickness_of(c) for c in cloths)
+    cell = GRID_CELL * QUERY_REACH * max(thickness_of(c) for c in cloths)
     return hash_grid_dims(lo, hi, cell, scene.particle_count)
 
 
@@ -258,7 +263,7 @@ class SelfContact(ConstraintSet):
         grid.reserve(n)
         cell = data.cell
         find = recorded(contact_candidates, n, [wp.uint64(grid.id), x, data.thickness, data.rest, data.cloth,
-                                                REST_EXCLUSION, QUERY_REACH, real(cell), MAX_CANDIDATES],
+                                                REST_EXCLUSION, QUERY_REACH, real(data.radius), MAX_CANDIDATES],
                         [candidate, candidate_count])
 
         def search(state, dt: float) -> None:
