@@ -10,8 +10,8 @@ that excludes the topological neighbours (structural sticks at one spacing apart
 thickness reaches them) without a table, so that a cloth at rest is not in contact with itself.
 
 Each substep (``run``) rebuilds a ``wp.HashGrid`` of every particle with cells of ``GRID_CELL`` × the query
-radius (``QUERY_REACH`` × the largest thickness) and lists each particle's candidate pairs, those within ``QUERY_REACH`` × their thickness (at most
-``MAX_CANDIDATES``): rebuilt every substep because at the shipped speeds a particle moves up to about a thickness
+radius (``QUERY_REACH`` × the largest thickness) and lists each particle's candidate pairs, those within
+``QUERY_REACH`` × their thickness (at most ``MAX_CANDIDATES``): rebuilt every substep because at the shipped speeds a particle moves up to about a thickness
 per substep, so a list kept for longer would miss new pairs. Each sweep then (``phases``) gathers, per particle,
 the pushes of its candidates closer than the thickness, from the same old positions, into a scratch buffer
 (their average: Jacobi, as the Jacobi sticks do in kernels/relax.py) and copies the buffer back in a second
@@ -199,10 +199,7 @@ class SelfContact(ConstraintSet):
     cloth_keys = (SELF_COLLISION, COLLISION_THICKNESS, SELF_FRICTION_COEFFICIENT, SELF_STATIC_FRICTION_COEFFICIENT)
 
     def capturable(self, device) -> bool:
-        # Warp's HashGrid.build replayed from a CUDA graph left the grid stale past a small cloth: on an H100 a
-        # folded 256^2 cloth's layers passed through each other with the frame captured, and held without
-        # (bench/results/self_contact.md). The CPU capture replays it correctly (tests/test_self_contact.py).
-        return device.is_cpu
+        return True  # on CUDA with ``bind``'s before_replay
 
     def check_cloth(self, spec, table):
         given = spec.options.get(COLLISION_THICKNESS.name)
@@ -275,6 +272,14 @@ class SelfContact(ConstraintSet):
                                                     MAX_CANDIDATES, state.particle_q_inertial, state.particle_dq,
                                                     data.friction, f, scratch])
 
+        def point_descriptor_at_this_grid() -> None:
+            # Warp's CUDA HashGrid.build ends by copying the grid's descriptor to the device from one static host
+            # variable per dtype, which a captured build records by address; at replay the copy reads whatever grid
+            # was built last in the process (a second simulator's, a measuring grid's), and the search would walk
+            # that grid. A build of this one, just before each replay, leaves its own descriptor there.
+            grid.build(x, cell)
+
         # ``search`` holds the grid, which the recorded launch reads by its id only.
         return BoundStage(search, [split_tasks(gather, 0, n, solver.threads),
-                                   copy_back_phase(x, scratch, n, solver.threads)])
+                                   copy_back_phase(x, scratch, n, solver.threads)],
+                          point_descriptor_at_this_grid if model.device.is_cuda else None)

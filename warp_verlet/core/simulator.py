@@ -331,6 +331,7 @@ class Simulator:
                             self.solver.step(state, dt)
                     self._frame_graphs[n] = capture.graph
                     state.time, state.steps = time, steps  # capture recorded the work; it has not run yet
+                self.solver.before_replay(state)
                 wp.capture_launch(self._frame_graphs[n])
                 state.time += n * dt
                 state.steps += n

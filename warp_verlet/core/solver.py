@@ -108,6 +108,12 @@ class VerletSolver:
                 self._bound[state] = [(s.name, s.bind(self.model, state, self)) for s in STAGES if s.needed(self.req)]
         return [(name, bound.run) for name, bound in self._bound[state]]
 
+    def before_replay(self, state: State) -> None:
+        """What the stages bound to ``state`` need done on the host before a captured frame of it replays."""
+        for _, bound in self._bound.get(state, ()):
+            if bound.before_replay is not None:
+                bound.before_replay()
+
     # ------------------------------------------------------------------ limits
     def _smallest_resolved_dt(self) -> float:
         """The smallest dt whose gravity-and-wind step |a| dt^2 is at least 4 spacings, in the positions'

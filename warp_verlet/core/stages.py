@@ -401,6 +401,7 @@ class Relax:
         first = [phase for c, bound in zip(kinds, sets) if not (folded and isinstance(c, Tethers))
                  for phase in bound.phases]
         before = [bound.run for bound in sets if bound.run is not None]  # per-substep set-up (dt, zeroing)
+        replay_hooks = [bound.before_replay for bound in sets if bound.before_replay is not None]
         collide_first = ()
         if contact_every_sweep(solver):
             # The clamps end every sweep, so the colliders are placed for this substep before the first one.
@@ -428,7 +429,11 @@ class Relax:
                 for task in sweep:
                     task()
 
-        return BoundStage(run, phases)
+        def before_replay() -> None:
+            for hook in replay_hooks:
+                hook()
+
+        return BoundStage(run, phases, before_replay if replay_hooks else None)
 
 
 def collider_placement(solver) -> str:
