@@ -22,14 +22,13 @@ median, since other work on a shared machine slows some frames), the same with s
 without, and the worst penetration over the run, 1 - (least distance between two particles that were not rest
 neighbours) / thickness, taken at the end of every frame (after timing it) by a hash-grid query on the device
 (0: no pair closer than the thickness; 1: two particles at one point). The run without self-collision shows
-how far the same cloth passes through itself. "searched": the share of substeps that searched the hash grid for
-candidate pairs (the others kept the last search's: warp_verlet/constraints/self_contact.py, SKIN).
+how far the same cloth passes through itself.
 
 --peer adds NVIDIA Newton's rows for the same scene (bench/newton_self_contact.py, which lists what differs):
 newton-vbd (SolverVBD, its particle self-contact off and on) and newton-style3d (SolverStyle3D, its collision
 handler's self-contact off and on), measured the same way, with a "simulator" column and a "graph" column (whether
-a frame ran as one captured graph: warp-verlet captures on the CPU and on CUDA; Newton's rows capture on CUDA
-only). Without Newton it prints "Newton not installed: skipped" and the table
+a frame ran as one captured graph: warp-verlet captures on the CPU too, but not a CUDA frame with self-collision;
+Newton's rows capture on CUDA only). Without Newton it prints "Newton not installed: skipped" and the table
 has warp-verlet's rows alone.
 """
 
@@ -43,7 +42,7 @@ from pathlib import Path
 import numpy as np
 import warp as wp
 
-from warp_verlet.constraints.self_contact import DEFAULT_FRACTION, REST_EXCLUSION, SEARCHES
+from warp_verlet.constraints.self_contact import DEFAULT_FRACTION, REST_EXCLUSION
 from warp_verlet.core.simulator import Simulator
 from warp_verlet.input.scene import parse_scene
 
@@ -135,13 +134,9 @@ def run(n: int, self_collision: bool, frames: int, substeps: int, iterations: in
     readings = []
     times = timed_frames(sim, frames, lambda: readings.append(meter.penetration()))
     worst = max([0.0, *readings])
-    searched = ""
-    if self_collision:
-        searches = int(sim.solver.scratch(SEARCHES, 1, int).numpy()[0])
-        searched = f"{searches / sim.steps:.0%}"
     return {"n": n, "self_collision": "on" if self_collision else "off", "particles": n * n,
             "ms/frame": round(1e3 * statistics.median(times[1:]), 3), "worst penetration": round(worst, 4),
-            "searched": searched, "build s": round(build, 2), "graph": sim.replays_frames}
+            "build s": round(build, 2), "graph": sim.replays_frames}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -175,8 +170,7 @@ def main(argv: list[str] | None = None) -> int:
     on = "one CPU thread" if wp.get_device(args.device).is_cpu else str(where)
     title = (f"Self-collision: a folded 1 m cloth dropped on the ground, {args.frames} frames at 60 fps, "
              f"{args.substeps} substeps, {args.iterations} sweeps, {on}\n\n" + "\n".join(where.lines(command)))
-    columns = ["n", "particles", "self_collision", "ms/frame", "x without", "worst penetration", "searched",
-               "build s"]
+    columns = ["n", "particles", "self_collision", "ms/frame", "x without", "worst penetration", "build s"]
     if args.peer:
         columns = ["simulator", *columns, "graph"]
     write_table([{k: row[k] for k in columns} for row in rows], args.out, STEM, title, columns)

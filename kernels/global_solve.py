@@ -21,7 +21,7 @@ from typing import Any
 
 import warp as wp
 
-from .positions import copy_positions, for_positions, shifted, to_vec3  # noqa: F401 (copy_positions: its launch)
+from .positions import for_positions, shifted, to_vec3
 
 
 
@@ -54,6 +54,13 @@ def stick_directions(
     if compliance[s] > 0.0:
         k = wp.min(rigid, 1.0 / compliance[s])
     stiffness[s] = k
+
+
+@wp.kernel
+def copy_positions(x: wp.array(dtype=Any), copy: wp.array(dtype=Any)):
+    """A kernel, not ``wp.copy``: a CPU frame capture replays kernels only."""
+    i = wp.tid()
+    copy[i] = x[i]
 
 
 @wp.kernel
@@ -469,6 +476,7 @@ def hand_over_tension(
 for_positions(stick_directions, arrays=("x",))
 for_positions(hand_over_tension, arrays=("x",))
 for_positions(contact_normals, arrays=("x", "x_before"))
+for_positions(copy_positions, arrays=("x", "copy"))
 for_positions(assemble, arrays=("x", "x_inertial"))
 for_positions(apply_correction, arrays=("x",))
 for_positions(candidate_energy, arrays=("x", "x_inertial"))

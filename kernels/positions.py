@@ -57,13 +57,3 @@ def to_vec3(v: Any):
 def shifted(x: Any, d: wp.vec3, s: float):
     """``x + s d``, with the float32 move ``s d`` converted to ``x``'s type first."""
     return x + type(x)(type(x[0])(d[0] * s), type(x[0])(d[1] * s), type(x[0])(d[2] * s))
-
-
-@wp.kernel
-def copy_positions(x: wp.array(dtype=Any), copy: wp.array(dtype=Any)):
-    """A kernel, not ``wp.copy``: a CPU frame capture replays kernels only."""
-    i = wp.tid()
-    copy[i] = x[i]
-
-
-for_positions(copy_positions, arrays=("x", "copy"))

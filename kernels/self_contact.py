@@ -1,11 +1,9 @@
-"""Self-collision and cloth–cloth contact (warp_verlet/constraints/self_contact.py): candidate pairs kept while
-the cloth moves less than a skin, one Jacobi gather per sweep.
+"""Self-collision and cloth–cloth contact (warp_verlet/constraints/self_contact.py): candidate pairs once a
+substep, one Jacobi gather per sweep.
 
-Where a substep finds that some particle has moved more than half the skin since the last search, relative to a
-reference particle (``contact_moved``: a pair's distance changes by at most twice that, and a common translation
-changes none), each particle of a colliding cloth lists its candidate pairs again from the hash grid (rebuilt just
-before): the particles within ``reach`` × the pair's thickness (the mean of the two particles') plus the skin,
-except those closer than ``rest_exclusion`` × the thickness in the rest pose of one cloth. In each sweep, for every candidate
+Once a substep, each particle of a colliding cloth lists its candidate pairs from the hash grid (rebuilt just
+before): the particles within ``reach`` × the pair's thickness (the mean of the two particles'), except those
+closer than ``rest_exclusion`` × the thickness in the rest pose of one cloth. In each sweep, for every candidate
 closer than the thickness, it takes its share of the push that separates the pair to the thickness: (h - d)
 along the separation, times w_i / (w_i + w_j), and writes the average of its pushes to ``x_out``; the caller
 copies ``x_out`` back. Every thread reads the same old positions and no thread writes another's particle, and the
@@ -50,15 +48,14 @@ def contact_candidates(
     cloth: wp.array(dtype=int),
     rest_exclusion: float,
     reach: float,
-    skin: float,
     query_radius: Any,
     max_candidates: int,
     candidate: wp.array(dtype=int),
     candidate_count: wp.array(dtype=int),
 ):
-    """Each colliding particle's pairs within ``reach`` x their thickness + ``skin`` (m), in the grid's order, the
-    first ``max_candidates`` of them. Thread k takes the grid's k-th point in cell order, so that a warp's queries
-    walk the same cells; a pair farther than the query radius (reach x the largest thickness + the skin) is
+    """Once a substep: each colliding particle's pairs within ``reach`` x their thickness, in the grid's order,
+    the first ``max_candidates`` of them. Thread k takes the grid's k-th point in cell order, so that a warp's
+    queries walk the same cells; a pair farther than the query radius (reach x the largest thickness) is
     dropped before its thickness and rest positions are read."""
     i = wp.hash_grid_point_id(grid, wp.tid())
     count = int(0)
@@ -71,7 +68,7 @@ def contact_candidates(
                 continue
             h = pair_thickness(i, j, thickness, rest, cloth, rest_exclusion)
             if h > 0.0 and count < max_candidates:
-                if wp.length(xi - x[j]) < type(query_radius)(reach * h + skin):
+                if wp.length(xi - x[j]) < type(query_radius)(reach * h):
                     candidate[i * max_candidates + count] = j
                     count += 1
     candidate_count[i] = count
@@ -122,33 +119,5 @@ def contact_gather(
     x_out[i] = xi
 
 
-@wp.kernel
-def contact_moved(
-    x: wp.array(dtype=Any),
-    x_searched: wp.array(dtype=Any),
-    thickness: wp.array(dtype=float),
-    reference: int,
-    limit: float,
-    moved: wp.array(dtype=int),
-):
-    """Raise ``moved[0]`` where a colliding particle has moved more than ``limit`` (m) since the last search,
-    relative to particle ``reference``. Every thread that raises it writes the same 1, so the flag does not depend
-    on the threads' order."""
-    i = wp.tid()
-    if thickness[i] > 0.0:
-        shift = (x[i] - x_searched[i]) - (x[reference] - x_searched[reference])
-        if wp.length(shift) > type(shift[0])(limit):
-            moved[0] = 1
-
-
-@wp.kernel
-def search_done(moved: wp.array(dtype=int), searches: wp.array(dtype=int)):
-    """After a search: lower the moved flag (a kernel, not a memset, so that a CPU frame capture replays it) and
-    count the search."""
-    moved[0] = 0
-    searches[0] = searches[0] + 1
-
-
 for_positions(contact_candidates, arrays=("x",), scalars=("query_radius",))
-for_positions(contact_moved, arrays=("x", "x_searched"))
 for_positions(contact_gather, arrays=("x_in", "x_out", "x_inertial", "delta"))

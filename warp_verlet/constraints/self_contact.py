@@ -9,14 +9,10 @@ inverse mass. Pairs of one cloth whose REST distance is under ``REST_EXCLUSION``
 that excludes the topological neighbours (structural sticks at one spacing apart, and diagonals where the
 thickness reaches them) without a table, so that a cloth at rest is not in contact with itself.
 
-Each substep (``run``) first checks on the device whether some particle has moved more than half of ``SKIN`` × the
-largest thickness since the last search, relative to a reference particle. Only then does it rebuild (on CUDA,
-every substep: a conditional node takes kernels only) a ``wp.HashGrid`` of every particle, with cells of ``GRID_CELL`` × the query radius (``QUERY_REACH`` × the largest
-thickness plus the skin), and list each particle's candidate pairs, those within ``QUERY_REACH`` × their
-thickness plus the skin (at most ``MAX_CANDIDATES``). A pair's distance shrinks by at most twice what the check
-allows, so the list holds every pair within ``QUERY_REACH`` × its thickness at every substep's start, as a search
-every substep would; a landing layer that moves about a thickness a substep is searched every substep, a cloth
-falling, sliding as one piece or at rest is not. Each sweep then (``phases``) gathers, per particle,
+Each substep (``run``) rebuilds a ``wp.HashGrid`` of every particle with cells of ``GRID_CELL`` × the query
+radius (``QUERY_REACH`` × the largest thickness) and lists each particle's candidate pairs, those within
+``QUERY_REACH`` × their thickness (at most ``MAX_CANDIDATES``): rebuilt every substep because at the shipped speeds a particle moves up to about a thickness
+per substep, so a list kept for longer would miss new pairs. Each sweep then (``phases``) gathers, per particle,
 the pushes of its candidates closer than the thickness, from the same old positions, into a scratch buffer
 (their average: Jacobi, as the Jacobi sticks do in kernels/relax.py) and copies the buffer back in a second
 launch: no atomics on positions, so the result is bit-for-bit repeatable on every device.
@@ -48,14 +44,9 @@ DEFAULT_FRACTION = 0.8
 REST_EXCLUSION = 1.5
 """Pairs of one cloth closer than this × their thickness in the rest pose never collide."""
 QUERY_REACH = 1.25
-"""Candidates are the pairs within this × their thickness (plus the skin) at the last search: checked in each sweep
-of a substep, so the margin over the thickness covers what the sweeps move a pair together within the substep."""
-SKIN = 0.5
-"""The candidates' skin, × the largest thickness: pairs are listed within ``QUERY_REACH`` × their thickness plus
-the skin, and listed again only in a substep that starts with some particle moved more than half the skin since
-the last search, relative to a reference particle. A pair's distance shrinks by at most twice that, so every pair
-within ``QUERY_REACH`` × its thickness at a substep's start is listed, as if searched then, while a cloth that
-falls, slides as one piece or rests is not searched again (bench/results/self_contact.md)."""
+"""Candidates are the pairs within this × their thickness at the start of a substep (and the hash grid's query
+radius this × the largest thickness): they are found once per substep and checked in each of its sweeps,
+so the margin covers what the sweeps move a pair together after the search."""
 MAX_CANDIDATES = 12
 """Candidate pairs kept per particle and substep, the first found in the grid's order (a fixed order, so which
 ones is repeatable). Particles at least a thickness apart fit about 12 around one within 1.25 × the thickness
@@ -64,8 +55,6 @@ GRID_CELL = 2.0
 """The hash grid's cell, as a multiple of the query radius: a query then visits 2 × 2 × 2 cells instead of the
 3 × 3 × 3 of a cell the radius's size. Fewer, fuller cells take fewer dependent loads from the cell table, which
 is what the search waits on (bench/results/self_contact.md)."""
-SEARCHES = "contact_searches"
-"""The solver scratch (1,) int32 that counts the substeps that searched for candidates."""
 THIN_AXIS_CELLS = 8
 """Cells along an axis where the cloths are flat at rest: room for the layers of a fold or a pile."""
 CELLS_PER_PARTICLE = 8
@@ -165,9 +154,9 @@ def _rest_box(spec) -> tuple[np.ndarray, np.ndarray]:
 class ContactData:
     """The contact's device data, per particle of the scene: ``thickness`` (N,) float32 m (0: its cloth does not
     collide), ``rest`` (N,) vec3 float32 m (rest position), ``cloth`` (N,) int32 (its cloth's index) and
-    ``friction`` (N,) vec2 float32 (its cloth's self-contact (μ_k, μ_s)); for the hash grid, ``skin`` (m),
-    ``radius`` (m, the query radius), ``cell`` (m, its cell) and ``dims``; ``reference``, the particle whose move
-    the others' are measured from. The candidates, rewritten at each search, are the solver's scratch."""
+    ``friction`` (N,) vec2 float32 (its cloth's self-contact (μ_k, μ_s)); and for the hash grid, ``radius`` (m,
+    the query radius), ``cell`` (m, its cell) and ``dims``. The candidates, rewritten each substep, are the
+    solver's scratch."""
 
     def __init__(self, model, scene, device):
         import warp as wp
@@ -182,10 +171,8 @@ class ContactData:
             if h is not None:
                 thickness[slot.particles] = h
                 friction[slot.particles] = friction_of(spec)
-        self.skin = SKIN * float(thickness.max())
-        self.radius = QUERY_REACH * float(thickness.max()) + self.skin
+        self.radius = QUERY_REACH * float(thickness.max())
         self.cell = GRID_CELL * self.radius
-        self.reference = int(np.flatnonzero(thickness > 0.0)[0])  # the particle others' moves are measured from
         self.dims = scene_grid_dims(scene)
         self.thickness = wp.array(thickness, dtype=float, device=device)
         self.rest = wp.array(model.rest_positions.astype(np.float32), dtype=wp.vec3, device=device)
@@ -199,7 +186,7 @@ def scene_grid_dims(scene) -> tuple[int, int, int]:
     boxes = [_rest_box(c) for c in cloths]
     lo = np.min([b[0] for b in boxes], axis=0)
     hi = np.max([b[1] for b in boxes], axis=0)
-    cell = GRID_CELL * (QUERY_REACH + SKIN) * max(thickness_of(c) for c in cloths)
+    cell = GRID_CELL * QUERY_REACH * max(thickness_of(c) for c in cloths)
     return hash_grid_dims(lo, hi, cell, scene.particle_count)
 
 
@@ -252,10 +239,9 @@ class SelfContact(ConstraintSet):
 
     def device_bytes(self, req) -> int:
         # per particle: thickness, rest position, cloth, friction (μ_k, μ_s) (Model); a scratch position, the
-        # position at the last search, the candidates and their count (solver); the moved flag and the searches'
-        # count; the hash grid
-        return (req.particles * (FLOAT + VEC3 + INT + 2 * FLOAT + 2 * req.position_bytes + (MAX_CANDIDATES + 1) * INT)
-                + 2 * INT + hash_grid_bytes(req.particles, req.count(self.name)[1]))
+        # candidates and their count (solver); the hash grid
+        return (req.particles * (FLOAT + VEC3 + INT + 2 * FLOAT + req.position_bytes + (MAX_CANDIDATES + 1) * INT)
+                + hash_grid_bytes(req.particles, req.count(self.name)[1]))
 
     def build(self, model, scene, device):
         return ContactData(model, scene, device)
@@ -263,47 +249,23 @@ class SelfContact(ConstraintSet):
     def bind(self, model, state, solver) -> BoundStage:
         import warp as wp
 
-        from warp_verlet.kernels.positions import copy_positions
-        from warp_verlet.kernels.self_contact import contact_candidates, contact_gather, contact_moved, search_done
+        from warp_verlet.kernels.self_contact import contact_candidates, contact_gather
 
         data, x, n = model.constraints[self.name], state.particle_q, model.particle_count
         real = model.position_scalar
         scratch = solver.scratch("contact_positions", n, model.position_dtype)
         candidate = solver.scratch("contact_candidates", n * MAX_CANDIDATES, int)
         candidate_count = solver.scratch("contact_candidate_count", n, int)
-        searched = solver.scratch("contact_searched_positions", n, model.position_dtype)
-        moved = solver.scratch("contact_moved", 1, int)
-        moved.fill_(1)  # nothing searched yet
-        searches = solver.scratch(SEARCHES, 1, int)  # how many substeps searched (diagnostics, bench.self_contact)
-        searches.zero_()
         grid = wp.HashGrid(*data.dims, device=model.device, dtype=real)
         grid.reserve(n)
         cell = data.cell
-        check = recorded(contact_moved, n, [x, searched, data.thickness, data.reference, 0.5 * data.skin], [moved])
         find = recorded(contact_candidates, n, [wp.uint64(grid.id), x, data.thickness, data.rest, data.cloth,
-                                                REST_EXCLUSION, QUERY_REACH, data.skin, real(data.radius),
-                                                MAX_CANDIDATES], [candidate, candidate_count])
-        remember = recorded(copy_positions, n, [x], [searched])
-        done = recorded(search_done, 1, [], [moved, searches])
-
-        # The search is decided on the device (a conditional node where a CUDA frame is captured), so no host read
-        # stalls the launches queued behind it. A CUDA conditional's body takes kernels only, and Warp's grid build
-        # copies its descriptor from host memory and sorts in graph-allocated memory, so on CUDA the grid is built
-        # every substep, outside it; the CPU's capture runs the whole search conditionally.
-        build_always = model.device.is_cuda
-
-        def search_again() -> None:
-            if not build_always:
-                grid.build(x, cell)
-            find.run()
-            remember.run()
-            done.run()
+                                                REST_EXCLUSION, QUERY_REACH, real(data.radius), MAX_CANDIDATES],
+                        [candidate, candidate_count])
 
         def search(state, dt: float) -> None:
-            check.run()
-            if build_always:
-                grid.build(x, cell)
-            wp.capture_if(moved, on_true=search_again)
+            grid.build(x, cell)
+            find.run()
 
         def gather(f, count):
             return recorded(contact_gather, count, [x, model.inv_mass, data.thickness, candidate, candidate_count,
