@@ -39,6 +39,21 @@ def perturbed(sim: Simulator, seed: int = 3) -> np.ndarray:
     return x.astype(np.float32)
 
 
+def run_phases(bound) -> None:
+    """One tiled sweep: every tile colour's launch, in order."""
+    for phase in bound.phases:
+        for task in phase:
+            task.run()
+
+
+def sequential_tile_order(explicit: Simulator, tile: int):
+    """The stick-array model, its sticks' ends, and its sticks in the tiled sweep's order (``tile_order``)."""
+    m = explicit.model
+    ends = m.stick_ends.numpy()
+    colour_of = np.repeat(np.arange(len(m.colour_ranges)), [n for _, n in m.colour_ranges])
+    return m, ends, tile_order(ends, colour_of, COLS, tile)
+
+
 @pytest.mark.parametrize("tile, cloth", [
     (4, {}),  # the smallest tile
     (16, {}),  # the default
@@ -56,14 +71,9 @@ def test_a_tiled_sweep_is_the_sequential_sweep_in_tile_order_bit_for_bit(tile, c
     tiled.state.set_positions(start)
     bound = GridTiles().bind(tiled.model, tiled.state, tiled.solver)
     assert len(bound.phases) == 4  # one launch per tile colour
-    for phase in bound.phases:
-        for task in phase:
-            task.run()
+    run_phases(bound)
 
-    m = explicit.model
-    ends = m.stick_ends.numpy()
-    colour_of = np.repeat(np.arange(len(m.colour_ranges)), [n for _, n in m.colour_ranges])
-    order = tile_order(ends, colour_of, COLS, tile)
+    m, ends, order = sequential_tile_order(explicit, tile)
     x = wp.array(start, dtype=wp.vec3, device="cpu")
     wp.launch(relax_colour, len(order), device="cpu",
               inputs=[x, m.inv_mass, wp.array(ends[order], dtype=wp.vec2i, device="cpu"),
@@ -93,14 +103,9 @@ def test_a_soft_tiled_sweep_is_the_sequential_xpbd_sweep_in_tile_order_bit_for_b
     bound = GridTiles().bind(tiled.model, tiled.state, tiled.solver)
     bound.run(tiled.state, dt)  # the substep's 1 / dt^2, the tensions zeroed
     for _ in range(2):
-        for phase in bound.phases:
-            for task in phase:
-                task.run()
+        run_phases(bound)
 
-    m = explicit.model
-    ends = m.stick_ends.numpy()
-    colour_of = np.repeat(np.arange(len(m.colour_ranges)), [n for _, n in m.colour_ranges])
-    order = tile_order(ends, colour_of, COLS, tile)
+    m, ends, order = sequential_tile_order(explicit, tile)
     compliance = m.stick_compliance.numpy()[order]
     assert 0 < np.count_nonzero(compliance) < len(order)  # soft shear and bend sticks among rigid ones
     x = wp.array(start, dtype=wp.vec3, device="cpu")
