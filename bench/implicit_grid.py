@@ -35,8 +35,8 @@ import warp as wp
 from warp_verlet.input.scene import parse_scene
 from warp_verlet.core.simulator import Simulator
 
-from .common import (HANGING_DAMPING, add_compliance_arg, arg_parser, compliance_of, copy_bandwidth, hanging_sheet, machine, median_spread, quiet_warp,
-                     scene, time_frames, write_table)
+from .common import (HANGING_DAMPING, add_compliance_arg, arg_parser, compliance_of, copy_bandwidth, hanging_sheet,
+                     machine, median_spread, quiet_warp, scene, time_frames, write_table)
 from .throughput import RELAX_BYTES_PER_PROJECTION
 
 FRAMES, WARM_UP, SETTLE = 60, 2, 20

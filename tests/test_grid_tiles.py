@@ -163,8 +163,8 @@ def one_tiled_substep(scene, device: str, start: np.ndarray) -> np.ndarray:
 
 @pytest.mark.cuda
 @pytest.mark.skipif(not wp.is_cuda_available(), reason="no CUDA device")
-@pytest.mark.parametrize("tile, cloth", [(8, {}), (16, {}),
-                                        (16, {"sticks": ["structural", "shear", "bend"], "compliance": {"bend": 0.05}})],
+@pytest.mark.parametrize("tile, cloth", [
+    (8, {}), (16, {}), (16, {"sticks": ["structural", "shear", "bend"], "compliance": {"bend": 0.05}})],
                          ids=["8", "16", "16-soft-bend"])
 def test_a_tiled_sweep_on_cuda_is_the_sequential_sweep(tile, cloth, monkeypatch):
     """A GPU block runs a colour's sticks at once and relies on one barrier after each colour (and after the

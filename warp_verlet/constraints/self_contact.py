@@ -11,11 +11,13 @@ thickness reaches them) without a table, so that a cloth at rest is not in conta
 
 Each substep (``run``) rebuilds a ``wp.HashGrid`` of every particle with cells of ``GRID_CELL`` × the query
 radius (``QUERY_REACH`` × the largest thickness) and lists each particle's candidate pairs, those within
-``QUERY_REACH`` × their thickness (at most ``MAX_CANDIDATES``): rebuilt every substep because at the shipped speeds a particle moves up to about a thickness
-per substep, so a list kept for longer would miss new pairs. Each sweep then (``phases``) gathers, per particle,
-the pushes of its candidates closer than the thickness, from the same old positions, into a scratch buffer
-(their average: Jacobi, as the Jacobi sticks do in kernels/relax.py) and copies the buffer back in a second
-launch: no atomics on positions, so the result is bit-for-bit repeatable on every device.
+``QUERY_REACH`` × their thickness (at most ``MAX_CANDIDATES``): rebuilt every substep because at the shipped
+speeds a particle moves up to about a thickness per substep, so a list kept for longer would miss new pairs (a
+list kept while the cloth moves less than a skin was measured slower on a GPU: bench/results/self_contact.md).
+Each sweep then (``phases``) gathers, per particle, the pushes of its candidates closer than the thickness, from
+the same old positions, into a scratch buffer (their average: Jacobi, as the Jacobi sticks do in
+kernels/relax.py) and copies the buffer back in a second launch: no atomics on positions, so the result is
+bit-for-bit repeatable on every device.
 
 Friction (``self_friction_coefficient`` μ_k, ``self_static_friction_coefficient`` μ_s) is the colliders' Coulomb law
 at the position level, on the pair's relative motion over the substep: a pair pushed apart by d_n whose relative
@@ -53,8 +55,8 @@ ones is repeatable). Particles at least a thickness apart fit about 12 around on
 (a dense packing); a particle between two layers of a fold has 2 to 8."""
 GRID_CELL = 2.0
 """The hash grid's cell, as a multiple of the query radius: a query then visits 2 × 2 × 2 cells instead of the
-3 × 3 × 3 of a cell the radius's size. Fewer, fuller cells take fewer dependent loads from the cell table, which
-is what the search waits on (bench/results/self_contact.md)."""
+3 × 3 × 3 of a cell the radius's size. Fewer, fuller cells take fewer turns of the query's loop, whose
+instructions and divergence are what the search spends its time on (bench/results/self_contact.md)."""
 THIN_AXIS_CELLS = 8
 """Cells along an axis where the cloths are flat at rest: room for the layers of a fold or a pile."""
 CELLS_PER_PARTICLE = 8
