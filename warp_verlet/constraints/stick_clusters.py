@@ -32,8 +32,8 @@ MAX_REGION = 2048
 are packed into one int, 16 bits each."""
 MAX_SHARED_BYTES = 48 * 1024
 """The most shared memory a block of the clustered sweep may take (a CUDA block's static limit): its region's
-positions and weights, its sticks' packed ends and rest lengths (and soft sticks' compliances and tensions), and
-its colours' starts."""
+positions and weights, its sticks' packed ends and rest lengths (and, where staged, soft sticks' compliances and
+tensions), and its colours' starts."""
 
 
 def shared_bytes(region_capacity: int, stick_capacity: int, colours: int, staged_soft: bool = False) -> int:
