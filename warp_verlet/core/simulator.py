@@ -178,9 +178,9 @@ class Simulator:
         """``sticks``: "auto" computes a grid cloth's sticks in the kernels on a GPU where the scene allows it
         (one grid cloth that cannot tear, the coloured solver: stages.implicit_grid_obstacle) and keeps stick
         arrays otherwise and on the CPU (model.stick_form says why), and sweeps float32 ones of a large grid, rigid
-        or soft, tile by tile in shared memory (kernels/grid_tiles.py); "explicit" always keeps them; "implicit" insists on
-        a launch per colour, in the explicit sticks' order and with their positions bit for bit; "tiled" insists
-        on tiles; "clustered" sweeps stick arrays (a mesh's) cluster by cluster in shared memory
+        or soft, tile by tile in shared memory (kernels/grid_tiles.py); "explicit" always keeps them; "implicit"
+        insists on a launch per colour, in the explicit sticks' order and with their positions bit for bit;
+        "tiled" insists on tiles; "clustered" sweeps stick arrays (a mesh's) cluster by cluster in shared memory
         (constraints/stick_clusters.py), which "auto" chooses for float32 stick arrays on a GPU from
         stages.MIN_CLUSTERED_PARTICLES on (``model.clusters_refused`` says why where their layout is refused).
         ``constraint_sets`` says what was chosen. ``particle_order``: "auto" holds a mesh cloth's particles in
