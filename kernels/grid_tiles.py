@@ -84,10 +84,6 @@ def _make_kernel(tile: int, colours: tuple, max_registers: int | None):
     REGION = REGION_ROWS * REGION_COLS
     STICKS = tile * tile // 2  # a colour's sticks in a tile: one axis keeps half its anchors
     COLOURS = colours
-    import os
-    INNER = int(os.environ.get("INNER", "1"))  # prototype: passes over a tile's colours per staging
-    import os
-    INNER = int(os.environ.get("INNER", "1"))
 
     @wp.func
     def region_cell(e: int):
@@ -141,7 +137,6 @@ def _make_kernel(tile: int, colours: tuple, max_registers: int | None):
         anchors_per_row: colour_ints,
         inv_dt2: float,
         tension: wp.array(dtype=float),
-        shift: wp.array(dtype=int),
     ):
         """One sweep of every colour over the tiles of one tile colour (tile row parity, tile column parity):
         block k takes tile (parity_row + 2 (k // tiles_across), parity_col + 2 (k % tiles_across)). ``layout``
@@ -153,8 +148,8 @@ def _make_kernel(tile: int, colours: tuple, max_registers: int | None):
         threads = wp.block_dim()
         first = layout.first_particle
         grid_cols = layout.grid_cols
-        r0 = (tile_row_parity + 2 * (block // tiles_across)) * TILE_SIDE - shift[0]
-        c0 = (tile_col_parity + 2 * (block % tiles_across)) * TILE_SIDE - shift[0]
+        r0 = (tile_row_parity + 2 * (block // tiles_across)) * TILE_SIDE
+        c0 = (tile_col_parity + 2 * (block % tiles_across)) * TILE_SIDE
         # Everything a projection reads is staged in shared memory first: the region's positions and weights,
         # and the rest-length tables over its columns and rows, so that the colours' steps, which a barrier
         # separates, wait on no global load.
@@ -170,7 +165,7 @@ def _make_kernel(tile: int, colours: tuple, max_registers: int | None):
             rr, rc = region_cell(e)
             gr = r0 + rr
             gc = c0 - 1 + rc
-            if gr >= 0 and gr < grid_rows and gc >= 0 and gc < grid_cols:
+            if gr < grid_rows and gc >= 0 and gc < grid_cols:
                 put_point(region, rr, rc, x[first + gr * grid_cols + gc])
                 put_weight(weight, rr, rc, particle_weight(layout, first + gr * grid_cols + gc, inv_mass, pins))
             e += threads
@@ -186,16 +181,15 @@ def _make_kernel(tile: int, colours: tuple, max_registers: int | None):
         k = lane
         while k < REGION_ROWS:
             gr = r0 + k
-            if gr >= 0 and gr < row_rest1.shape[0]:
+            if gr < row_rest1.shape[0]:
                 put_row_rest(row_rest, 0, k, row_rest1[gr])
                 put_row_step(row_step, k, row_sq[gr])
-            if gr >= 0 and gr < row_rest2.shape[0]:
+            if gr < row_rest2.shape[0]:
                 put_row_rest(row_rest, 1, k, row_rest2[gr])
             k += threads
         block_barrier()
 
-        for inner in range(wp.static(INNER)):
-          for n in range(wp.static(len(COLOURS))):
+        for n in range(wp.static(len(COLOURS))):
             dr = wp.static(COLOURS[n][0])
             dc = wp.static(COLOURS[n][1])
             col_first = wp.static(COLOURS[n][2])
@@ -216,7 +210,7 @@ def _make_kernel(tile: int, colours: tuple, max_registers: int | None):
                     lc = anchor_index(k % HALF, q, parity)
                 r = r0 + lr
                 c = c0 + lc
-                active = r >= 0 and r + dr < grid_rows and c >= col_first and c + wp.max(dc, 0) < grid_cols
+                active = r + dr < grid_rows and c >= col_first and c + wp.max(dc, 0) < grid_cols
                 ic = lc + 1
                 jr = lr + dr
                 jc = ic + dc
@@ -259,14 +253,8 @@ def _make_kernel(tile: int, colours: tuple, max_registers: int | None):
             rr, rc = region_cell(e)
             gr = r0 + rr
             gc = c0 - 1 + rc
-            if gr >= 0 and gr < grid_rows and gc >= 0 and gc < grid_cols:
+            if gr < grid_rows and gc >= 0 and gc < grid_cols:
                 x[first + gr * grid_cols + gc] = region[rr, rc]
             e += threads
 
     return relax_grid_tiles
-
-
-@wp.kernel
-def toggle_tile_shift(shift: wp.array(dtype=int), amount: int):
-    """Prototype: the tile grid's offset alternates between 0 and ``amount`` cells after every sweep."""
-    shift[0] = amount - shift[0]

@@ -191,10 +191,7 @@ class GridTiles(ConstraintSet):
         tension = solver.scratch("grid_tension", g.soft_sticks, float) if g.soft_sticks else g.col_rest1
         registers = GRID_TILE_MAX_REGISTERS if g.rows * g.cols >= GRID_TILE_CAPPED_FROM else None
         kernel = relax_grid_tiles(tile, geometry, registers)
-        import os
-        shift_amount = int(os.environ.get("TILE_SHIFT", "0"))  # prototype: tiles shifted every other sweep
-        shift = wp.zeros(1, dtype=int, device=model.device)
-        tiles_down, tiles_across = -(-(g.rows + shift_amount) // tile), -(-(g.cols + shift_amount) // tile)
+        tiles_down, tiles_across = -(-g.rows // tile), -(-g.cols // tile)
         tasks = []
         for row_parity in (0, 1):
             for col_parity in (0, 1):
@@ -205,12 +202,8 @@ class GridTiles(ConstraintSet):
                     kernel, dim=[down * across], block_dim=tile * tile // 2, record_cmd=True, device=model.device,
                     inputs=[x, model.inv_mass, g.colours[0].layout, g.colours[0].pins, g.col_rest1, g.col_rest2,
                             g.row_rest1, g.row_rest2, g.col_sq1, g.row_sq1, g.rows, row_parity, col_parity, across,
-                            *soft, 0.0, tension, shift])
+                            *soft, 0.0, tension])
                 tasks.append(PhaseTask(kernel.key, launch.launch, launch))
-        if shift_amount:
-            from warp_verlet.kernels.grid_tiles import toggle_tile_shift
-            launch = wp.launch(toggle_tile_shift, 1, inputs=[shift, shift_amount], record_cmd=True, device=model.device)
-            tasks.append(PhaseTask("toggle", launch.launch, launch))
         # One thread runs a tile colour: on the CPU a tiled launch's shared memory is one buffer for the process,
         # so two threads' launches would write over each other. The CPU thread team's other threads wait.
         idle = [None] * (solver.threads - 1)
