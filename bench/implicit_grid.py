@@ -162,18 +162,13 @@ def main(argv=None) -> int:
     add_compliance_arg(p)
     p.add_argument("--tethers-apart", action="store_true",
                    help="run the first sweep's tether pass as its own launch, not inside the Verlet step")
-    p.add_argument("--step-apart", action="store_true",
-                   help="run every substep's Verlet step as its own launch, not in the tiled sweep's last write-back")
     args = p.parse_args(argv)
     compliance = compliance_of(p, args.compliance)
     quiet_warp()
-    if args.tethers_apart or args.step_apart:
+    if args.tethers_apart:
         from warp_verlet.core import stages
 
-        if args.tethers_apart:
-            stages.FOLD_TETHERS_INTO_INTEGRATE = dict.fromkeys(stages.FOLD_TETHERS_INTO_INTEGRATE, False)
-        if args.step_apart:
-            stages.STEP_IN_TILED_SWEEP = dict.fromkeys(stages.STEP_IN_TILED_SWEEP, False)
+        stages.FOLD_TETHERS_INTO_INTEGRATE = dict.fromkeys(stages.FOLD_TETHERS_INTO_INTEGRATE, False)
     if args.tile:
         from warp_verlet.constraints import sticks
 

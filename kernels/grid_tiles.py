@@ -31,13 +31,7 @@ thread, so its tension needs no staging and no barrier.
 
 The Verlet step and the tether pass before a sweep stay launches of their own. Taken into the staging (the first
 tile to stage a particle moving it, bit for bit the same), they made each staged cell wait on a chain of dependent
-loads, and measured slower (bench/results/grid_tiles/tiles-take-step.md). Taken into the write-back instead (a
-``step`` kernel), the last sweep of a substep takes the *next* substep's step there: a cell's last writer in a
-sweep is the tile launched last of those whose regions hold it, and nothing reads the cell after that write
-until the next substep, so the tile that writes it last moves it on by the step (and the tether pass, which reads
-only pins) with the very arithmetic of kernels/integrate.py, bit for bit the separate launch, and the step's loads
-overlap the other blocks' work instead of waiting in a launch of their own. The solver decides where this applies
-(core/stages.step_in_tiles).
+loads, and measured slower (bench/results/grid_tiles/tiles-take-step.md).
 
 The projection is ``stick_correction`` with the rest lengths and weights the implicit grid sticks use
 (kernels/grid_relax.py), so every stick sees exactly the arithmetic of the other forms; only the order of the
@@ -50,7 +44,6 @@ import warp as wp
 from .grid_relax import GridColour, anchor_index, particle_weight
 from .positions import scaled
 from .relax import compliant_correction, stick_correction
-from .tether import within_reach
 
 _KERNELS: dict = {}
 
@@ -61,49 +54,34 @@ def block_barrier():
     ...
 
 
-NO_STEP, STEP, STEP_TETHERED = 0, 1, 2
-"""What a tiled launch's write-back does besides writing the positions: nothing; the next substep's Verlet step
-(kernels/integrate.verlet_step) on the particles it writes last in the sweep; or that step and the first sweep's
-tether pass (verlet_step_tethered)."""
-
 MAX_TILED_COLOURS = 12
 """The most stick colours a tiled sweep takes (three families of four): the length of its per-colour vectors."""
 colour_floats = wp.types.vector(length=MAX_TILED_COLOURS, dtype=float)
 colour_ints = wp.types.vector(length=MAX_TILED_COLOURS, dtype=int)
 
 
-def relax_grid_tiles(tile: int, colours: tuple, max_registers: int | None = None, step: int = NO_STEP,
-                     tethers: int = 0):
+def relax_grid_tiles(tile: int, colours: tuple, max_registers: int | None = None):
     """The tiled sweep's kernel for tiles of ``tile`` x ``tile`` cells and the given colours, each
     ``(dr, dc, col_first, parity_axis, q, parity, soft)`` (parity_axis 0: rows, 1: columns; soft: XPBD, the
     colour's compliance, its first tension and its anchors per row given at launch), in sweep order. One
-    kernel per (tile, colours, max_registers, step): the shared tiles' shapes and each colour's geometry are
+    kernel per (tile, colours, max_registers): the shared tiles' shapes and each colour's geometry are
     compile-time constants, so a colour's step unrolls to its own index arithmetic. ``max_registers`` caps a
-    CUDA thread's registers (None: the compiler's choice), so that more blocks fit on a multiprocessor.
-    ``step``: NO_STEP, or the next substep's Verlet step taken in the write-back (STEP, or STEP_TETHERED with
-    the first sweep's tether pass too, ``tethers`` a particle in the table; see the module docstring)."""
+    CUDA thread's registers (None: the compiler's choice), so that more blocks fit on a multiprocessor."""
     if tile < 4 or tile % 4:
         raise AssertionError(f"a tile's side must be a multiple of 4 (a bend colour's parity repeats every 4 rows or "
                              f"columns, and two tiles apart must share no particle), got {tile}")
-    key = (tile, tuple(colours), max_registers, step, tethers if step == STEP_TETHERED else 0)
+    key = (tile, tuple(colours), max_registers)
     if key not in _KERNELS:
-        _KERNELS[key] = _make_kernel(*key)
+        _KERNELS[key] = _make_kernel(tile, tuple(colours), max_registers)
     return _KERNELS[key]
 
 
-def _make_kernel(tile: int, colours: tuple, max_registers: int | None, step: int, tethers: int):
+def _make_kernel(tile: int, colours: tuple, max_registers: int | None):
     TILE_SIDE = tile
-    STEPS = step != NO_STEP
-    TETHERED = step == STEP_TETHERED
-    TETHERS = max(tethers, 1)
     HALF = tile // 2
     REGION_ROWS = tile + 2
     REGION_COLS = tile + 3
     REGION = REGION_ROWS * REGION_COLS
-    # The step's staged values: the summed form's prediction and increment, and each tether's pin and length, of
-    # the cells the block writes last (one cell where the kernel takes no step).
-    STEP_ROWS, STEP_COLS = (REGION_ROWS, REGION_COLS) if STEPS else (1, 1)
-    TETHER_COLS = STEP_COLS * TETHERS if TETHERED else 1
     STICKS = tile * tile // 2  # a colour's sticks in a tile: one axis keeps half its anchors
     COLOURS = colours
 
@@ -136,37 +114,6 @@ def _make_kernel(tile: int, colours: tuple, max_registers: int | None, step: int
     def put_row_step(t: wp.tile(dtype=wp.float64, shape=(REGION_ROWS,), storage="shared"), i: int,
                      value: wp.float64): ...
 
-    @wp.func
-    def writes_last(r: int, c: int, own_order: int, tiles_wide: int):
-        """Whether the tile of launch order ``own_order`` (2 x tile row parity + tile column parity) is the last
-        in the sweep to write cell (r, c): of the tiles whose regions hold the cell (its own; the tile above,
-        for its first two rows; the tile to the right, for its last column; the tile to the left, for its first
-        two columns), the one launched last."""
-        tr = r // TILE_SIDE
-        tc = c // TILE_SIDE
-        up = r % TILE_SIDE < 2 and tr > 0
-        right = c % TILE_SIDE == TILE_SIDE - 1 and tc + 1 < tiles_wide
-        left = c % TILE_SIDE < 2 and tc > 0
-        last = int(0)
-        for dr in range(2):
-            if dr == 0 or up:
-                for dc in range(-1, 2):
-                    if dc == 0 or (dc == 1 and right) or (dc == -1 and left):
-                        last = wp.max(last, 2 * ((tr - dr) % 2) + (tc + dc) % 2)
-        return last == own_order
-
-    @wp.func_native("t.data(wp::tile_coord(i, j)) = value;")
-    def put_step(t: wp.tile(dtype=wp.vec3, shape=(STEP_ROWS, STEP_COLS), storage="shared"), i: int, j: int,
-                 value: wp.vec3): ...
-
-    @wp.func_native("t.data(wp::tile_coord(i, j)) = value;")
-    def put_tether_pin(t: wp.tile(dtype=int, shape=(STEP_ROWS, TETHER_COLS), storage="shared"), i: int, j: int,
-                       value: int): ...
-
-    @wp.func_native("t.data(wp::tile_coord(i, j)) = value;")
-    def put_tether_length(t: wp.tile(dtype=float, shape=(STEP_ROWS, TETHER_COLS), storage="shared"), i: int, j: int,
-                          value: float): ...
-
     options = {} if max_registers is None else {"cuda_max_registers": max_registers}
 
     @wp.kernel(module="unique", **options)
@@ -190,24 +137,13 @@ def _make_kernel(tile: int, colours: tuple, max_registers: int | None, step: int
         anchors_per_row: colour_ints,
         inv_dt2: float,
         tension: wp.array(dtype=float),
-        x_inertial: wp.array(dtype=wp.vec3),
-        delta: wp.array(dtype=wp.vec3),
-        velocity_scale: float,
-        accel_offset: wp.vec3,
-        tether_pin: wp.array2d(dtype=int),
-        tether_length: wp.array2d(dtype=float),
-        tiles_wide: int,
     ):
         """One sweep of every colour over the tiles of one tile colour (tile row parity, tile column parity):
         block k takes tile (parity_row + 2 (k // tiles_across), parity_col + 2 (k % tiles_across)). ``layout``
         is any colour's (the kernel reads the cloth's first particle, row length and weights from it). A soft
         colour n's stick with anchor (r, c) keeps its tension (mu, zeroed at the substep's start) where the
         launch-per-colour form keeps it: tension[tension_first[n] + kr * anchors_per_row[n] + kc], (kr, kc) its
-        place among the colour's anchors (kernels/grid_relax.py). With the step (``step`` of relax_grid_tiles), the
-        particles this block writes last in the sweep (``writes_last``) then take the next substep's Verlet step
-        (``velocity_scale``, ``accel_offset``, the summed form's ``x_inertial`` and ``delta``) and, tethered, the
-        tether pass from the table's row of p, whose rows are the cloth's free particles in order and ``pins`` its
-        pins; a row of the grid holds ``tiles_wide`` tiles. Without it those arguments are not read."""
+        place among the colour's anchors (kernels/grid_relax.py)."""
         block, lane = wp.tid()
         threads = wp.block_dim()
         first = layout.first_particle
@@ -223,11 +159,6 @@ def _make_kernel(tile: int, colours: tuple, max_registers: int | None, step: int
         col_step = wp.tile_empty(shape=REGION_COLS, dtype=wp.float64, storage="shared")  # squared, 1 apart
         row_rest = wp.tile_empty(shape=(2, REGION_ROWS), dtype=float, storage="shared")
         row_step = wp.tile_empty(shape=REGION_ROWS, dtype=wp.float64, storage="shared")
-        inertial = wp.tile_empty(shape=(STEP_ROWS, STEP_COLS), dtype=wp.vec3, storage="shared")
-        increment = wp.tile_empty(shape=(STEP_ROWS, STEP_COLS), dtype=wp.vec3, storage="shared")
-        pin_of = wp.tile_empty(shape=(STEP_ROWS, TETHER_COLS), dtype=int, storage="shared")
-        reach = wp.tile_empty(shape=(STEP_ROWS, TETHER_COLS), dtype=float, storage="shared")
-        own_order = 2 * tile_row_parity + tile_col_parity
 
         e = lane
         while e < REGION:
@@ -235,24 +166,8 @@ def _make_kernel(tile: int, colours: tuple, max_registers: int | None, step: int
             gr = r0 + rr
             gc = c0 - 1 + rc
             if gr < grid_rows and gc >= 0 and gc < grid_cols:
-                p = first + gr * grid_cols + gc
-                put_point(region, rr, rc, x[p])
-                w = particle_weight(layout, p, inv_mass, pins)
-                put_weight(weight, rr, rc, w)
-                if wp.static(STEPS):
-                    # The step's inputs are staged with the positions, so that their loads overlap the sweep's
-                    # and the write-back waits on none.
-                    if w != 0.0 and writes_last(gr, gc, own_order, tiles_wide):
-                        put_step(inertial, rr, rc, x_inertial[p])
-                        put_step(increment, rr, rc, delta[p])
-                        if wp.static(TETHERED):
-                            row = p - first  # the table's row: the free particles before p
-                            for n in range(pins.shape[0]):
-                                if pins[n] < p:
-                                    row -= 1
-                            for k in range(TETHERS):
-                                put_tether_pin(pin_of, rr, rc * TETHERS + k, tether_pin[row, k])
-                                put_tether_length(reach, rr, rc * TETHERS + k, tether_length[row, k])
+                put_point(region, rr, rc, x[first + gr * grid_cols + gc])
+                put_weight(weight, rr, rc, particle_weight(layout, first + gr * grid_cols + gc, inv_mass, pins))
             e += threads
         k = lane
         while k < REGION_COLS:
@@ -339,22 +254,7 @@ def _make_kernel(tile: int, colours: tuple, max_registers: int | None, step: int
             gr = r0 + rr
             gc = c0 - 1 + rc
             if gr < grid_rows and gc >= 0 and gc < grid_cols:
-                p = first + gr * grid_cols + gc
-                value = region[rr, rc]
-                if wp.static(STEPS):
-                    # kernels/integrate.py's step and tether pass, in their arithmetic, on the position the
-                    # sweep leaves here
-                    if weight[rr, rc] != 0.0 and writes_last(gr, gc, own_order, tiles_wide):
-                        step = (increment[rr, rc] + (value - inertial[rr, rc])) * velocity_scale + accel_offset
-                        value = value + step
-                        x_inertial[p] = value
-                        delta[p] = step
-                        if wp.static(TETHERED):
-                            for k in range(TETHERS):
-                                a = pin_of[rr, rc * TETHERS + k]
-                                if a >= 0:
-                                    value = within_reach(value, x[a], reach[rr, rc * TETHERS + k])
-                x[p] = value
+                x[first + gr * grid_cols + gc] = region[rr, rc]
             e += threads
 
     return relax_grid_tiles

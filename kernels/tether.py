@@ -24,19 +24,12 @@ def tethered(xp: Any, x: wp.array(dtype=Any), pin: wp.array2d(dtype=int), length
     while k < pin.shape[1]:  # not range(), whose loop handles either sign of step: slower on the CPU
         a = pin[t, k]
         if a >= 0:
-            xp = within_reach(xp, x[a], length[t, k])
+            d = xp - x[a]
+            distance = wp.length(d)
+            limit = type(distance)(length[t, k])
+            if distance > limit:
+                xp = x[a] + d * (limit / distance)
         k += 1
-    return xp
-
-
-@wp.func
-def within_reach(xp: Any, anchor: Any, limit: float):
-    """``xp`` moved back within ``limit`` of ``anchor``, along the line between them (unmoved where it is)."""
-    d = xp - anchor
-    distance = wp.length(d)
-    reach = type(distance)(limit)
-    if distance > reach:
-        return anchor + d * (reach / distance)
     return xp
 
 

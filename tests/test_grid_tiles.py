@@ -14,9 +14,6 @@ from warp_verlet.constraints.sticks import GridTiles
 from warp_verlet.core.simulator import Simulator
 from warp_verlet.errors import ArgumentError
 from warp_verlet.constraints import sticks
-from warp_verlet.core import stages
-from warp_verlet.input.scene import parse_scene
-from warp_verlet.kernels.grid_tiles import NO_STEP, STEP, STEP_TETHERED
 from warp_verlet.kernels.relax import relax_colour
 
 ROWS, COLS = 37, 45  # several tiles each way, neither a multiple of the tile
@@ -212,62 +209,3 @@ def test_tiled_sweeps_refuse_what_they_do_not_cover(cloth, simulation, words):
     scene = make_scene(simulation, **spec)
     with pytest.raises(ArgumentError, match=words):
         Simulator(scene, "cpu", sticks="tiled")
-
-
-def frames_with_and_without_the_step_in_the_sweep(scene, device: str, frames: int = 3):
-    """The positions after ``frames`` frames, the last sweep of each substep taking the next substep's Verlet step
-    and with every step its own launch, the rest positions, and the way the step was taken (stages.step_in_tiles)."""
-    out = []
-    for step_in_sweep in (True, False):
-        sim = Simulator(scene, device, threads=1, sticks="tiled")
-        mode = stages.step_in_tiles(sim.solver)
-        sim.solver.steps_in_sweep = step_in_sweep and sim.solver.steps_in_sweep
-        for _ in range(frames):
-            sim.step_frame()
-        out.append(sim.positions())
-        rest = sim.model.rest_positions
-        sim.close()
-    return out[0], out[1], rest, mode
-
-
-@pytest.mark.parametrize("simulation, cloth, tethers_in_step, mode", [
-    ({"substeps": 4, "iterations": 1}, {"tethers": True}, True, STEP_TETHERED),
-    ({"substeps": 3, "iterations": 2}, {"tethers": True}, True, STEP_TETHERED),
-    ({"substeps": 3, "iterations": 2}, {"tethers": True}, False, STEP),  # the tether pass a launch of its own
-    ({"substeps": 4, "iterations": 1}, {"tethers": False}, True, STEP),
-    ({"substeps": 2, "iterations": 3}, {"tethers": True, "compliance": {"bend": 0.5}}, True, STEP_TETHERED),
-])
-def test_the_step_taken_in_the_tiled_sweep_is_the_step_launched_bit_for_bit(device, simulation, cloth,
-                                                                             tethers_in_step, mode, monkeypatch):
-    """A hanging sheet, the step taken by each cell's last writer in a substep's last sweep: the same positions,
-    bit for bit, as with the step a launch of its own, tethered or not, rigid or soft, one sweep or several."""
-    monkeypatch.setitem(stages.FOLD_TETHERS_INTO_INTEGRATE, "cuda" if device == "cuda" else "cpu", tethers_in_step)
-    scene = make_scene({**simulation, "fps": 30}, resolution=[ROWS, COLS], size=[1.0, 1.2],
-                       pins=["top-left", "top-right"], orientation="horizontal",
-                       sticks=["structural", "shear", "bend"], **cloth)
-    stepped_in_sweep, stepped_apart, rest, taken = frames_with_and_without_the_step_in_the_sweep(scene, device)
-    assert taken == mode
-    assert np.abs(stepped_apart - rest).max() > 0.03  # it fell (0.049 m in 0.1 s)
-    np.testing.assert_array_equal(stepped_in_sweep, stepped_apart)
-
-
-@pytest.mark.parametrize("simulation, cloth", [
-    ({}, {"tethers": True, "pins": ["top-left"]}),  # the reference: the step is taken in the sweep
-    ({}, {"particle_masses": [[4, 6, 0.05]]}),  # tethered, but the sweep has no pin list to find a tether's row
-    ({"air": {"velocity": [3.0, 0.0, 0.0]}}, {}),  # the air's forces enter the step
-    ({"global_iterations": 2}, {}),  # the global correction runs between the step and the sweeps
-])
-def test_the_step_stays_a_launch_where_a_substep_holds_more(simulation, cloth, monkeypatch):
-    """What may run between two substeps' sweeps keeps the step a launch of its own: a collider's clamp, the
-    air, the global correction, a tethered cloth whose sweep has no pin list; and a CPU thread team."""
-    monkeypatch.setitem(stages.FOLD_TETHERS_INTO_INTEGRATE, "cpu", True)  # tethered as on a GPU
-    base = {"resolution": [ROWS, COLS], "pins": ["top-left", "top-right"], **cloth}
-    scene = make_scene({"substeps": 2, **simulation}, **base)
-    sim = Simulator(scene, "cpu", threads=1, sticks="tiled")
-    expected = STEP_TETHERED if not simulation and "particle_masses" not in cloth else NO_STEP
-    assert stages.step_in_tiles(sim.solver) == expected
-    if expected != NO_STEP:
-        assert stages.step_in_tiles(Simulator(scene, "cpu", threads=2, sticks="tiled").solver) == NO_STEP
-    with_ground = parse_scene({"simulation": {"substeps": 2}, "cloth": [{**base, "size": [1.0, 1.0]}],
-                               "collider": [{"type": "plane", "point": [0.0, -2.0, 0.0]}]}, file="<test>")
-    assert stages.step_in_tiles(Simulator(with_ground, "cpu", threads=1, sticks="tiled").solver) == NO_STEP

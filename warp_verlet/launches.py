@@ -30,15 +30,11 @@ class BoundStage:
     never the State itself, so a solver's cache does not keep a dropped state alive); ``phases`` (constraint
     sets only) are the per-thread tasks of one sweep, phase after phase, which the CPU thread team may run
     instead; ``before_replay()``, where given, must run before each replay of a captured frame (host state that
-    the capture's work reads at replay, such as Warp's hash-grid descriptor); ``stepping``, where given, are
-    ``phases`` again with the next substep's Verlet step taken in their writes (the tiled grid sweep's, for the
-    last sweep of a substep: core/stages.step_in_tiles), launches whose ``velocity_scale`` and ``accel_offset``
-    are set before each use."""
+    the capture's work reads at replay, such as Warp's hash-grid descriptor)."""
 
     run: Callable[[Any, float], None] | None  # (a State, dt)
     phases: list[list[PhaseTask | None]] | None = None
     before_replay: Callable[[], None] | None = None
-    stepping: list[list[PhaseTask | None]] | None = None
 
 
 def recorded(kernel, dim: int, inputs: list, outputs: list | None = None, block_dim: int = 256) -> PhaseTask:

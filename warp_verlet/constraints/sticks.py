@@ -174,9 +174,7 @@ class GridTiles(ConstraintSet):
     def bind(self, model, state, solver) -> BoundStage:
         import warp as wp
 
-        from warp_verlet.kernels.grid_tiles import (MAX_TILED_COLOURS, NO_STEP, STEP_TETHERED, colour_floats,
-                                                    colour_ints, relax_grid_tiles)
-        from ..core.stages import step_in_tiles
+        from warp_verlet.kernels.grid_tiles import MAX_TILED_COLOURS, colour_floats, colour_ints, relax_grid_tiles
 
         g, x, tile = model.grid, state.particle_q, GRID_TILE
         geometry = tuple((c.layout.dr, c.layout.dc, c.layout.col_first, int(c.layout.row_q == 0),
@@ -192,40 +190,22 @@ class GridTiles(ConstraintSet):
         # Rigid, the kernel has no soft colour and reads no tension: any float array fills the argument.
         tension = solver.scratch("grid_tension", g.soft_sticks, float) if g.soft_sticks else g.col_rest1
         registers = GRID_TILE_MAX_REGISTERS if g.rows * g.cols >= GRID_TILE_CAPPED_FROM else None
+        kernel = relax_grid_tiles(tile, geometry, registers)
         tiles_down, tiles_across = -(-g.rows // tile), -(-g.cols // tile)
-
-        def launches(step: int, step_arrays: list) -> list[PhaseTask]:
-            kernel = relax_grid_tiles(tile, geometry, registers, step,
-                                      model.tether_pin.shape[1] if step == STEP_TETHERED else 0)
-            tasks = []
-            for row_parity in (0, 1):
-                for col_parity in (0, 1):
-                    down, across = (tiles_down - row_parity + 1) // 2, (tiles_across - col_parity + 1) // 2
-                    if down * across == 0:
-                        continue
-                    launch = wp.launch_tiled(
-                        kernel, dim=[down * across], block_dim=tile * tile // 2, record_cmd=True,
-                        device=model.device,
-                        inputs=[x, model.inv_mass, g.colours[0].layout, g.colours[0].pins, g.col_rest1, g.col_rest2,
-                                g.row_rest1, g.row_rest2, g.col_sq1, g.row_sq1, g.rows, row_parity, col_parity,
-                                across, *soft, 0.0, tension, *step_arrays, tiles_across])
-                    tasks.append(PhaseTask(kernel.key, launch.launch, launch))
-            return tasks
-
-        # Without the step its arguments are not read: any arrays of their types fill them.
-        tasks = launches(NO_STEP, [x, x, 0.0, wp.vec3(), None, None])
-        step = step_in_tiles(solver)
-        stepping = []
-        if step != NO_STEP:
-            tethers = [None, None]
-            if step == STEP_TETHERED:
-                length = state.tether_length if state.tether_length is not None else model.tether_length
-                tethers = [model.tether_pin, length]
-            stepping = launches(step, [state.particle_q_inertial, state.particle_dq, 0.0, wp.vec3(), *tethers])
+        tasks = []
+        for row_parity in (0, 1):
+            for col_parity in (0, 1):
+                down, across = (tiles_down - row_parity + 1) // 2, (tiles_across - col_parity + 1) // 2
+                if down * across == 0:
+                    continue
+                launch = wp.launch_tiled(
+                    kernel, dim=[down * across], block_dim=tile * tile // 2, record_cmd=True, device=model.device,
+                    inputs=[x, model.inv_mass, g.colours[0].layout, g.colours[0].pins, g.col_rest1, g.col_rest2,
+                            g.row_rest1, g.row_rest2, g.col_sq1, g.row_sq1, g.rows, row_parity, col_parity, across,
+                            *soft, 0.0, tension])
+                tasks.append(PhaseTask(kernel.key, launch.launch, launch))
         # One thread runs a tile colour: on the CPU a tiled launch's shared memory is one buffer for the process,
         # so two threads' launches would write over each other. The CPU thread team's other threads wait.
         idle = [None] * (solver.threads - 1)
-        prepare = (start_compliant_substep([t.launch for t in tasks + stepping], tension) if g.soft_sticks
-                   else None)
-        return BoundStage(prepare, [[task, *idle] for task in tasks],
-                          stepping=[[task, *idle] for task in stepping] or None)
+        prepare = start_compliant_substep([t.launch for t in tasks], tension) if g.soft_sticks else None
+        return BoundStage(prepare, [[task, *idle] for task in tasks])

@@ -321,12 +321,14 @@ class Simulator:
             self.solver.check_step(state, dt)
         with wp.ScopedDevice(self.device):
             if not self._use_graph or state.dt_prev != dt:
-                self.solver.steps(state, dt, n)
+                for _ in range(n):
+                    self.solver.step(state, dt)
             else:
                 if n not in self._frame_graphs:
                     time, steps = state.time, state.steps
                     with wp.ScopedCapture() as capture:
-                        self.solver.steps(state, dt, n)
+                        for _ in range(n):
+                            self.solver.step(state, dt)
                     self._frame_graphs[n] = capture.graph
                     state.time, state.steps = time, steps  # capture recorded the work; it has not run yet
                 self.solver.before_replay(state)

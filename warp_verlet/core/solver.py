@@ -14,7 +14,6 @@ from typing import Callable
 import numpy as np
 import warp as wp
 
-from warp_verlet.kernels.grid_tiles import NO_STEP
 from warp_verlet.kernels.integrate import verlet_start
 
 from .cpu_team import COLOURED_SECONDS_PER_STICK, JACOBI_SECONDS_PER_ENTRY, MAX_THREADS, PhaseTeam, auto_threads
@@ -23,7 +22,7 @@ from .model import Model
 from .precision import acceleration, smallest_dt
 from ..input.scene import SimulationSettings
 from ..launches import PhaseTask
-from .stages import STAGES, Requirements, step_in_tiles
+from .stages import STAGES, Requirements
 from .state import State
 
 
@@ -55,12 +54,6 @@ class VerletSolver:
         # dropped state's team is collected and its worker threads stop (PhaseTeam's finalizer).
         self._teams: weakref.WeakSet[PhaseTeam] = weakref.WeakSet()
         self.min_dt = self._smallest_resolved_dt()
-        self.steps_in_sweep = step_in_tiles(self) != NO_STEP
-        """Whether, in :meth:`steps`, a substep's last sweep takes the next substep's Verlet step
-        (stages.step_in_tiles)."""
-        self.next_dt: float | None = None
-        """While :meth:`steps` runs a substep whose last sweep takes the next one's step: that step's dt."""
-        self._step_taken = False
 
     # ------------------------------------------------------------------ set-up
     def _thread_count(self, threads: int | None) -> int:
@@ -177,23 +170,11 @@ class VerletSolver:
                           inputs=[state.particle_q, self.model.inv_mass, self.accel, self.model.position_scalar(dt)],
                           outputs=[state.particle_q_inertial, state.particle_dq])
                 state.dt_prev = dt
-            for name, run in stages:
-                if not (self._step_taken and name == "integrate"):
-                    run(state, dt)
+            for _, run in stages:
+                run(state, dt)
         state.dt_prev = dt
         state.time += dt
         state.steps += 1
-
-    def steps(self, state: State, dt: float, count: int) -> None:
-        """``count`` substeps of ``dt`` (as many :meth:`step` calls, with the same positions bit for bit), where the
-        last sweep of each substep but the last may take the next substep's Verlet step (``steps_in_sweep``)."""
-        try:
-            for k in range(count):
-                self.next_dt = dt if self.steps_in_sweep and k < count - 1 else None
-                self.step(state, dt)
-                self._step_taken = self.next_dt is not None
-        finally:
-            self.next_dt, self._step_taken = None, False
 
     def close(self) -> None:
         """Stop the CPU thread teams (also done when the solver is collected)."""

@@ -267,15 +267,6 @@ class Aerodynamics:
         return BoundStage(run)
 
 
-def step_factors(solver, dt: float, dt_prev: float) -> tuple:
-    """The Verlet step's ``velocity_scale`` and ``accel_offset`` (kernels/integrate.py) for a step of ``dt`` after one
-    of ``dt_prev`` seconds, in the positions' type (the acceleration is one too): a float32 factor would cost
-    float64 its precision."""
-    settings, real = solver.settings, solver.model.position_scalar
-    ratio = min(dt / dt_prev, settings.max_dt_ratio)
-    return real(math.exp(-settings.damping * dt) * ratio), solver.accel * real(dt * (dt + dt_prev) * 0.5)
-
-
 class Integrate:
     """The Verlet step (kernels/integrate.py): gravity and wind in one acceleration, damping per second; with air,
     each particle's share of its faces' forces too (Aerodynamics)."""
@@ -296,6 +287,7 @@ class Integrate:
         from warp_verlet.kernels.integrate import verlet_step, verlet_step_tethered
         from warp_verlet.kernels.positions import instance
 
+        settings, accel, real = solver.settings, solver.accel, model.position_scalar
         x, x_inertial, dq, inv_mass, n = (state.particle_q, state.particle_q_inertial, state.particle_dq,
                                           model.inv_mass, model.particle_count)
         # Launched every substep: the kernel is resolved once here.
@@ -308,7 +300,10 @@ class Integrate:
             kernel, tethers, weights = instance(verlet_step, model.position_dtype), [], [inv_mass]
 
         def run(state, dt: float) -> None:
-            velocity_scale, accel_offset = step_factors(solver, dt, state.dt_prev)
+            ratio = min(dt / state.dt_prev, settings.max_dt_ratio)
+            # In the positions' type (accel is one too): a float32 factor would cost float64 its precision.
+            velocity_scale = real(math.exp(-settings.damping * dt) * ratio)
+            accel_offset = accel * real(dt * (dt + state.dt_prev) * 0.5)
             wp.launch(kernel, n, inputs=[x, x_inertial, dq, *weights, velocity_scale, accel_offset, *tethers])
 
         return BoundStage(run)
@@ -356,35 +351,6 @@ def tethers_in_integrate(solver) -> bool:
         return False
     free = sum(int((slot.device_topology.inv_mass > 0).sum()) for slot in model.cloths)
     return model.tether_table.count == free
-
-
-STEP_IN_TILED_SWEEP = {"cpu": True, "cuda": True}
-"""Per kind of device, whether the tiled grid sweep may take the next substep's Verlet step (step_in_tiles). On a
-GPU that saves a launch a substep and a trip of the positions through memory
-(bench/results/grid_tiles/step-in-sweep.md); the CPU keeps it on so that its tests run the same path, though
-``sticks = "auto"`` never tiles there. Bit for bit the step as a launch of its own (tests/test_grid_tiles.py)."""
-
-
-def step_in_tiles(solver) -> int:
-    """How the last sweep of a substep followed by another may take that next substep's Verlet step, in the tiled
-    grid sweep's write-back (kernels/grid_tiles.py), so that the step is no launch of its own: NO_STEP, STEP, or
-    STEP_TETHERED with the first sweep's tether pass that the step runs (tethers_in_integrate). Where a substep
-    is the step and the sweeps alone (no air, global correction, colliders or tears), the sweeps are the tiled
-    grid's and at most tethers, and one thread runs them. Tethered, only where the grid's few pins are in the
-    sweep's pin list (Requirements.weight_pins), from which a particle's row in the tether table follows."""
-    from warp_verlet.kernels.grid_tiles import NO_STEP, STEP, STEP_TETHERED
-
-    from ..constraints.sticks import GridTiles
-
-    req = solver.req
-    if (not STEP_IN_TILED_SWEEP["cuda" if solver.model.device.is_cuda else "cpu"]
-            or tuple(s.name for s in STAGES if s.needed(req)) != ("integrate", RELAX.name) or not req.grid_tiles
-            or any(c.needed(req) and not isinstance(c, (Tethers, GridTiles)) for c in constraint_kinds())
-            or solver.threads > 1):
-        return NO_STEP
-    if not tethers_in_integrate(solver):
-        return STEP
-    return STEP_TETHERED if req.weight_pins > 0 and len(solver.model.cloths) == 1 else NO_STEP
 
 
 class GlobalSolve:
@@ -448,12 +414,6 @@ class Relax:
         team = solver.team(first + phases * (iterations - 1), repeats=1) if first != phases else solver.team(phases)
         sweep = [task.run for phase in phases for task in phase if task is not None]
         first_sweep = [task.run for phase in first for task in phase if task is not None]
-        # The last sweep taking the next substep's Verlet step (step_in_tiles): each set's stepping phases in
-        # place of its phases, the first sweep's tether pass left out as above.
-        stepping = [task.launch for bound in sets for phase in bound.stepping or () for task in phase if task]
-        last_sweep = [task.run for c, bound in zip(kinds, sets)
-                      if not (iterations == 1 and folded and isinstance(c, Tethers))
-                      for phase in bound.stepping or bound.phases for task in phase if task is not None]
 
         def run(state, dt: float) -> None:
             for place in collide_first:
@@ -463,17 +423,10 @@ class Relax:
             if team is not None:
                 team.run()
                 return
-            step_next = stepping and solver.next_dt is not None
-            if step_next:
-                velocity_scale, accel_offset = step_factors(solver, solver.next_dt, dt)
-                for launch in stepping:
-                    launch.set_param_by_name("velocity_scale", velocity_scale)
-                    launch.set_param_by_name("accel_offset", accel_offset)
-            sweeps = [first_sweep] + [sweep] * (iterations - 1)
-            if step_next:
-                sweeps[-1] = last_sweep
-            for tasks in sweeps:
-                for task in tasks:
+            for task in first_sweep:
+                task()
+            for _ in range(iterations - 1):
+                for task in sweep:
                     task()
 
         def before_replay() -> None:
