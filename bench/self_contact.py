@@ -2,7 +2,7 @@
 ``self_collision``.
 
     python -m bench.self_contact [--sizes 64 128] [--frames 60] [--substeps 8] [--iterations 8]
-                                 [--device cpu] [--out bench/results]
+                                 [--strides 1 2] [--device cpu] [--out bench/results]
     python -m bench.self_contact --device cuda --sizes 256 1024 --substeps 32
     python -m bench.self_contact --peer [...]   # beside NVIDIA Newton, when installed (bench/newton_self_contact.py)
 
@@ -16,12 +16,16 @@ the lower one at about 1.4 m/s, so nearly every particle is in contact from then
 --substeps substeps and --iterations sweeps, damping 0.5 /s; the thickness is the default, 0.8 x the spacing
 1 / (n - 1) m. Keep a particle's move per substep (about 1.4 m/s x dt) under half the thickness: 8 substeps do
 up to 128 x 128, 1024 x 1024 needs about 32. On the CPU, one thread (``Simulator(..., threads=1)``).
+--strides runs the contact once per ``self_collision_stride``: with a stride k, every k-th particle along the rows
+and columns collides, at the default thickness of its spacing, 0.8 k / (n - 1) m, and the fold's gap is 1.5 of
+that thickness.
 
 Columns: ms/frame (the median frame's wall time over --frames frames, frame 1 excluded as the warm-up; the
 median, since other work on a shared machine slows some frames), the same with self-collision as a multiple of
 without, and the worst penetration over the run, 1 - (least distance between two particles that were not rest
 neighbours) / thickness, taken at the end of every frame (after timing it) by a hash-grid query on the device
-(0: no pair closer than the thickness; 1: two particles at one point). The run without self-collision shows
+(0: no pair closer than the thickness; 1: two particles at one point); with a stride, over the colliding particles
+at their thickness. The run without self-collision shows
 how far the same cloth passes through itself.
 
 --peer adds NVIDIA Newton's rows for the same scene (bench/newton_self_contact.py, which lists what differs):
@@ -42,7 +46,7 @@ from pathlib import Path
 import numpy as np
 import warp as wp
 
-from warp_verlet.constraints.self_contact import DEFAULT_FRACTION, REST_EXCLUSION
+from warp_verlet.constraints.self_contact import DEFAULT_FRACTION, REST_EXCLUSION, strided
 from warp_verlet.core.simulator import Simulator
 from warp_verlet.input.scene import parse_scene
 
@@ -53,10 +57,12 @@ STEM = "self_contact"
 SIZE, MASS, HEIGHT = 1.0, 0.3, 0.1  # m, kg, m above the ground
 
 
-def folded_scene(n: int, self_collision: bool, frames: int, substeps: int, iterations: int):
+def folded_scene(n: int, self_collision: bool, frames: int, substeps: int, iterations: int, stride: int = 1):
     cloth = {"name": "sheet", "resolution": [n, n], "size": [SIZE, SIZE], "origin": [-0.5, HEIGHT, -0.5],
              "orientation": "horizontal", "sticks": ["structural", "shear", "bend"], "compliance": {"bend": 1.0},
              "mass": MASS, "self_collision": self_collision}
+    if self_collision and stride > 1:
+        cloth["self_collision_stride"] = stride
     ground = {"type": "plane", "point": [0.0, 0.0, 0.0], "normal": [0.0, 1.0, 0.0], "friction_coefficient": 0.5}
     return parse_scene({"simulation": {"fps": 60, "frames": frames, "substeps": substeps, "iterations": iterations,
                                        "damping": 0.5}, "cloth": [cloth], "collider": [ground]}, file="<bench>")
@@ -123,18 +129,24 @@ class GapMeter(PointsGapMeter):
         return self.penetration_of(self.sim.positions())
 
 
-def run(n: int, self_collision: bool, frames: int, substeps: int, iterations: int, device: str) -> dict:
-    scene = folded_scene(n, self_collision, frames, substeps, iterations)
-    thickness = DEFAULT_FRACTION * SIZE / (n - 1)
+def run(n: int, self_collision: bool, frames: int, substeps: int, iterations: int, device: str,
+        stride: int = 1) -> dict:
+    """One drop, timed, with the worst penetration at the frame ends: of every particle at the thickness, or with
+    a stride of the colliding particles at theirs (the particles between them are not spheres of it)."""
+    scene = folded_scene(n, self_collision, frames, substeps, iterations, stride)
+    thickness = DEFAULT_FRACTION * stride * SIZE / (n - 1)
     start = time.perf_counter()
     sim = Simulator(scene, device, threads=1)
     build = time.perf_counter() - start
     sim.state.set_positions(folded(sim.model.rest_positions, SIZE / (n - 1), thickness))
-    meter = GapMeter(sim, thickness)
+    colliding = strided(n, stride)
+    colliding = (colliding[:, None] * n + colliding[None, :]).ravel()
+    meter = PointsGapMeter(sim.model.rest_positions[colliding], thickness, sim.device)
     readings = []
-    times = timed_frames(sim, frames, lambda: readings.append(meter.penetration()))
+    times = timed_frames(sim, frames, lambda: readings.append(meter.penetration_of(sim.positions()[colliding])))
     worst = max([0.0, *readings])
     return {"n": n, "self_collision": "on" if self_collision else "off", "particles": n * n,
+            "stride": stride if self_collision else "", "thickness mm": round(1e3 * thickness, 3),
             "ms/frame": round(1e3 * statistics.median(times[1:]), 3), "worst penetration": round(worst, 4),
             "build s": round(build, 2), "graph": sim.replays_frames}
 
@@ -147,6 +159,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--iterations", type=int, default=8, help="sweeps per substep")
     parser.add_argument("--device", default="cpu")
     parser.add_argument("--out", type=Path, default=None, help="directory for self_contact.md and .csv")
+    parser.add_argument("--strides", type=int, nargs="+", default=[1],
+                        help="self_collision_stride values to run with contact on (1: every particle collides)")
     parser.add_argument("--peer", action="store_true",
                         help="also run NVIDIA Newton's VBD and Style3D solvers on the scene, when Newton is installed")
     args = parser.parse_args(argv)
@@ -156,11 +170,14 @@ def main(argv: list[str] | None = None) -> int:
     if args.peer and not newton_self_contact.available():
         print(newton_self_contact.SKIP_MESSAGE)
         args.peer = False
+    if any(k < 1 for k in args.strides):
+        parser.error("each stride needs to be 1 or more")
     rows = []
     for n in args.sizes:
-        without, with_contact = (run(n, on, args.frames, args.substeps, args.iterations, args.device)
-                                 for on in (False, True))
-        for row in (without, with_contact):
+        without = run(n, False, args.frames, args.substeps, args.iterations, args.device)
+        runs = [without] + [run(n, True, args.frames, args.substeps, args.iterations, args.device, k)
+                            for k in args.strides if k < n]
+        for row in runs:
             row["x without"] = round(row["ms/frame"] / without["ms/frame"], 2)
             rows.append({"simulator": "warp-verlet", **row})
         if args.peer:
@@ -170,10 +187,11 @@ def main(argv: list[str] | None = None) -> int:
     on = "one CPU thread" if wp.get_device(args.device).is_cpu else str(where)
     title = (f"Self-collision: a folded 1 m cloth dropped on the ground, {args.frames} frames at 60 fps, "
              f"{args.substeps} substeps, {args.iterations} sweeps, {on}\n\n" + "\n".join(where.lines(command)))
-    columns = ["n", "particles", "self_collision", "ms/frame", "x without", "worst penetration", "build s"]
+    columns = ["n", "particles", "self_collision", "stride", "thickness mm", "ms/frame", "x without",
+               "worst penetration", "build s"]
     if args.peer:
         columns = ["simulator", *columns, "graph"]
-    write_table([{k: row[k] for k in columns} for row in rows], args.out, STEM, title, columns)
+    write_table([{k: row.get(k, "") for k in columns} for row in rows], args.out, STEM, title, columns)
     return 0
 
 

@@ -1,8 +1,9 @@
 """Self-collision and cloth–cloth contact (warp_verlet/constraints/self_contact.py): candidate pairs once a
 substep, one Jacobi gather per sweep.
 
-Once a substep, each particle of a colliding cloth lists its candidate pairs from the hash grid (rebuilt just
-before): the particles within ``reach`` × the pair's thickness (the mean of the two particles'), except those
+Indices are the colliding particles' (``particle`` maps them to the positions): every particle of a colliding
+cloth, or with a stride a grid's every few. Once a substep, each colliding particle lists its candidate pairs from
+the hash grid (rebuilt just before, over their positions): the particles within ``reach`` × the pair's thickness (the mean of the two particles'), except those
 closer than ``rest_exclusion`` × the thickness in the rest pose of one cloth. In each sweep, for every candidate
 closer than the thickness, it takes its share of the push that separates the pair to the thickness: (h - d)
 along the separation, times w_i / (w_i + w_j), and writes the average of its pushes to ``x_out``; the caller
@@ -78,6 +79,7 @@ def contact_candidates(
 def contact_gather(
     x_in: wp.array(dtype=Any),
     inv_mass: wp.array(dtype=float),
+    particle: wp.array(dtype=int),
     thickness: wp.array(dtype=float),
     candidate: wp.array(dtype=int),
     candidate_count: wp.array(dtype=int),
@@ -88,11 +90,12 @@ def contact_gather(
     first: int,
     x_out: wp.array(dtype=Any),
 ):
-    """Each sweep: a particle's share of the push of every candidate pair closer than its thickness, and of the
-    pair's friction, averaged."""
+    """Each sweep: colliding particle i's (particle[i] of the positions) share of the push of every candidate pair
+    closer than its thickness, and of the pair's friction, averaged, into x_out[i]."""
     i = first + wp.tid()
-    xi = x_in[i]
-    wi = inv_mass[i]
+    pi = particle[i]
+    xi = x_in[pi]
+    wi = inv_mass[pi]
     found = candidate_count[i]
     if wi == 0.0 or found == 0:
         x_out[i] = xi
@@ -101,17 +104,18 @@ def contact_gather(
     count = int(0)
     for k in range(found):
         j = candidate[i * max_candidates + k]
-        d = xi - x_in[j]
+        pj = particle[j]
+        d = xi - x_in[pj]
         dist = wp.length(d)
         gap = type(dist)(0.5 * (thickness[i] + thickness[j])) - dist
         if gap > type(dist)(0.0) and dist > type(dist)(0.0):  # closer than the thickness, with a direction
-            share = wi / (wi + inv_mass[j])
+            share = wi / (wi + inv_mass[pj])
             total += d * (gap / dist * type(dist)(share))
             count += 1
             mu = 0.5 * (friction[i] + friction[j])  # (mu_k, mu_s); mu_s >= mu_k, so 0 means no friction
             if mu[1] > 0.0:
                 n = d / dist
-                relative = (xi - (x_inertial[i] - delta[i])) - (x_in[j] - (x_inertial[j] - delta[j]))
+                relative = (xi - (x_inertial[pi] - delta[pi])) - (x_in[pj] - (x_inertial[pj] - delta[pj]))
                 tangential = relative - n * wp.dot(relative, n)
                 total -= tangential * (coulomb_removed(wp.length(tangential), gap, mu) * type(dist)(share))
     if count > 0:
@@ -119,5 +123,22 @@ def contact_gather(
     x_out[i] = xi
 
 
+@wp.kernel
+def gather_positions(x: wp.array(dtype=Any), particle: wp.array(dtype=int), out: wp.array(dtype=Any)):
+    """The colliding particles' positions, in their order: what the search reads where only some collide."""
+    k = wp.tid()
+    out[k] = x[particle[k]]
+
+
+@wp.kernel
+def scatter_positions(gathered: wp.array(dtype=Any), particle: wp.array(dtype=int), first: int,
+                      x: wp.array(dtype=Any)):
+    """The gather's result written back to the colliding particles (the copy back where only some collide)."""
+    k = first + wp.tid()
+    x[particle[k]] = gathered[k]
+
+
 for_positions(contact_candidates, arrays=("x",), scalars=("query_radius",))
 for_positions(contact_gather, arrays=("x_in", "x_out", "x_inertial", "delta"))
+for_positions(gather_positions, arrays=("x", "out"))
+for_positions(scatter_positions, arrays=("gathered", "x"))

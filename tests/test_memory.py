@@ -103,6 +103,8 @@ CASES = {
                                                                    [[5, 5], [5, 6], [6, 5]]]}),
     "self-contact": ({}, {"self_collision": True}),  # per particle: thickness, rest, cloth, a scratch position
     "jacobi-self-contact-float64": ({"relaxation": "jacobi", "precision": "float64"}, {"self_collision": True}),
+    # every other row and column: per colliding particle its index, and the positions the search reads
+    "self-contact-stride": ({}, {"self_collision": True, "self_collision_stride": 2}),
     # triangle meshes (points and indices, a wp.Mesh id, reach, thickness, friction, a translation in the Model
     # and the State, and a BVH of its own); a moving one adds its keyframes, a clock and per-mesh key starts
     "mesh": ({}, {}, [BALL, TABLE, dict(TABLE, translate=[0.0, -3.0, 0.0]), GROUND]),
@@ -117,7 +119,7 @@ CASES = {
 # The cases above that allow implicit grid sticks (one grid cloth that cannot tear, the coloured solver), again
 # with them ("auto" keeps stick arrays on the CPU).
 IMPLICIT = ["coloured", "tethers", "compliance", "multilevel", "float64", "moving-sphere", "planes", "angle-limit",
-            "rigid-patches", "self-contact", "global"]
+            "rigid-patches", "self-contact", "self-contact-stride", "global"]
 
 
 # The float32 cases that allow tiled sweeps (kernels/grid_tiles.py).
@@ -147,7 +149,7 @@ def test_estimate_matches_the_arrays_allocated(case):
     counters = 4 * (scene.tears + (scene.simulation.relaxation == "jacobi"))
     # Warp's hash grid (self contact) and a mesh's BVH allocate outside any wp.array: counted from Warp's source.
     contact = Requirements.of(scene).count("self contact")
-    native = hash_grid_bytes(scene.particle_count, contact[1]) if contact else 0
+    native = hash_grid_bytes(contact[0], contact[1]) if contact else 0
     allocated = simulator_bytes(sim) + native + mesh_native_bytes(sim)
     # Clustered sticks are estimated before their layout is built, by a bound: every particle and one other end
     # per stick in the regions, MAX_COLOURS stick colours per cluster. What the layout left of it is exact.

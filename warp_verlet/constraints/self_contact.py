@@ -39,7 +39,7 @@ import numpy as np
 
 from .kind import ConstraintSet
 from ..launches import FLOAT, INT, VEC3, BoundStage, copy_back_phase, recorded, split_tasks
-from ..scene_keys import Key, boolean, real
+from ..scene_keys import Key, boolean, integer, real
 
 DEFAULT_FRACTION = 0.8
 """The default thickness as a fraction of the cloth's rest spacing."""
@@ -69,11 +69,20 @@ SELF_COLLISION = Key(
         "collide with each other. Costs a hash grid rebuilt every substep and a pass per sweep.")
 COLLISION_THICKNESS = Key(
     "collision_thickness", real(0.0, None, lo_open=True), None, type="number", unit="m",
-    default_text="absent: 0.8 × the rest spacing", allowed="> 0, at most the rest spacing",
-    doc="The contact distance of `self_collision` (each particle a sphere of this diameter; a pair of two cloths "
-        "uses the mean of theirs). The rest spacing is a grid's `size / (n - 1)`, the smaller of its two axes, or "
-        "a mesh's median edge. Keep a particle's move per substep under half of it, or a fast layer can pass "
-        "through another between two substeps. Only with `self_collision = true`.")
+    default_text="absent: 0.8 × the collision spacing", allowed="> 0, at most the collision spacing",
+    doc="The contact distance of `self_collision` (each colliding particle a sphere of this diameter; a pair of two "
+        "cloths uses the mean of theirs). The collision spacing is the rest spacing (a grid's `size / (n - 1)`, the "
+        "smaller of its two axes, or a mesh's median edge) times `self_collision_stride`. Keep a particle's move "
+        "per substep under half of it, or a fast layer can pass through another between two substeps. Only with "
+        "`self_collision = true`.")
+SELF_COLLISION_STRIDE = Key(
+    "self_collision_stride", integer(1), None, type="integer", unit="particles", default_text="`1`",
+    allowed="≥ 1; above 1 on a grid cloth only, less than its rows and columns",
+    doc="Every how many particles along a grid's rows and columns one takes part in `self_collision` (and its last "
+        "row and column): 2 collides a quarter of them, 3 a ninth. The colliding particles stand for the cloth "
+        "between them, so the thickness may reach their spacing, `self_collision_stride` times the rest spacing: a "
+        "fine cloth can then collide with a thickness of a few of its spacings, at a fraction of the search's cost. "
+        "Only with `self_collision = true`.")
 
 SELF_FRICTION_COEFFICIENT = Key(
     "self_friction_coefficient", real(0.0), None, type="number", default_text="`0`", allowed="≥ 0",
@@ -120,6 +129,38 @@ def thickness_of(spec) -> float | None:
     return spec.options.get(COLLISION_THICKNESS.name) if spec.options.get(SELF_COLLISION.name) else None
 
 
+def stride_of(spec) -> int:
+    """Every how many particles along a grid's rows and columns one collides (1: all of them)."""
+    return spec.options.get(SELF_COLLISION_STRIDE.name) or 1
+
+
+def strided(n: int, stride: int) -> np.ndarray:
+    """Every ``stride``-th of ``n`` indices, and always the last, so that the cloth's edge collides."""
+    kept = np.arange(0, n, stride)
+    return kept if kept[-1] == n - 1 else np.r_[kept, n - 1]
+
+
+def colliding_particles(spec) -> np.ndarray:
+    """The cloth's colliding particles, as its own (scene-order) indices, ascending: all of them, or on a grid
+    with a stride the particles of every stride-th row and column (and the last)."""
+    stride = stride_of(spec)
+    if stride == 1:
+        return np.arange(spec.particle_count)
+    rows, cols = spec.resolution
+    return (strided(rows, stride)[:, None] * cols + strided(cols, stride)[None, :]).ravel()
+
+
+def colliding_count(spec) -> int:
+    """How many of the cloth's particles collide (0 without self_collision), without building anything."""
+    if not spec.options.get(SELF_COLLISION.name):
+        return 0
+    stride = stride_of(spec)
+    if stride == 1:
+        return spec.particle_count
+    rows, cols = spec.resolution
+    return len(strided(rows, stride)) * len(strided(cols, stride))
+
+
 def hash_grid_dims(lo: np.ndarray, hi: np.ndarray, cell: float, particles: int) -> tuple[int, int, int]:
     """Cells per axis of the hash grid over the colliding cloths' rest box [lo, hi]: the box in cells (a cell
     per point of a sheet, so that a flat cloth's cells do not wrap onto each other), THIN_AXIS_CELLS on an axis
@@ -154,32 +195,38 @@ def _rest_box(spec) -> tuple[np.ndarray, np.ndarray]:
 
 
 class ContactData:
-    """The contact's device data, per particle of the scene: ``thickness`` (N,) float32 m (0: its cloth does not
-    collide), ``rest`` (N,) vec3 float32 m (rest position), ``cloth`` (N,) int32 (its cloth's index) and
-    ``friction`` (N,) vec2 float32 (its cloth's self-contact (μ_k, μ_s)); and for the hash grid, ``radius`` (m,
-    the query radius), ``cell`` (m, its cell) and ``dims``. The candidates, rewritten each substep, are the
-    solver's scratch."""
+    """The contact's device data, per colliding particle (M of them, in the Model's particle order): ``particle``
+    (M,) int32 (its index in the Model), ``thickness`` (M,) float32 m, ``rest`` (M,) vec3 float32 m (rest
+    position), ``cloth`` (M,) int32 (its cloth's index) and ``friction`` (M,) vec2 float32 (its cloth's
+    self-contact (μ_k, μ_s)); ``every_particle`` where the M are all the Model's particles (then the search reads
+    the positions themselves, not a gathered copy); and for the hash grid, ``radius`` (m, the query radius),
+    ``cell`` (m, its cell) and ``dims``. The candidates, rewritten each substep, are the solver's scratch."""
 
     def __init__(self, model, scene, device):
         import warp as wp
 
-        n = model.particle_count
-        thickness = np.zeros(n, np.float32)
-        cloth = np.zeros(n, np.int32)
-        friction = np.zeros((n, 2), np.float32)
+        particle, thickness, cloth, friction = [], [], [], []
         for k, (slot, spec) in enumerate(zip(model.cloths, scene.cloths)):
-            cloth[slot.particles] = k
             h = thickness_of(spec)
-            if h is not None:
-                thickness[slot.particles] = h
-                friction[slot.particles] = friction_of(spec)
-        self.radius = QUERY_REACH * float(thickness.max())
+            if h is None:
+                continue
+            # The device holds a grid's particles as the scene numbers them; a mesh with a stride is refused.
+            mine = slot.first + colliding_particles(spec)
+            particle.append(mine)
+            thickness.append(np.full(len(mine), h, np.float32))
+            cloth.append(np.full(len(mine), k, np.int32))
+            friction.append(np.tile(np.asarray(friction_of(spec), np.float32), (len(mine), 1)))
+        particle = np.concatenate(particle)  # ascending: the cloths' slots follow each other
+        self.count = len(particle)
+        self.every_particle = self.count == model.particle_count
+        self.radius = QUERY_REACH * float(max(t.max() for t in thickness))
         self.cell = GRID_CELL * self.radius
         self.dims = scene_grid_dims(scene)
-        self.thickness = wp.array(thickness, dtype=float, device=device)
-        self.rest = wp.array(model.rest_positions.astype(np.float32), dtype=wp.vec3, device=device)
-        self.cloth = wp.array(cloth, dtype=int, device=device)
-        self.friction = wp.array(friction, dtype=wp.vec2, device=device)
+        self.particle = wp.array(particle.astype(np.int32), dtype=int, device=device)
+        self.thickness = wp.array(np.concatenate(thickness), dtype=float, device=device)
+        self.rest = wp.array(model.rest_positions[particle].astype(np.float32), dtype=wp.vec3, device=device)
+        self.cloth = wp.array(np.concatenate(cloth), dtype=int, device=device)
+        self.friction = wp.array(np.concatenate(friction), dtype=wp.vec2, device=device)
 
 
 def scene_grid_dims(scene) -> tuple[int, int, int]:
@@ -189,7 +236,7 @@ def scene_grid_dims(scene) -> tuple[int, int, int]:
     lo = np.min([b[0] for b in boxes], axis=0)
     hi = np.max([b[1] for b in boxes], axis=0)
     cell = GRID_CELL * QUERY_REACH * max(thickness_of(c) for c in cloths)
-    return hash_grid_dims(lo, hi, cell, scene.particle_count)
+    return hash_grid_dims(lo, hi, cell, sum(colliding_count(c) for c in cloths))
 
 
 class SelfContact(ConstraintSet):
@@ -198,7 +245,8 @@ class SelfContact(ConstraintSet):
 
     name = "self contact"
     reads_positions_before_sweeps = True
-    cloth_keys = (SELF_COLLISION, COLLISION_THICKNESS, SELF_FRICTION_COEFFICIENT, SELF_STATIC_FRICTION_COEFFICIENT)
+    cloth_keys = (SELF_COLLISION, COLLISION_THICKNESS, SELF_COLLISION_STRIDE, SELF_FRICTION_COEFFICIENT,
+                  SELF_STATIC_FRICTION_COEFFICIENT)
 
     def capturable(self, device) -> bool:
         return True  # on CUDA with ``bind``'s before_replay
@@ -207,6 +255,7 @@ class SelfContact(ConstraintSet):
         given = spec.options.get(COLLISION_THICKNESS.name)
         if not spec.options.get(SELF_COLLISION.name):
             for key, what in ((COLLISION_THICKNESS, "a collision thickness"),
+                              (SELF_COLLISION_STRIDE, "a self-collision stride"),
                               (SELF_FRICTION_COEFFICIENT, "a self-contact friction coefficient"),
                               (SELF_STATIC_FRICTION_COEFFICIENT, "a self-contact friction coefficient")):
                 if spec.options.get(key.name) is not None:
@@ -221,29 +270,46 @@ class SelfContact(ConstraintSet):
         spacing = rest_spacing(spec)
         if spacing is None:
             raise table.error(SELF_COLLISION.name, "self-collision needs a cloth of two particles or more")
+        stride = stride_of(spec)
+        if stride > 1:
+            if spec.mesh is not None:
+                raise table.error(SELF_COLLISION_STRIDE.name, f"expected 1 on a mesh cloth, got {stride}: a stride "
+                                  "takes every so many particles along a grid's rows and columns, and a mesh has none")
+            if stride >= min(spec.resolution):
+                raise table.error(SELF_COLLISION_STRIDE.name,
+                                  f"expected less than the cloth's {min(spec.resolution)} particles along its shorter "
+                                  f"side, got {stride}")
+        spacing *= stride
+        what = "the cloth's rest spacing" if stride == 1 else f"{stride} × the cloth's rest spacing"
         if given is None:
             return {COLLISION_THICKNESS.name: DEFAULT_FRACTION * spacing}
         if given > spacing:
             raise table.error(COLLISION_THICKNESS.name,
-                              f"expected at most the cloth's rest spacing, {spacing:.6g} m, got {given:g} m: a "
-                              f"thicker cloth's rest neighbours that never collide (within {REST_EXCLUSION} × the "
-                              "thickness at rest) reach past the nearest particles, so a tight fold could pass "
-                              "through itself")
+                              f"expected at most {what}, {spacing:.6g} m, got {given:g} m: a thicker cloth's "
+                              f"colliding neighbours that never collide (within {REST_EXCLUSION} × the thickness at "
+                              "rest) reach past the nearest ones, so a tight fold could pass through itself")
         return None
 
     def count(self, scene):
-        """(the particles that collide, the hash grid's cells), or 0."""
-        colliding = sum(c.particle_count for c in _colliding(scene))
-        return (colliding, math.prod(scene_grid_dims(scene))) if colliding else 0
+        """(the particles that collide, the hash grid's cells, whether every particle of the scene collides),
+        or 0."""
+        colliding = sum(colliding_count(c) for c in _colliding(scene))
+        if not colliding:
+            return 0
+        return colliding, math.prod(scene_grid_dims(scene)), int(colliding == scene.particle_count)
 
     def needed(self, req) -> bool:
         return bool(req.count(self.name))
 
     def device_bytes(self, req) -> int:
-        # per particle: thickness, rest position, cloth, friction (μ_k, μ_s) (Model); a scratch position, the
-        # candidates and their count (solver); the hash grid
-        return (req.particles * (FLOAT + VEC3 + INT + 2 * FLOAT + req.position_bytes + (MAX_CANDIDATES + 1) * INT)
-                + hash_grid_bytes(req.particles, req.count(self.name)[1]))
+        # per colliding particle: its index, thickness, rest position, cloth, friction (μ_k, μ_s) (Model); a
+        # scratch position, the candidates and their count, and unless every particle collides the positions the
+        # search reads (solver); the hash grid
+        colliding, cells, every_particle = req.count(self.name)
+        search_positions = 0 if every_particle else req.position_bytes
+        per_particle = (INT + FLOAT + VEC3 + INT + 2 * FLOAT + req.position_bytes + (MAX_CANDIDATES + 1) * INT
+                        + search_positions)
+        return colliding * per_particle + hash_grid_bytes(colliding, cells)
 
     def build(self, model, scene, device):
         return ContactData(model, scene, device)
@@ -251,37 +317,48 @@ class SelfContact(ConstraintSet):
     def bind(self, model, state, solver) -> BoundStage:
         import warp as wp
 
-        from warp_verlet.kernels.self_contact import contact_candidates, contact_gather
+        from warp_verlet.kernels.self_contact import (contact_candidates, contact_gather, gather_positions,
+                                                      scatter_positions)
 
-        data, x, n = model.constraints[self.name], state.particle_q, model.particle_count
+        data, x, n = model.constraints[self.name], state.particle_q, model.constraints[self.name].count
         real = model.position_scalar
         scratch = solver.scratch("contact_positions", n, model.position_dtype)
         candidate = solver.scratch("contact_candidates", n * MAX_CANDIDATES, int)
         candidate_count = solver.scratch("contact_candidate_count", n, int)
+        # The positions the grid holds and the search reads: the particles' own where every one collides, else
+        # the colliding ones' gathered each substep.
+        searched = x if data.every_particle else solver.scratch("contact_search_positions", n, model.position_dtype)
+        collect = None if data.every_particle else recorded(gather_positions, n, [x, data.particle], [searched])
         grid = wp.HashGrid(*data.dims, device=model.device, dtype=real)
         grid.reserve(n)
         cell = data.cell
-        find = recorded(contact_candidates, n, [wp.uint64(grid.id), x, data.thickness, data.rest, data.cloth,
+        find = recorded(contact_candidates, n, [wp.uint64(grid.id), searched, data.thickness, data.rest, data.cloth,
                                                 REST_EXCLUSION, QUERY_REACH, real(data.radius), MAX_CANDIDATES],
                         [candidate, candidate_count])
 
         def search(state, dt: float) -> None:
-            grid.build(x, cell)
+            if collect is not None:
+                collect.run()
+            grid.build(searched, cell)
             find.run()
 
         def gather(f, count):
-            return recorded(contact_gather, count, [x, model.inv_mass, data.thickness, candidate, candidate_count,
-                                                    MAX_CANDIDATES, state.particle_q_inertial, state.particle_dq,
-                                                    data.friction, f, scratch])
+            return recorded(contact_gather, count, [x, model.inv_mass, data.particle, data.thickness, candidate,
+                                                    candidate_count, MAX_CANDIDATES, state.particle_q_inertial,
+                                                    state.particle_dq, data.friction, f, scratch])
+
+        def scatter(f, count):
+            return recorded(scatter_positions, count, [scratch, data.particle, f], [x])
 
         def point_descriptor_at_this_grid() -> None:
             # Warp's CUDA HashGrid.build ends by copying the grid's descriptor to the device from one static host
             # variable per dtype, which a captured build records by address; at replay the copy reads whatever grid
             # was built last in the process (a second simulator's, a measuring grid's), and the search would walk
             # that grid. A build of this one, just before each replay, leaves its own descriptor there.
-            grid.build(x, cell)
+            grid.build(searched, cell)
 
+        write_back = (copy_back_phase(x, scratch, n, solver.threads) if data.every_particle
+                      else split_tasks(scatter, 0, n, solver.threads))
         # ``search`` holds the grid, which the recorded launch reads by its id only.
-        return BoundStage(search, [split_tasks(gather, 0, n, solver.threads),
-                                   copy_back_phase(x, scratch, n, solver.threads)],
+        return BoundStage(search, [split_tasks(gather, 0, n, solver.threads), write_back],
                           point_descriptor_at_this_grid if model.device.is_cuda else None)
