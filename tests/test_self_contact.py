@@ -13,7 +13,8 @@ import bench_package  # noqa: F401  (makes the repository's bench/ importable as
 from bench import self_contact as self_contact_bench
 
 from conftest import make_scene
-from warp_verlet.constraints.self_contact import DEFAULT_FRACTION, GRID_CELL, REST_EXCLUSION
+from warp_verlet.constraints.self_contact import (DEFAULT_FRACTION, GRID_CELL, MESH_SUBSET_RADIUS, REST_EXCLUSION,
+                                                  colliding_particles)
 from warp_verlet.core.memory import estimate
 from warp_verlet.core.simulator import Simulator
 from warp_verlet.errors import SceneError
@@ -207,9 +208,32 @@ def test_a_mesh_cloths_default_is_its_median_edge(tmp_path):
     data = {"cloth": [{"mesh": "strip.obj", "self_collision": True}]}
     scene = parse_scene(data, str(tmp_path / "s.toml"), tmp_path / "s.toml")
     assert scene.cloths[0].options["collision_thickness"] == pytest.approx(DEFAULT_FRACTION * 0.05, rel=1e-6)
-    data["cloth"][0]["self_collision_stride"] = 2
-    with pytest.raises(SceneError, match=r"self_collision_stride: expected 1 on a mesh cloth, got 2"):
-        parse_scene(data, str(tmp_path / "s.toml"), tmp_path / "s.toml")
+
+
+
+def test_a_mesh_stride_collides_a_spread_subset(tmp_path):
+    """On a mesh, self_collision_stride = k keeps particles at least MESH_SUBSET_RADIUS × k median edges apart
+    with every particle within that of one (so no particle of another layer passes between them at the default
+    thickness, 0.8 k edges); the thickness follows k; the Model holds them in its own particle order."""
+    from test_angle_limit import strip_obj
+
+    strip_obj(tmp_path / "strip.obj", rows=12, cols=12)  # 12 x 12 vertices, 0.05 m apart
+    data = {"cloth": [{"mesh": "strip.obj", "self_collision": True, "self_collision_stride": 2}]}
+    scene = parse_scene(data, str(tmp_path / "s.toml"), tmp_path / "s.toml")
+    spec = scene.cloths[0]
+    assert spec.options["collision_thickness"] == pytest.approx(DEFAULT_FRACTION * 2 * 0.05, rel=1e-6)
+    points = spec.mesh.mesh.particle_points
+    kept = colliding_particles(spec)
+    radius = MESH_SUBSET_RADIUS * 2 * 0.05
+    d = np.linalg.norm(points[:, None] - points[None], axis=2)
+    assert 0 < len(kept) < len(points)
+    assert d[np.ix_(kept, kept)][~np.eye(len(kept), dtype=bool)].min() >= radius  # spread
+    assert d[:, kept].min(axis=1).max() < radius  # covering
+    sim = Simulator(scene, "cpu", particle_order="morton")  # the device's order is not the scene's
+    assert sim.model.scene_particle is not None
+    held = sim.model.constraints["self contact"].particle.numpy()
+    np.testing.assert_array_equal(held, np.sort(sim.model.device_particles(kept)))
+    sim.step_frame()  # it runs
 
 
 STRIDE = 2

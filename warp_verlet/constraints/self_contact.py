@@ -53,6 +53,11 @@ MAX_CANDIDATES = 12
 """Candidate pairs kept per particle and substep, the first found in the grid's order (a fixed order, so which
 ones is repeatable). Particles at least a thickness apart fit about 12 around one within 1.25 × the thickness
 (a dense packing); a particle between two layers of a fold has 2 to 8."""
+MESH_SUBSET_RADIUS = 0.7
+"""On a mesh with ``self_collision_stride`` k, the colliding particles are at least this × k median edges apart and
+every particle lies within that of one (``spread_subset``): under the default thickness, 0.8 k edges, so a
+particle of another layer cannot pass between them, as on a grid, whose stride leaves holes of half a square's
+diagonal, 0.71 k spacings."""
 GRID_CELL = 2.0
 """The hash grid's cell, as a multiple of the query radius: a query then visits 2 × 2 × 2 cells instead of the
 3 × 3 × 3 of a cell the radius's size. Fewer, fuller cells take fewer turns of the query's loop, whose
@@ -77,12 +82,12 @@ COLLISION_THICKNESS = Key(
         "`self_collision = true`.")
 SELF_COLLISION_STRIDE = Key(
     "self_collision_stride", integer(1), None, type="integer", unit="particles", default_text="`1`",
-    allowed="≥ 1; above 1 on a grid cloth only, less than its rows and columns",
+    allowed="≥ 1; on a grid, less than its rows and columns",
     doc="Every how many particles along a grid's rows and columns one takes part in `self_collision` (and its last "
-        "row and column): 2 collides a quarter of them, 3 a ninth. The colliding particles stand for the cloth "
-        "between them, so the thickness may reach their spacing, `self_collision_stride` times the rest spacing: a "
-        "fine cloth can then collide with a thickness of a few of its spacings, at a fraction of the search's cost. "
-        "Only with `self_collision = true`.")
+        "row and column): 2 collides a quarter of them, 3 a ninth; on a mesh, particles about 0.7 × this many "
+        "median edges apart. The colliding particles stand for the cloth between them, so the "
+        "thickness may reach `self_collision_stride` times the rest spacing: a fine cloth can then collide with a "
+        "thickness of a few of its spacings, at a fraction of the search's cost. Only with `self_collision = true`.")
 
 SELF_FRICTION_COEFFICIENT = Key(
     "self_friction_coefficient", real(0.0), None, type="number", default_text="`0`", allowed="≥ 0",
@@ -141,24 +146,64 @@ def strided(n: int, stride: int) -> np.ndarray:
 
 
 def colliding_particles(spec) -> np.ndarray:
-    """The cloth's colliding particles, as its own (scene-order) indices, ascending: all of them, or on a grid
-    with a stride the particles of every stride-th row and column (and the last)."""
+    """The cloth's colliding particles, as its own (scene-order) indices, ascending: all of them; with a stride k
+    on a grid, the particles of every k-th row and column (and the last); on a mesh, a subset about
+    MESH_SUBSET_RADIUS × k median edges apart (``spread_subset``)."""
     stride = stride_of(spec)
     if stride == 1:
         return np.arange(spec.particle_count)
+    if spec.mesh is not None:
+        mesh = spec.mesh.mesh
+        return spread_subset(mesh.particle_points, MESH_SUBSET_RADIUS * stride * rest_spacing(spec))
     rows, cols = spec.resolution
     return (strided(rows, stride)[:, None] * cols + strided(cols, stride)[None, :]).ravel()
 
 
 def colliding_count(spec) -> int:
-    """How many of the cloth's particles collide (0 without self_collision), without building anything."""
+    """How many of the cloth's particles collide (0 without self_collision), before the Model is built."""
     if not spec.options.get(SELF_COLLISION.name):
         return 0
     stride = stride_of(spec)
     if stride == 1:
         return spec.particle_count
+    if spec.mesh is not None:
+        return len(colliding_particles(spec))
     rows, cols = spec.resolution
     return len(strided(rows, stride)) * len(strided(cols, stride))
+
+
+def spread_subset(points: np.ndarray, radius: float) -> np.ndarray:
+    """Indices of ``points`` no two of which are closer than ``radius``, such that every point lies within
+    ``radius`` of one of them (a Poisson-disk subset, greedy, offered in Morton order of the points: a fixed
+    order, so the subset is repeatable). Ascending."""
+    from ..geometry.particle_order import morton_codes
+
+    order = np.argsort(morton_codes(points), kind="stable")
+    cells: dict[tuple[int, int, int], list[int]] = {}
+    cell_of = np.floor(points / radius).astype(np.int64)
+    kept = []
+    r2 = radius * radius
+    for i in order:
+        cx, cy, cz = cell_of[i]
+        near = False
+        for dx in (-1, 0, 1):
+            for dy in (-1, 0, 1):
+                for dz in (-1, 0, 1):
+                    for j in cells.get((cx + dx, cy + dy, cz + dz), ()):
+                        d = points[i] - points[j]
+                        if d @ d < r2:
+                            near = True
+                            break
+                    if near:
+                        break
+                if near:
+                    break
+            if near:
+                break
+        if not near:
+            cells.setdefault((int(cx), int(cy), int(cz)), []).append(int(i))
+            kept.append(int(i))
+    return np.sort(np.asarray(kept, np.int64))
 
 
 def hash_grid_dims(lo: np.ndarray, hi: np.ndarray, cell: float, particles: int) -> tuple[int, int, int]:
@@ -210,8 +255,8 @@ class ContactData:
             h = thickness_of(spec)
             if h is None:
                 continue
-            # The device holds a grid's particles as the scene numbers them; a mesh with a stride is refused.
-            mine = slot.first + colliding_particles(spec)
+            # In the device's order (a mesh's particles may be renumbered there), ascending.
+            mine = np.sort(model.device_particles(slot.first + colliding_particles(spec)))
             particle.append(mine)
             thickness.append(np.full(len(mine), h, np.float32))
             cloth.append(np.full(len(mine), k, np.int32))
@@ -271,10 +316,7 @@ class SelfContact(ConstraintSet):
         if spacing is None:
             raise table.error(SELF_COLLISION.name, "self-collision needs a cloth of two particles or more")
         stride = stride_of(spec)
-        if stride > 1:
-            if spec.mesh is not None:
-                raise table.error(SELF_COLLISION_STRIDE.name, f"expected 1 on a mesh cloth, got {stride}: a stride "
-                                  "takes every so many particles along a grid's rows and columns, and a mesh has none")
+        if stride > 1 and spec.mesh is None:
             if stride >= min(spec.resolution):
                 raise table.error(SELF_COLLISION_STRIDE.name,
                                   f"expected less than the cloth's {min(spec.resolution)} particles along its shorter "
