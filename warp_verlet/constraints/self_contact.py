@@ -9,7 +9,11 @@ inverse mass. Pairs of one cloth whose REST distance is under ``REST_EXCLUSION``
 that excludes the topological neighbours (structural sticks at one spacing apart, and diagonals where the
 thickness reaches them) without a table, so that a cloth at rest is not in contact with itself.
 
-Each substep (``run``) rebuilds a ``wp.HashGrid`` of every particle with cells of ``GRID_CELL`` × the query
+The colliding particles are every particle of the cloths that ask for it, or with ``self_collision_stride`` k a
+grid's every k-th row and column (and its last) or a mesh's spread subset (``spread_subset``): they stand for the
+cloth between them, so the thickness may reach k spacings, and everything below runs over them alone.
+
+Each substep (``run``) rebuilds a ``wp.HashGrid`` of the colliding particles with cells of ``GRID_CELL`` × the query
 radius (``QUERY_REACH`` × the largest thickness) and lists each particle's candidate pairs, those within
 ``QUERY_REACH`` × their thickness (at most ``MAX_CANDIDATES``): rebuilt every substep because at the shipped
 speeds a particle moves up to about a thickness per substep, so a list kept for longer would miss new pairs (a
@@ -85,9 +89,9 @@ SELF_COLLISION_STRIDE = Key(
     allowed="≥ 1; on a grid, less than its rows and columns",
     doc="Every how many particles along a grid's rows and columns one takes part in `self_collision` (and its last "
         "row and column): 2 collides a quarter of them, 3 a ninth; on a mesh, particles about 0.7 × this many "
-        "median edges apart. The colliding particles stand for the cloth between them, so the "
-        "thickness may reach `self_collision_stride` times the rest spacing: a fine cloth can then collide with a "
-        "thickness of a few of its spacings, at a fraction of the search's cost. Only with `self_collision = true`.")
+        "median edges apart. The colliding particles stand for the cloth between them, so the thickness may reach "
+        "`self_collision_stride` times the rest spacing: a fine cloth can then collide with a thickness of a few of "
+        "its spacings, at a fraction of the search's cost. Only with `self_collision = true`.")
 
 SELF_FRICTION_COEFFICIENT = Key(
     "self_friction_coefficient", real(0.0), None, type="number", default_text="`0`", allowed="≥ 0",
