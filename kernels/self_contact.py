@@ -4,11 +4,12 @@ substep, one Jacobi gather per sweep.
 Indices are the colliding particles' (``particle`` maps them to the positions): every particle of a colliding
 cloth, or with a stride a subset. Once a substep, each colliding particle lists its candidate pairs from the hash
 grid (rebuilt just before, over their positions): the particles within ``reach`` × the pair's thickness (the mean
-of the two particles'), except those closer than ``rest_exclusion`` × the thickness in the rest pose of one cloth. In each sweep, for every candidate
-closer than the thickness, it takes its share of the push that separates the pair to the thickness: (h - d)
-along the separation, times w_i / (w_i + w_j), and writes the average of its pushes to ``x_out``; the caller
-copies ``x_out`` back. Every thread reads the same old positions and no thread writes another's particle, and the
-grid's order is fixed, so the sum order is fixed and the result repeatable on every device.
+of the two particles'), except those closer than ``rest_exclusion`` × the thickness in the rest pose of one cloth.
+In each sweep, for every candidate closer than the thickness, it takes its share of the push that separates the
+pair to the thickness: (h - d) along the separation, times w_i / (w_i + w_j), and writes the average of its pushes
+to ``x_out``; the caller copies ``x_out`` back. Every thread reads the same old positions and no thread writes
+another's particle, and the grid's order is fixed, so the sum order is fixed and the result repeatable on every
+device.
 
 Friction (``friction``: (mu_k, mu_s) per particle; a pair takes the mean of its two) is Coulomb's at the position
 level, as the colliders' (collide_response.py), on the pair's relative tangential move over the substep (each

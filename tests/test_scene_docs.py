@@ -233,7 +233,7 @@ def test_the_keys_of_constraint_kinds_land_in_the_cloths_options(tmp_path, monke
         load(angle_limit=30.0)
     assert load().options == {"max_bend_angle": None, "self_collision": False, "collision_thickness": None,
                               "self_collision_stride": None, "self_friction_coefficient": None,
-                              "self_static_friction_coefficient": None, "rigid_patches": ()}  # the registered kinds' defaults
+                              "self_static_friction_coefficient": None, "rigid_patches": ()}  # the kinds' defaults
     monkeypatch.setattr(scene, "cloth_keys_of_kinds", lambda: (EXTRA,))
     spec = load(angle_limit=30)
     assert spec.options == {"angle_limit": 30.0} and isinstance(spec.options["angle_limit"], float)
