@@ -182,32 +182,27 @@ def spread_subset(points: np.ndarray, radius: float) -> np.ndarray:
     order, so the subset is repeatable). Ascending."""
     from ..geometry.particle_order import morton_codes
 
-    order = np.argsort(morton_codes(points), kind="stable")
-    cells: dict[tuple[int, int, int], list[int]] = {}
-    cell_of = np.floor(points / radius).astype(np.int64)
-    kept = []
-    r2 = radius * radius
-    for i in order:
-        cx, cy, cz = cell_of[i]
-        near = False
-        for dx in (-1, 0, 1):
-            for dy in (-1, 0, 1):
-                for dz in (-1, 0, 1):
-                    for j in cells.get((cx + dx, cy + dy, cz + dz), ()):
-                        d = points[i] - points[j]
-                        if d @ d < r2:
-                            near = True
-                            break
-                    if near:
-                        break
-                if near:
-                    break
-            if near:
-                break
-        if not near:
-            cells.setdefault((int(cx), int(cy), int(cz)), []).append(int(i))
-            kept.append(int(i))
-    return np.sort(np.asarray(kept, np.int64))
+    cell_of = [tuple(c) for c in np.floor(points / radius).astype(np.int64).tolist()]
+    xyz = points.tolist()
+    taken: dict[tuple[int, int, int], list[int]] = {}
+    for i in np.argsort(morton_codes(points), kind="stable").tolist():
+        if not _within(xyz, i, taken, cell_of[i], radius * radius):
+            taken.setdefault(cell_of[i], []).append(i)
+    return np.sort(np.fromiter((i for kept in taken.values() for i in kept), np.int64))
+
+
+def _within(xyz: list, i: int, taken: dict, cell: tuple[int, int, int], r2: float) -> bool:
+    """Whether point i is closer than sqrt(r2) to a point already taken, in its cell or the 26 around it."""
+    x, y, z = xyz[i]
+    cx, cy, cz = cell
+    for dx in (-1, 0, 1):
+        for dy in (-1, 0, 1):
+            for dz in (-1, 0, 1):
+                for j in taken.get((cx + dx, cy + dy, cz + dz), ()):
+                    px, py, pz = xyz[j]
+                    if (x - px) ** 2 + (y - py) ** 2 + (z - pz) ** 2 < r2:
+                        return True
+    return False
 
 
 def hash_grid_dims(lo: np.ndarray, hi: np.ndarray, cell: float, particles: int) -> tuple[int, int, int]:
