@@ -25,8 +25,7 @@ median, since other work on a shared machine slows some frames), the same with s
 without, and the worst penetration over the run, 1 - (least distance between two particles that were not rest
 neighbours) / thickness, taken at the end of every frame (after timing it) by a hash-grid query on the device
 (0: no pair closer than the thickness; 1: two particles at one point); with a stride, over the colliding particles
-at their thickness. The run without self-collision shows
-how far the same cloth passes through itself.
+at their thickness. The run without self-collision shows how far the same cloth passes through itself.
 
 --peer adds NVIDIA Newton's rows for the same scene (bench/newton_self_contact.py, which lists what differs):
 newton-vbd (SolverVBD, its particle self-contact off and on) and newton-style3d (SolverStyle3D, its collision
