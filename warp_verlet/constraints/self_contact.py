@@ -157,10 +157,24 @@ def colliding_particles(spec) -> np.ndarray:
     if stride == 1:
         return np.arange(spec.particle_count)
     if spec.mesh is not None:
-        mesh = spec.mesh.mesh
-        return spread_subset(mesh.particle_points, MESH_SUBSET_RADIUS * stride * rest_spacing(spec))
+        return _mesh_subset(spec.mesh.mesh.particle_points, MESH_SUBSET_RADIUS * stride * rest_spacing(spec))
     rows, cols = spec.resolution
     return (strided(rows, stride)[:, None] * cols + strided(cols, stride)[None, :]).ravel()
+
+
+_MESH_SUBSETS: list[tuple[np.ndarray, float, np.ndarray]] = []
+"""The last few mesh subsets (points, radius, subset): the memory estimate and the Model ask for the same one, and a
+large mesh's takes seconds."""
+
+
+def _mesh_subset(points: np.ndarray, radius: float) -> np.ndarray:
+    for held, r, subset in _MESH_SUBSETS:
+        if held is points and r == radius:
+            return subset
+    subset = spread_subset(points, radius)
+    subset.flags.writeable = False  # shared by every caller
+    _MESH_SUBSETS[:] = [(points, radius, subset), *_MESH_SUBSETS[:3]]
+    return subset
 
 
 def colliding_count(spec) -> int:
