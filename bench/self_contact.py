@@ -45,7 +45,7 @@ from pathlib import Path
 import numpy as np
 import warp as wp
 
-from warp_verlet.constraints.self_contact import DEFAULT_FRACTION, REST_EXCLUSION, strided
+from warp_verlet.constraints.self_contact import DEFAULT_FRACTION, REST_EXCLUSION, colliding_particles
 from warp_verlet.core.simulator import Simulator
 from warp_verlet.input.scene import parse_scene
 
@@ -138,8 +138,7 @@ def run(n: int, self_collision: bool, frames: int, substeps: int, iterations: in
     sim = Simulator(scene, device, threads=1)
     build = time.perf_counter() - start
     sim.state.set_positions(folded(sim.model.rest_positions, SIZE / (n - 1), thickness))
-    colliding = strided(n, stride)
-    colliding = (colliding[:, None] * n + colliding[None, :]).ravel()
+    colliding = colliding_particles(scene.cloths[0])  # the scene's order, which a grid's device order is
     meter = PointsGapMeter(sim.model.rest_positions[colliding], thickness, sim.device)
     readings = []
     times = timed_frames(sim, frames, lambda: readings.append(meter.penetration_of(sim.positions()[colliding])))

@@ -181,13 +181,7 @@ def colliding_count(spec) -> int:
     """How many of the cloth's particles collide (0 without self_collision), before the Model is built."""
     if not spec.options.get(SELF_COLLISION.name):
         return 0
-    stride = stride_of(spec)
-    if stride == 1:
-        return spec.particle_count
-    if spec.mesh is not None:
-        return len(colliding_particles(spec))
-    rows, cols = spec.resolution
-    return len(strided(rows, stride)) * len(strided(cols, stride))
+    return spec.particle_count if stride_of(spec) == 1 else len(colliding_particles(spec))
 
 
 def spread_subset(points: np.ndarray, radius: float) -> np.ndarray:
@@ -329,11 +323,10 @@ class SelfContact(ConstraintSet):
         if spacing is None:
             raise table.error(SELF_COLLISION.name, "self-collision needs a cloth of two particles or more")
         stride = stride_of(spec)
-        if stride > 1 and spec.mesh is None:
-            if stride >= min(spec.resolution):
-                raise table.error(SELF_COLLISION_STRIDE.name,
-                                  f"expected less than the cloth's {min(spec.resolution)} particles along its shorter "
-                                  f"side, got {stride}")
+        if stride > 1 and spec.mesh is None and stride >= min(spec.resolution):
+            raise table.error(SELF_COLLISION_STRIDE.name,
+                              f"expected less than the cloth's {min(spec.resolution)} particles along its shorter "
+                              f"side, got {stride}")
         spacing *= stride
         what = "the cloth's rest spacing" if stride == 1 else f"{stride} × the cloth's rest spacing"
         if given is None:
@@ -375,7 +368,8 @@ class SelfContact(ConstraintSet):
         from warp_verlet.kernels.self_contact import (contact_candidates, contact_gather, gather_positions,
                                                       scatter_positions)
 
-        data, x, n = model.constraints[self.name], state.particle_q, model.constraints[self.name].count
+        data, x = model.constraints[self.name], state.particle_q
+        n = data.count
         real = model.position_scalar
         scratch = solver.scratch("contact_positions", n, model.position_dtype)
         candidate = solver.scratch("contact_candidates", n * MAX_CANDIDATES, int)
