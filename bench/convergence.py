@@ -86,6 +86,10 @@ METHODS: dict[str, dict] = {
     **{f"global{n}": {"simulation": {"global_iterations": n}} for n in (3, 5, 10, 30)},
     **{f"global_jacobi{n}": {"simulation": {"global_iterations": n, "global_preconditioner": "jacobi"}}
        for n in (10, 30, 100)},
+    # a cloth that can drape without stretching: soft shear and bend sticks (rigid ones make a grid a flat plate)
+    "soft": {"cloth": {"compliance": {"shear": 1.0, "bend": 1.0}}},
+    # exact solves of the structural rows and columns before each substep's sweeps
+    **{("lines" if n == 1 else f"lines{n}"): {"cloth": {"line_passes": n}} for n in (1, 2)},
 }
 """Method name -> scene overrides. Combine with "+" on the command line (``multilevel+tethers``)."""
 

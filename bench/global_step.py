@@ -1,7 +1,7 @@
 """A global correction with contact inside it, prototyped on the host: how far can it take the drape?
 
     python -m bench.global_step [--sizes 64 ...] [--budgets SxK ...] [--linear direct amg:N jacobi:N bilinear:F agg:F ...]
-        [--newton 1 2 ...] [--frames 90] [--out DIR]
+        [--newton 1 2 ...] [--friction 0 0.5 ...] [--frames 90] [--out DIR]
 
 The drape of ``bench.convergence`` (1 m, 0.2 kg, structural + shear + bend sticks, dropped from 0.5 m onto a
 0.25 m sphere, ground at -0.5 m, read at 1.5 s) runs through the real simulator on the CPU (one relaxation
@@ -22,6 +22,22 @@ Gauss-Newton matrix H = M/h^2 + k J^T J + kc n n^T:
   of every F-th particle (bilinear interpolation) or of F x F aggregates, solved exactly, then J damped-Jacobi
   sweeps (bench/results/global_solve.md: it throws the cloth).
 
+The dual form, ``dual:SOLVER`` (Goldenthal et al. 2007, "fast projection"; Li et al. 2025, MGPBD), takes
+``newton`` Newton steps on the constraint manifold instead, from the prediction clamped to the colliders: with
+C(x) = |x_i - x_j| - L per stick and its Jacobian J,
+
+    (J W J^T + alpha) dlambda = -C - alpha lambda,    x += W J^T dlambda,    lambda += dlambda
+
+(lambda zero at the substep's start), W each particle's inverse mass, times (I - n n^T) for a particle on a collider
+(normal n: it may slide along the surface, not move through or off it within the step; the clamp after the step
+lets it leave). The three families of rigid sticks over-constrain a grid (about six sticks a particle, three
+degrees of freedom), so J W J^T is singular and alpha = ``DUAL_REGULARISATION`` x its diagonal makes each step a
+damped least-squares one (MGPBD needs compliance > 0 for the same reason). SOLVER is ``direct``, ``amg:N`` or
+``jacobi:N`` on that system.
+
+``--friction mu`` gives the ball Coulomb friction (``friction_coefficient``): a frictionless ball lets a converged
+drape slide off it to the ground, so that a low stretch can mean a cloth that lies flat; top y tells.
+
 After the step every collider clamps, then the coloured sweeps make the final projection and the substep's
 clamp runs, exactly as without the stage. Rows give the final RMS and max structural stretch, the lowest
 particle and the host time (a prototype's, not a device figure). ``none`` is the plain simulator.
@@ -33,6 +49,7 @@ dependencies only: ``pip install scipy pyamg``).
 from __future__ import annotations
 
 import argparse
+import itertools
 import sys
 import time
 from pathlib import Path
@@ -41,6 +58,8 @@ import numpy as np
 
 STIFFNESS = 1.0e4  # k h^2 / m: sticks 1e4 x stiffer than a particle's inertia over one substep
 CONTACT = 1.0e2  # contact penalty per unit of the particle's own diagonal
+DUAL_REGULARISATION = 1.0e-2  # the dual step's alpha per unit of its system's diagonal
+ON_SURFACE = 1.0e-7  # m: a particle this close to a collider's surface after the clamp is in contact
 
 
 def _need(module: str):
@@ -145,9 +164,9 @@ class GlobalStep:
             cache[kind, factor] = self.sp.kron(self.sp.kron(P1, P1), self.sp.identity(3)).tocsr()
         return cache[kind, factor]
 
-    def solve(self, H, rhs):
+    def solve(self, H, rhs, dual: bool = False):
         self.solves += 1
-        kind, _, count = self.linear.partition(":")
+        kind, _, count = self.linear.removeprefix("dual:").partition(":")
         if kind == "direct":
             return self.spla.spsolve(H.tocsc(), rhs)
         if kind in ("agg", "bilinear"):
@@ -165,7 +184,8 @@ class GlobalStep:
         iters = int(count or 20)
         if kind == "amg":
             pyamg = _need("pyamg")
-            ml = pyamg.smoothed_aggregation_solver(H, B=np.kron(np.ones((self.n, 1)), np.eye(3)), max_coarse=64)
+            near_null = np.ones((H.shape[0], 1)) if dual else np.kron(np.ones((self.n, 1)), np.eye(3))
+            ml = pyamg.smoothed_aggregation_solver(H, B=near_null, max_coarse=64)
             M = ml.aspreconditioner(cycle="V")
         elif kind == "jacobi":
             M = self.sp.diags(1.0 / H.diagonal())
@@ -174,6 +194,54 @@ class GlobalStep:
         dx, _ = self.spla.cg(H, rhs, M=M, maxiter=iters, rtol=1e-10)
         self.cg_iterations += iters
         return dx
+
+
+class DualStep(GlobalStep):
+    """The dual form: Newton steps on the sticks' lengths with the contacts filtered out of W (module docstring)."""
+
+    def collider_normals(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(index, normal) of the particles on a collider's surface (after the clamp), the ball's last where a
+        particle touches both."""
+        idx, nrm = [], []
+        g = (x[:, 1] <= self.ground_y + ON_SURFACE) & self.free
+        idx.append(np.nonzero(g)[0])
+        nrm.append(np.tile([0.0, 1.0, 0.0], (int(g.sum()), 1)))
+        d = x - self.centre
+        r = np.linalg.norm(d, axis=1)
+        on = (r <= self.radius + ON_SURFACE) & self.free
+        idx.append(np.nonzero(on)[0])
+        nrm.append(d[on] / r[on, None])
+        return np.concatenate(idx), np.concatenate(nrm)
+
+    def __call__(self, x: np.ndarray, x_pred: np.ndarray, h: float) -> np.ndarray:
+        sp = self.sp
+        w = np.where(self.free, 1.0 / np.where(self.free, self.mass, 1.0), 0.0)
+        x = x.copy()
+        self.clamp(x)
+        lam = np.zeros(len(self.ends))
+        a, b = self.ends[:, 0], self.ends[:, 1]
+        for _ in range(self.newton):
+            d = x[b] - x[a]
+            length = np.linalg.norm(d, axis=1)
+            nrm = d / np.maximum(length, 1e-12)[:, None]
+            c = length - self.rest
+            blocks = w[:, None, None] * np.eye(3)[None]
+            idx, cn = self.collider_normals(x)
+            blocks[idx] -= w[idx, None, None] * cn[:, :, None] * cn[:, None, :]
+            rows = (3 * np.arange(self.n)[:, None, None] + np.arange(3)[None, :, None]).repeat(3, axis=2)
+            cols = (3 * np.arange(self.n)[:, None, None] + np.arange(3)[None, None, :]).repeat(3, axis=1)
+            W = sp.csr_matrix((blocks.ravel(), (rows.ravel(), cols.ravel())), shape=(3 * self.n, 3 * self.n))
+            jv = np.concatenate([-nrm, nrm], axis=1).ravel()
+            J = sp.csr_matrix((jv, (self._j_rows, self._j_cols)), shape=(len(self.ends), 3 * self.n))
+            WJt = (W @ J.T).tocsc()
+            A = (J @ WJt).tocsr()
+            alpha = DUAL_REGULARISATION * A.diagonal()
+            A = A + sp.diags(alpha)
+            dlam = self.solve(A.tocsr(), -c - alpha * lam, dual=True)
+            lam += dlam
+            x = x + (WJt @ dlam).reshape(-1, 3)
+            self.clamp(x)
+        return x
 
 
 def axis_prolongation(side: int, kind: str, factor: int) -> np.ndarray:
@@ -194,7 +262,7 @@ def axis_prolongation(side: int, kind: str, factor: int) -> np.ndarray:
 
 
 def run_drape(n: int, substeps: int, iterations: int, linear: str, newton: int, frames: int = 90,
-              contact_projection: str = "after_sweeps") -> dict:
+              contact_projection: str = "after_sweeps", friction: float = 0.0) -> dict:
     import warp as wp
 
     from bench.convergence import merge, scene_tables
@@ -204,12 +272,15 @@ def run_drape(n: int, substeps: int, iterations: int, linear: str, newton: int, 
     wp.config.quiet = True
     tables = scene_tables("drape", n, "plain", substeps, iterations, frames)
     tables = merge(tables, {"simulation": {"precision": "float64", "contact_projection": contact_projection}})
+    if friction:
+        tables["collider"][0]["friction_coefficient"] = friction
     scene = parse_scene(tables, file=f"<drape {n}>")
     # A host stage must run every substep: a captured frame would replay only the kernels.
     sim = Simulator(scene, "cpu", threads=1, use_graph=linear == "none")
     step = None
     if linear != "none":
-        step = GlobalStep(sim.model, (np.zeros(3), 0.25), -0.5, linear, newton)
+        form = DualStep if linear.startswith("dual:") else GlobalStep
+        step = form(sim.model, (np.zeros(3), 0.25), -0.5, linear, newton)
         solver = sim.solver
         original = solver.bind
 
@@ -235,6 +306,7 @@ def run_drape(n: int, substeps: int, iterations: int, linear: str, newton: int, 
     s = sim.stretch(x)
     sim.close()
     return {"n": n, "budget": f"{substeps}x{iterations}", "linear": linear, "newton": newton if step else 0,
+            "friction": friction,
             "contact": contact_projection, "rms": s.rms, "max": s.max, "lowest_y": float(x[:, 1].min()),
             "top_y": float(x[:, 1].max()), "host_ms_per_frame": wall / frames * 1e3,
             "cg_per_substep": (step.cg_iterations / max(step.solves, 1) * newton) if step else 0}
@@ -248,22 +320,22 @@ def main(argv=None) -> int:
     p.add_argument("--newton", type=int, nargs="*", default=[1])
     p.add_argument("--contact", nargs="*", default=["after_sweeps"])
     p.add_argument("--frames", type=int, default=90)
+    p.add_argument("--friction", type=float, nargs="*", default=[0.0], help="the ball's friction_coefficient")
     p.add_argument("--out", type=Path, default=None)
     args = p.parse_args(argv)
-    lines = ["| grid | S × K | contact | global step | Newton | RMS | max | lowest y (m) | top y (m) | host ms/frame |",
-             "|---|---|---|---|---|---|---|---|---|---|"]
+    lines = ["| grid | S × K | ball μ | contact | global step | Newton | RMS | max | lowest y (m) | top y (m) | "
+             "host ms/frame |", "|---|---|---|---|---|---|---|---|---|---|---|"]
     print("\n".join(lines), flush=True)
     for n in args.sizes:
         for budget in args.budgets:
             s, k = (int(v) for v in budget.split("x"))
-            for contact in args.contact:
-                for linear in args.linear:
-                    for newton in (args.newton if linear != "none" else [0]):
-                        r = run_drape(n, s, k, linear, newton, args.frames, contact)
-                        line = (f"| {n}² | {s} × {k} | {contact} | {linear} | {r['newton']} | {r['rms']:.3%} | "
-                                f"{r['max']:.2%} | {r['lowest_y']:.3f} | {r['top_y']:.3f} | {r['host_ms_per_frame']:.0f} |")
-                        lines.append(line)
-                        print(line, flush=True)
+            for mu, contact, linear in itertools.product(args.friction, args.contact, args.linear):
+                for newton in (args.newton if linear != "none" else [0]):
+                    r = run_drape(n, s, k, linear, newton, args.frames, contact, mu)
+                    line = (f"| {n}² | {s} × {k} | {mu:g} | {contact} | {linear} | {r['newton']} | {r['rms']:.3%} | "
+                            f"{r['max']:.2%} | {r['lowest_y']:.3f} | {r['top_y']:.3f} | {r['host_ms_per_frame']:.0f} |")
+                    lines.append(line)
+                    print(line, flush=True)
     if args.out:
         args.out.mkdir(parents=True, exist_ok=True)
         (args.out / "global_step.md").write_text("\n".join(lines) + "\n")

@@ -113,18 +113,23 @@ CASES = {
     "global": ({"global_iterations": 3}, {}, [BALL, GROUND]),  # with its multigrid levels
     "global-jacobi": ({"global_iterations": 3, "global_preconditioner": "jacobi"}, {"pins": ["top-left"]}),
     "global-float64-tear": ({"global_iterations": 3, "precision": "float64"}, {"tear_threshold": 1.5}, [SWEEP]),
+    # line solves: a vec4i per row and column and a rest length per gap; with colliders a position snapshot and a
+    # contact normal per particle
+    "line-solves": ({}, {"line_passes": 1, "compliance": {"bend": 1e-3}}, [SWEEP, GROUND]),
+    "line-solves-float64": ({"precision": "float64"}, {"line_passes": 2}, [BALL]),
+    "line-solves-alone": ({}, {"line_passes": 1}),
 }
 
 
 # The cases above that allow implicit grid sticks (one grid cloth that cannot tear, the coloured solver), again
 # with them ("auto" keeps stick arrays on the CPU).
 IMPLICIT = ["coloured", "tethers", "compliance", "multilevel", "float64", "moving-sphere", "planes", "angle-limit",
-            "rigid-patches", "self-contact", "self-contact-stride", "global"]
+            "rigid-patches", "self-contact", "self-contact-stride", "global", "line-solves", "line-solves-alone"]
 
 
 # The float32 cases that allow tiled sweeps (kernels/grid_tiles.py).
 TILED = ["coloured", "tethers", "compliance", "multilevel", "moving-sphere", "planes", "angle-limit", "rigid-patches",
-         "self-contact", "global"]
+         "self-contact", "global", "line-solves"]
 
 
 # The float32 cases of the coloured solver that cannot tear, which allow clustered sweeps of stick arrays (soft

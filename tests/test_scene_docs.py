@@ -231,7 +231,8 @@ def test_the_keys_of_constraint_kinds_land_in_the_cloths_options(tmp_path, monke
 
     with pytest.raises(scene.SceneError, match="cloth\\[0\\].angle_limit: unknown key"):
         load(angle_limit=30.0)
-    assert load().options == {"max_bend_angle": None, "self_collision": False, "collision_thickness": None,
+    assert load().options == {"line_passes": 0, "max_bend_angle": None, "self_collision": False,
+                              "collision_thickness": None,
                               "self_collision_stride": None, "self_friction_coefficient": None,
                               "self_static_friction_coefficient": None, "rigid_patches": ()}  # the kinds' defaults
     monkeypatch.setattr(scene, "cloth_keys_of_kinds", lambda: (EXTRA,))
@@ -253,7 +254,8 @@ def test_cloth_options_are_read_only_and_survive_pickling():
     options = FrozenMapping({"angle_limit": 30.0})
     spec = ClothSpec("c", (2, 2), (1.0, 1.0), options=options)
     assert pickle.loads(pickle.dumps(spec)).options == {"angle_limit": 30.0}
-    assert ClothSpec("c", (2, 2), (1.0, 1.0)).options == {"max_bend_angle": None, "self_collision": False,
+    assert ClothSpec("c", (2, 2), (1.0, 1.0)).options == {"line_passes": 0, "max_bend_angle": None,
+                                                          "self_collision": False,
                                                           "collision_thickness": None, "self_collision_stride": None,
                                                           "self_friction_coefficient": None,
                                                           "self_static_friction_coefficient": None,

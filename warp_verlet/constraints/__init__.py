@@ -21,6 +21,7 @@ __all__ = ["CONSTRAINT_KINDS", "ConstraintKind", "ConstraintSet", "cloth_keys", 
 
 def _kinds() -> tuple:
     from .angle_limit import AngleHinges, AngleJoints
+    from .line_solve import LineSolves
     from .multilevel import Multilevel
     from .rigid_patches import RigidPatches
     from .self_contact import SelfContact
@@ -28,14 +29,14 @@ def _kinds() -> tuple:
     from .sticks import GridSticks, GridTiles, Sticks
     from .tethers import GridTethers, Tethers
 
-    # The multilevel pass first (it measures moves from the Verlet prediction), then the long-range tethers, so
-    # that every sweep starts from particles within reach of their pins, then the sticks, then the angle limits
-    # (on lengths the sticks have just set), then the contacts (after the sticks, so that a sweep's last word on
-    # a pair is to keep it apart, the sticks' pull being what brings layers together), and the rigid patches
-    # last, so that a sweep ends with each rigid.
-    return (Multilevel(), Tethers(), GridTethers(), Sticks(), StickClusters(), GridSticks(), GridTiles(), AngleJoints(),
-            AngleHinges(), SelfContact(), RigidPatches())
-
+    # The multilevel pass first (it measures moves from the Verlet prediction), then the line solves (a substep's
+    # set-up only: they carry a correction along whole rows and columns before any sweep), then the long-range
+    # tethers, so that every sweep starts from particles within reach of their pins, then the sticks, then the
+    # angle limits (on lengths the sticks have just set), then the contacts (after the sticks, so that a sweep's
+    # last word on a pair is to keep it apart, the sticks' pull being what brings layers together), and the rigid
+    # patches last, so that a sweep ends with each rigid.
+    return (Multilevel(), LineSolves(), Tethers(), GridTethers(), Sticks(), StickClusters(), GridSticks(), GridTiles(),
+            AngleJoints(), AngleHinges(), SelfContact(), RigidPatches())
 
 CONSTRAINT_KINDS: tuple = _kinds()
 """Every constraint kind, in the order a sweep projects them."""

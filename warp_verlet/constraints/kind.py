@@ -64,6 +64,10 @@ class ConstraintKind(Protocol):
     """Whether its per-substep set-up (``bind``'s ``run``) reads or moves the positions the Verlet step left:
     then nothing of the first sweep may be folded into that step (stages.tethers_in_integrate)."""
 
+    clamps_before_sweeps: bool
+    """Whether its per-substep set-up runs the colliders' clamps: then the relaxation places the moving colliders
+    for the substep before it (stages.collider_placement)."""
+
 
 class ConstraintSet:
     """Defaults for a kind that owns no keys, has nothing to check, keeps its data in the Model's core arrays
@@ -72,6 +76,7 @@ class ConstraintSet:
     name = ""
     cloth_keys: tuple = ()
     reads_positions_before_sweeps = False
+    clamps_before_sweeps = False
 
     def named_vertex_sets(self, options) -> tuple:
         return ()

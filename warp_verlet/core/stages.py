@@ -403,11 +403,13 @@ class Relax:
         before = [bound.run for bound in sets if bound.run is not None]  # per-substep set-up (dt, zeroing)
         replay_hooks = [bound.before_replay for bound in sets if bound.before_replay is not None]
         collide_first = ()
-        if contact_every_sweep(solver):
-            # The clamps end every sweep, so the colliders are placed for this substep before the first one.
+        if collider_placement(solver) == self.name:
+            # A clamp ends every sweep, or a kind clamps before the sweeps: the colliders are placed for this
+            # substep before either.
             launches = [kind.bind(model, state) for kind, _ in model.colliders.kinds]
-            if collider_placement(solver) == self.name:
-                collide_first = [place for bound in launches for place in bound.before]
+            collide_first = [place for bound in launches for place in bound.before]
+        if contact_every_sweep(solver):
+            launches = [kind.bind(model, state) for kind, _ in model.colliders.kinds]
             clamps = [[task] for bound in launches for task in bound.clamps]
             phases, first = phases + clamps, first + clamps
         iterations = solver.settings.iterations
@@ -438,9 +440,12 @@ class Relax:
 
 def collider_placement(solver) -> str:
     """The name of the first stage of a substep that clamps, which places the moving colliders for it."""
-    if GLOBAL.needed(solver.req) and solver.req.colliders:
+    req = solver.req
+    if GLOBAL.needed(req) and req.colliders:
         return GLOBAL.name
-    return RELAX.name if contact_every_sweep(solver) else Collide.name
+    clamps_before_sweeps = (bool(req.colliders) and RELAX.needed(req)
+                            and any(c.clamps_before_sweeps and c.needed(req) for c in constraint_kinds()))
+    return RELAX.name if contact_every_sweep(solver) or clamps_before_sweeps else Collide.name
 
 
 def contact_every_sweep(solver) -> bool:

@@ -1,0 +1,194 @@
+"""Line solves: ``line_passes = n`` on a grid cloth solves every row and every column of its structural sticks
+exactly, ``n`` times, at the start of each substep's relaxation (kernels/line_solve.py).
+
+Why: a Gauss-Seidel sweep carries a correction about one stick along a row per colour pass, so where nothing but
+contact holds the cloth up (a drape) it stretches in proportion to the grid's size, and tethers cannot help (they
+need pins). A row of structural sticks is a chain, and one Newton step on a chain's stick lengths is a tridiagonal
+system, solved exactly by cyclic reduction: the correction reaches the whole row at once. A pass solves every row,
+then every column (Gauss-Seidel across the two), and the sweeps then make the final projection of every family as
+before. Rows and columns of a flat net meet at right angles, so solving one family moves the other's lengths only
+to second order: a pass leaves the structural net nearly exact.
+
+Where the colliders touch the cloth, the lines must not push it into them nor lift it off: the stage clamps the
+Verlet prediction once (the colliders placed for the substep first), and each particle the clamp moved slides
+along the collider in the solve, its inverse mass taken as w (I - c c^T) along the clamp's direction c. (The
+clamp after the sweeps still runs, as the substep's last word.)
+
+Only the structural sticks are solved, and they must be rigid: a row's exact lengths are what the solve is for.
+The shear and bend families are left to the sweeps. A cloth whose shear and bend sticks are rigid too cannot
+drape without stretching (two rigid sticks along a row and a rigid bend stick across both hold the row straight,
+so such a cloth is a flat plate); give them a compliance (docs/method.md, "Line solves").
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .kind import ConstraintSet
+from ..launches import FLOAT, INT, VEC3, BoundStage, recorded
+from ..scene_keys import Key, integer
+
+LINE_THREADS = 256
+"""Threads of a CUDA block, which solves one line (the CPU runs one lane a block)."""
+MAX_LINE_STICKS = 4096
+"""The longest line the solve takes: its shared arrays hold 44 bytes a stick (4096: 180 KB, under a GPU block's
+shared-memory limit)."""
+
+LINE_PASSES = Key(
+    "line_passes", integer(0, 100), 0, type="integer", unit="passes", default_text="`0`", allowed="0 … 100",
+    doc="Exact solves of every row and then every column of the cloth's structural sticks, at the start of each "
+        "substep's relaxation (a Newton step on each line's lengths; particles on a collider slide along it). They "
+        "carry a correction across the whole cloth at once, which the sweeps cannot: the cure for a large cloth "
+        "held up by contact, which otherwise stretches. 0 leaves them out. A grid cloth with rigid structural "
+        "sticks that cannot tear, at most 4097 particles a side; its shear and bend sticks should have a "
+        "`compliance`, or the cloth cannot drape without stretching.")
+
+
+def passes_of(spec) -> int:
+    return spec.options.get(LINE_PASSES.name) or 0
+
+
+def _line_cloths(scene) -> list:
+    return [c for c in scene.cloths if passes_of(c)]
+
+
+def capacity_of(sticks: int) -> int:
+    """The kernel's capacity for lines of at most ``sticks`` sticks: the next power of two (at least 2)."""
+    return max(2, 1 << (max(sticks, 1) - 1).bit_length())
+
+
+class LineData:
+    """The lines of every cloth with line passes: ``lines`` (L,) vec4i (first particle, sticks, step between its
+    particles, the index of its first stick's rest length in ``rest``), rows first then columns of each cloth;
+    ``rest`` float32 m (per cloth, its rows' stick lengths along a row, then its columns'); ``rows`` and ``columns``
+    the (first line, count) of the two launches' ranges per cloth; ``capacity`` the longest line's, padded;
+    ``passes`` (the largest any cloth asks: a cloth asking fewer is one launch range of its own)."""
+
+    def __init__(self, model, scene, device):
+        import warp as wp
+
+        rows_table, cols_table, rest, passes = [], [], [], []
+        longest = 1
+        for slot, spec in zip(model.cloths, scene.cloths):
+            n = passes_of(spec)
+            if not n:
+                continue
+            top = slot.topology
+            rows, cols, first = top.rows, top.cols, slot.first
+            positions = np.asarray(model.rest_positions)[first:first + rows * cols].reshape(rows, cols, 3)
+            along_row = np.linalg.norm(positions[0, 1:] - positions[0, :-1], axis=1)
+            along_column = np.linalg.norm(positions[1:, 0] - positions[:-1, 0], axis=1)
+            base = sum(len(r) for r in rest)
+            rest += [along_row, along_column]
+            if cols > 1:
+                rows_table += [(first + r * cols, cols - 1, 1, base, n) for r in range(rows)]
+            if rows > 1:
+                cols_table += [(first + c, rows - 1, cols, base + cols - 1, n) for c in range(cols)]
+            longest = max(longest, rows - 1, cols - 1)
+            passes.append(n)
+        self.passes = max(passes)
+        self.capacity = capacity_of(longest)
+        # Each launch range holds the lines of the cloths asking at least that many passes: sorted by passes
+        # (descending), pass p launches the leading lines whose cloth asks more than p.
+        rows_table.sort(key=lambda line: -line[4])
+        cols_table.sort(key=lambda line: -line[4])
+        table = rows_table + cols_table
+        self.row_lines = [sum(1 for line in rows_table if line[4] > p) for p in range(self.passes)]
+        self.column_lines = [sum(1 for line in cols_table if line[4] > p) for p in range(self.passes)]
+        self.column_start = len(rows_table)
+        self.lines = wp.array(np.asarray([line[:4] for line in table], np.int32).reshape(-1, 4), dtype=wp.vec4i,
+                              device=device)
+        self.rest = wp.array(np.concatenate(rest).astype(np.float32), dtype=float, device=device)
+
+
+class LineSolves(ConstraintSet):
+    """Exact solves of a grid cloth's rows and columns of structural sticks (kernels/line_solve.py), once a
+    substep before the sweeps, after a clamp of the prediction to the colliders."""
+
+    name = "line solves"
+    reads_positions_before_sweeps = True
+    clamps_before_sweeps = True
+    cloth_keys = (LINE_PASSES,)
+
+    def check_cloth(self, spec, table):
+        if not passes_of(spec):
+            return None
+        why = None
+        if spec.mesh is not None:
+            why = "a mesh cloth has no rows and columns"
+        elif "structural" not in spec.sticks:
+            why = "the cloth has no structural sticks"
+        elif "structural" in spec.compliance:
+            why = "its structural sticks are soft (compliance), and a line solve makes them exact"
+        elif spec.tears:
+            why = "the cloth can tear (tear_threshold or tear_tension), and a torn row is no longer one line"
+        elif max(spec.resolution) - 1 > MAX_LINE_STICKS:
+            why = f"its lines are longer than {MAX_LINE_STICKS} sticks ({max(spec.resolution) - 1})"
+        if why is not None:
+            raise table.error(LINE_PASSES.name, f"line passes need a grid cloth with rigid structural sticks that "
+                                                f"cannot tear, at most {MAX_LINE_STICKS + 1} particles a side; {why}")
+        return None
+
+    def count(self, scene):
+        """(lines, rest lengths, whether the scene has colliders) of the cloths with line passes, or 0."""
+        cloths = _line_cloths(scene)
+        if not cloths:
+            return 0
+        lines = sum(r * (c > 1) + c * (r > 1) for r, c in (spec.resolution for spec in cloths))
+        rest = sum(r - 1 + c - 1 for r, c in (spec.resolution for spec in cloths))
+        return lines, rest, int(bool(scene.colliders))
+
+    def needed(self, req) -> bool:
+        return bool(req.count(self.name))
+
+    def device_bytes(self, req) -> int:
+        # a vec4i per line, a rest length per row and column gap (Model); with colliders, a position snapshot and
+        # a contact normal per particle (solver)
+        lines, rest, colliders = req.count(self.name)
+        contact = req.particles * (req.position_bytes + VEC3) if colliders else 0
+        return lines * 4 * INT + rest * FLOAT + contact
+
+    def build(self, model, scene, device):
+        return LineData(model, scene, device)
+
+    def bind(self, model, state, solver) -> BoundStage:
+        import warp as wp
+
+        from warp_verlet.kernels.global_solve import contact_normals, copy_positions
+        from warp_verlet.kernels.line_solve import line_solve_kernel
+
+        data, x = model.constraints[self.name], state.particle_q
+        n = model.particle_count
+        bound = [kind.bind(model, state) for kind, _ in model.colliders.kinds]
+        clamps = [task for launches in bound for task in launches.clamps]
+        if clamps:
+            snapshot = solver.scratch("line_snapshot", n, model.position_dtype)
+            normal = solver.scratch("line_normals", n, wp.vec3)
+            before = [recorded(copy_positions, n, [x], [snapshot])]
+            after = [recorded(contact_normals, n, [x, snapshot], [normal])]
+        else:
+            normal = wp.empty(0, dtype=wp.vec3, device=model.device)  # not read
+            before, after = [], []
+        kernel = line_solve_kernel(data.capacity, model.position_dtype)
+        threads = LINE_THREADS if model.device.is_cuda else 1
+
+        def lines(first: int, count: int):
+            return wp.launch_tiled(kernel, dim=[count], block_dim=threads, record_cmd=True, device=model.device,
+                                   inputs=[x, model.inv_mass, int(bool(clamps)), normal,
+                                           data.lines[first:first + count], data.rest])
+
+        passes = []
+        for p in range(data.passes):
+            if data.row_lines[p]:
+                passes.append(lines(0, data.row_lines[p]))
+            if data.column_lines[p]:
+                passes.append(lines(data.column_start, data.column_lines[p]))
+        tasks = [task.run for task in before] + [task.run for task in clamps] + [task.run for task in after]
+
+        def run(state, dt: float) -> None:
+            for task in tasks:
+                task()
+            for launch in passes:
+                launch.launch()
+
+        return BoundStage(run, [])
