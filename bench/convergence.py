@@ -88,6 +88,8 @@ METHODS: dict[str, dict] = {
        for n in (10, 30, 100)},
     # a cloth that can drape without stretching: soft shear and bend sticks (rigid ones make a grid a flat plate)
     "soft": {"cloth": {"compliance": {"shear": 1.0, "bend": 1.0}}},
+    "softer": {"cloth": {"compliance": {"shear": 10.0, "bend": 10.0}}},
+    "net": {"cloth": {"sticks": ["structural"]}},  # a net of threads: no shear or bend sticks at all
     # exact solves of the structural rows and columns before each substep's sweeps
     **{("lines" if n == 1 else f"lines{n}"): {"cloth": {"line_passes": n}} for n in (1, 2)},
 }

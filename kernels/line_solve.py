@@ -29,14 +29,15 @@ from .positions import POSITION_TYPES
 _KERNELS: dict = {}
 
 
-def line_solve_kernel(capacity: int, vector):
+def line_solve_kernel(capacity: int, vector, max_registers: int | None = None):
     """The line solve's kernel for lines of at most ``capacity`` sticks (a power of two: the shared arrays'
-    length) and positions of type ``vector`` (wp.vec3 or wp.vec3d)."""
+    length) and positions of type ``vector`` (wp.vec3 or wp.vec3d); ``max_registers`` caps a CUDA thread's
+    registers (None: the compiler's choice)."""
     if capacity < 2 or capacity & (capacity - 1):
         raise AssertionError(f"a line solve's capacity must be a power of two of at least 2, got {capacity}")
-    key = (capacity, vector)
+    key = (capacity, vector, max_registers)
     if key not in _KERNELS:
-        _KERNELS[key] = _make_kernel(capacity, vector)
+        _KERNELS[key] = _make_kernel(capacity, vector, max_registers)
     return _KERNELS[key]
 
 
@@ -46,7 +47,7 @@ def weighted_dot(u: wp.vec3d, v: wp.vec3d, w: wp.float64, c: wp.vec3d):
     return w * (wp.dot(u, v) - wp.dot(c, u) * wp.dot(c, v))
 
 
-def _make_kernel(capacity: int, vector):
+def _make_kernel(capacity: int, vector, max_registers: int | None):
     P = capacity
     VEC = vector
     REAL = dict(POSITION_TYPES)[vector]
@@ -57,7 +58,9 @@ def _make_kernel(capacity: int, vector):
     @wp.func_native("t.data(wp::tile_coord(i)) = value;")
     def put_direction(t: wp.tile(dtype=wp.vec3, shape=(P,), storage="shared"), i: int, value: wp.vec3): ...
 
-    @wp.kernel(module="unique")
+    options = {} if max_registers is None else {"cuda_max_registers": max_registers}
+
+    @wp.kernel(module="unique", **options)
     def solve_lines(
         x: wp.array(dtype=VEC),
         inv_mass: wp.array(dtype=float),

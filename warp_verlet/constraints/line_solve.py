@@ -30,6 +30,8 @@ from ..scene_keys import Key, integer
 
 LINE_THREADS = 256
 """Threads of a CUDA block, which solves one line (the CPU runs one lane a block)."""
+LINE_MAX_REGISTERS: int | None = 64
+"""A CUDA thread's registers at most (None: the compiler's choice, 78): four blocks an SM instead of three."""
 MAX_LINE_STICKS = 4096
 """The longest line the solve takes: its shared arrays hold 44 bytes a stick (4096: 180 KB, under a GPU block's
 shared-memory limit)."""
@@ -169,7 +171,7 @@ class LineSolves(ConstraintSet):
         else:
             normal = wp.empty(0, dtype=wp.vec3, device=model.device)  # not read
             before, after = [], []
-        kernel = line_solve_kernel(data.capacity, model.position_dtype)
+        kernel = line_solve_kernel(data.capacity, model.position_dtype, LINE_MAX_REGISTERS)
         threads = LINE_THREADS if model.device.is_cuda else 1
 
         def lines(first: int, count: int):
