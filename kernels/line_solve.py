@@ -29,15 +29,15 @@ from .positions import POSITION_TYPES
 _KERNELS: dict = {}
 
 
-def line_solve_kernel(capacity: int, vector, max_registers: int | None = None):
+def line_solve_kernel(capacity: int, vector, threads: int, max_registers: int | None = None):
     """The line solve's kernel for lines of at most ``capacity`` sticks (a power of two: the shared arrays'
-    length) and positions of type ``vector`` (wp.vec3 or wp.vec3d); ``max_registers`` caps a CUDA thread's
-    registers (None: the compiler's choice)."""
+    length), positions of type ``vector`` (wp.vec3 or wp.vec3d) and blocks of ``threads`` threads (1 on the CPU);
+    ``max_registers`` caps a CUDA thread's registers (None: the compiler's choice)."""
     if capacity < 2 or capacity & (capacity - 1):
         raise AssertionError(f"a line solve's capacity must be a power of two of at least 2, got {capacity}")
-    key = (capacity, vector, max_registers)
+    key = (capacity, vector, threads, max_registers)
     if key not in _KERNELS:
-        _KERNELS[key] = _make_kernel(capacity, vector, max_registers)
+        _KERNELS[key] = _make_kernel(capacity, vector, threads, max_registers)
     return _KERNELS[key]
 
 
@@ -47,16 +47,30 @@ def weighted_dot(u: wp.vec3d, v: wp.vec3d, w: wp.float64, c: wp.vec3d):
     return w * (wp.dot(u, v) - wp.dot(c, u) * wp.dot(c, v))
 
 
-def _make_kernel(capacity: int, vector, max_registers: int | None):
+def _make_kernel(capacity: int, vector, threads: int, max_registers: int | None):
     P = capacity
+    POINTS = capacity + 1
     VEC = vector
     REAL = dict(POSITION_TYPES)[vector]
+    THREADS = threads
+    # A thread's particles to stage, at most: a compile-time count, which Warp unrolls (up to its max_unroll), so
+    # that a thread issues all of its loads before it waits on any.
+    STAGING_TURNS = -(-POINTS // threads)
 
     @wp.func_native("t.data(wp::tile_coord(i)) = value;")
     def put_real(t: wp.tile(dtype=wp.float64, shape=(P,), storage="shared"), i: int, value: wp.float64): ...
 
     @wp.func_native("t.data(wp::tile_coord(i)) = value;")
     def put_direction(t: wp.tile(dtype=wp.vec3, shape=(P,), storage="shared"), i: int, value: wp.vec3): ...
+
+    @wp.func_native("t.data(wp::tile_coord(i)) = value;")
+    def put_point(t: wp.tile(dtype=VEC, shape=(POINTS,), storage="shared"), i: int, value: VEC): ...
+
+    @wp.func_native("t.data(wp::tile_coord(i)) = value;")
+    def put_weight(t: wp.tile(dtype=float, shape=(POINTS,), storage="shared"), i: int, value: float): ...
+
+    @wp.func_native("t.data(wp::tile_coord(i)) = value;")
+    def put_normal(t: wp.tile(dtype=wp.vec3, shape=(POINTS,), storage="shared"), i: int, value: wp.vec3): ...
 
     options = {} if max_registers is None else {"cuda_max_registers": max_registers}
 
@@ -73,7 +87,6 @@ def _make_kernel(capacity: int, vector, max_registers: int | None):
         length in ``rest``); ``normal`` is read where ``contact`` is 1 (the contact normal of each particle, 0 where
         none)."""
         block, lane = wp.tid()
-        threads = wp.block_dim()
         line = lines[block]
         first = line[0]
         sticks = line[1]
@@ -85,6 +98,22 @@ def _make_kernel(capacity: int, vector, max_registers: int | None):
         upper = wp.tile_empty(shape=P, dtype=wp.float64, storage="shared")  # couples equation k to k + stride
         rhs = wp.tile_empty(shape=P, dtype=wp.float64, storage="shared")  # -C, then the multipliers
         direction = wp.tile_empty(shape=P, dtype=wp.vec3, storage="shared")
+        point = wp.tile_empty(shape=POINTS, dtype=VEC, storage="shared")  # the line's particles, staged once
+        weight = wp.tile_empty(shape=POINTS, dtype=float, storage="shared")
+        contact_normal = wp.tile_empty(shape=POINTS, dtype=wp.vec3, storage="shared")
+
+        # The line's positions, inverse masses and contact normals, read from global memory once.
+        for turn in range(STAGING_TURNS):
+            q = lane + turn * THREADS
+            if q <= sticks:
+                p = first + q * step
+                put_point(point, q, x[p])
+                put_weight(weight, q, inv_mass[p])
+                if contact == 1:
+                    put_normal(contact_normal, q, normal[p])
+                else:
+                    put_normal(contact_normal, q, wp.vec3(0.0))
+        block_barrier()
 
         # Each stick's direction, stretch and diagonal; identity equations past the line's end.
         k = lane
@@ -93,17 +122,12 @@ def _make_kernel(capacity: int, vector, max_registers: int | None):
             d = zero
             n32 = wp.vec3(0.0)
             if k < sticks:
-                pa = first + k * step
-                pb = pa + step
-                e = wp.vec3d(x[pb] - x[pa])
+                e = wp.vec3d(point[k + 1] - point[k])
                 length = wp.length(e)
-                wa = wp.float64(inv_mass[pa])
-                wb = wp.float64(inv_mass[pb])
-                ca = wp.vec3d(0.0, 0.0, 0.0)
-                cb = wp.vec3d(0.0, 0.0, 0.0)
-                if contact == 1:
-                    ca = wp.vec3d(normal[pa])
-                    cb = wp.vec3d(normal[pb])
+                wa = wp.float64(weight[k])
+                wb = wp.float64(weight[k + 1])
+                ca = wp.vec3d(contact_normal[k])
+                cb = wp.vec3d(contact_normal[k + 1])
                 if length > zero:
                     n = e / length
                     a = weighted_dot(n, n, wa, ca) + weighted_dot(n, n, wb, cb)
@@ -117,21 +141,17 @@ def _make_kernel(capacity: int, vector, max_registers: int | None):
             put_real(lower, k, zero)
             put_real(upper, k, zero)
             put_direction(direction, k, n32)
-            k += threads
+            k += THREADS
         block_barrier()
 
         # Sticks k and k + 1 couple through their shared particle.
         k = lane
         while k < sticks - 1:
-            p = first + (k + 1) * step
-            c = wp.vec3d(0.0, 0.0, 0.0)
-            if contact == 1:
-                c = wp.vec3d(normal[p])
             coupling = -weighted_dot(wp.vec3d(direction[k]), wp.vec3d(direction[k + 1]),
-                                     wp.float64(inv_mass[p]), c)
+                                     wp.float64(weight[k + 1]), wp.vec3d(contact_normal[k + 1]))
             put_real(upper, k, coupling)
             put_real(lower, k + 1, coupling)
-            k += threads
+            k += THREADS
         block_barrier()
 
         # Cyclic reduction: at stride s, equation k = 2 s j + 2 s - 1 absorbs equations k - s and k + s, which
@@ -155,7 +175,7 @@ def _make_kernel(capacity: int, vector, max_registers: int | None):
                 put_real(rhs, k, d)
                 put_real(lower, k, low)
                 put_real(upper, k, up)
-                j += threads
+                j += THREADS
             block_barrier()
             s *= 2
         # The last equation stands alone; back substitution, stride P / 2 down to 1, each multiplier written over
@@ -172,26 +192,22 @@ def _make_kernel(capacity: int, vector, max_registers: int | None):
                 if k + s < P:
                     d -= upper[k] * rhs[k + s]
                 put_real(rhs, k, d / diagonal[k])
-                j += threads
+                j += THREADS
             block_barrier()
             s = s // 2
 
         # Each particle moves by W (n_{q-1} lambda_{q-1} - n_q lambda_q): the second end of stick q - 1 and the
         # first of stick q.
-        q = lane
-        while q <= sticks:
-            p = first + q * step
-            f = wp.vec3d(0.0, 0.0, 0.0)
-            if q > 0:
-                f += wp.vec3d(direction[q - 1]) * rhs[q - 1]
-            if q < sticks:
-                f -= wp.vec3d(direction[q]) * rhs[q]
-            w = wp.float64(inv_mass[p])
-            if contact == 1:
-                c = wp.vec3d(normal[p])
-                f = f - c * wp.dot(c, f)
-            move = f * w
-            x[p] = x[p] + VEC(REAL(move[0]), REAL(move[1]), REAL(move[2]))
-            q += threads
+        for turn in range(STAGING_TURNS):
+            q = lane + turn * THREADS
+            if q <= sticks:
+                f = wp.vec3d(0.0, 0.0, 0.0)
+                if q > 0:
+                    f += wp.vec3d(direction[q - 1]) * rhs[q - 1]
+                if q < sticks:
+                    f -= wp.vec3d(direction[q]) * rhs[q]
+                c = wp.vec3d(contact_normal[q])
+                move = (f - c * wp.dot(c, f)) * wp.float64(weight[q])
+                x[first + q * step] = point[q] + VEC(REAL(move[0]), REAL(move[1]), REAL(move[2]))
 
     return solve_lines

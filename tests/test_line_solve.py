@@ -203,6 +203,7 @@ def test_cpu_and_cuda_agree_and_cuda_repeats():
     ({"sticks": ["shear", "bend"]}, "no structural sticks"),
     ({"line_passes": -1}, "line_passes"),
     ({"line_passes": 1.5}, "line_passes"),
+    ({"resolution": [2, 2050]}, "longer than 2048 sticks"),
 ])
 def test_line_passes_refuse_what_they_cannot_solve(cloth, words):
     data = sheet(9, 9)

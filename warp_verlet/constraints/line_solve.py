@@ -32,17 +32,17 @@ LINE_THREADS = 256
 """Threads of a CUDA block, which solves one line (the CPU runs one lane a block)."""
 LINE_MAX_REGISTERS: int | None = 64
 """A CUDA thread's registers at most (None: the compiler's choice, 78): four blocks an SM instead of three."""
-MAX_LINE_STICKS = 4096
-"""The longest line the solve takes: its shared arrays hold 44 bytes a stick (4096: 180 KB, under a GPU block's
-shared-memory limit)."""
+MAX_LINE_STICKS = 2048
+"""The longest line the solve takes: a block's shared arrays hold 72 bytes a stick (84 with float64 positions), so
+2048 take 147 KB (172 KB), under a GPU block's shared-memory limit (227 KB on an H100)."""
 
 LINE_PASSES = Key(
     "line_passes", integer(0, 100), 0, type="integer", unit="passes", default_text="`0`", allowed="0 … 100",
     doc="Exact solves of every row and then every column of the cloth's structural sticks, at the start of each "
         "substep's relaxation (a Newton step on each line's lengths; particles on a collider slide along it). They "
-        "carry a correction across the whole cloth at once, which the sweeps cannot: the cure for a large cloth "
-        "held up by contact, which otherwise stretches. 0 leaves them out. A grid cloth with rigid structural "
-        "sticks that cannot tear, at most 4097 particles a side; its shear and bend sticks should have a "
+        "carry a correction across the whole cloth at once, which the sweeps cannot, for a large cloth held up by "
+        "contact, which otherwise stretches. 0 leaves them out. A grid cloth with rigid structural "
+        "sticks that cannot tear, at most 2049 particles a side; its shear and bend sticks should have a "
         "`compliance`, or the cloth cannot drape without stretching.")
 
 
@@ -171,8 +171,8 @@ class LineSolves(ConstraintSet):
         else:
             normal = wp.empty(0, dtype=wp.vec3, device=model.device)  # not read
             before, after = [], []
-        kernel = line_solve_kernel(data.capacity, model.position_dtype, LINE_MAX_REGISTERS)
         threads = LINE_THREADS if model.device.is_cuda else 1
+        kernel = line_solve_kernel(data.capacity, model.position_dtype, threads, LINE_MAX_REGISTERS)
 
         def lines(first: int, count: int):
             return wp.launch_tiled(kernel, dim=[count], block_dim=threads, record_cmd=True, device=model.device,
