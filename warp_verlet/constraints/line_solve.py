@@ -30,8 +30,9 @@ from ..scene_keys import Key, integer
 
 LINE_THREADS = 256
 """Threads of a CUDA block, which solves one line (the CPU runs one lane a block)."""
-LINE_MAX_REGISTERS: int | None = 64
-"""A CUDA thread's registers at most (None: the compiler's choice, 78): four blocks an SM instead of three."""
+LINE_MAX_REGISTERS: int | None = None
+"""A CUDA thread's registers at most (None: the compiler's choice). A cap of 64 measured slower at 1024²
+(bench/results/line_solve/README.md), so there is none; bench.line_solve --registers tries others."""
 MAX_LINE_STICKS = 2048
 """The longest line the solve takes: a block's shared arrays hold 72 bytes a stick (84 with float64 positions), so
 2048 take 147 KB (172 KB), under a GPU block's shared-memory limit (227 KB on an H100)."""
@@ -61,10 +62,11 @@ def capacity_of(sticks: int) -> int:
 
 class LineData:
     """The lines of every cloth with line passes: ``lines`` (L,) vec4i (first particle, sticks, step between its
-    particles, the index of its first stick's rest length in ``rest``), rows first then columns of each cloth;
-    ``rest`` float32 m (per cloth, its rows' stick lengths along a row, then its columns'); ``rows`` and ``columns``
-    the (first line, count) of the two launches' ranges per cloth; ``capacity`` the longest line's, padded;
-    ``passes`` (the largest any cloth asks: a cloth asking fewer is one launch range of its own)."""
+    particles, the index of its first stick's rest length in ``rest``), every row, then every column (from
+    ``column_start``), each group ordered by its cloth's passes, most first; ``rest`` float32 m (per cloth, its
+    stick lengths along a row, then along a column); ``passes`` the most any cloth asks, and ``row_lines[p]`` and
+    ``column_lines[p]`` how many leading rows and columns pass p solves (those of the cloths asking more than p);
+    ``capacity`` the kernel's, for the longest line."""
 
     def __init__(self, model, scene, device):
         import warp as wp

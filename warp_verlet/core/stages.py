@@ -403,13 +403,13 @@ class Relax:
         before = [bound.run for bound in sets if bound.run is not None]  # per-substep set-up (dt, zeroing)
         replay_hooks = [bound.before_replay for bound in sets if bound.before_replay is not None]
         collide_first = ()
-        if collider_placement(solver) == self.name:
+        places, every_sweep = collider_placement(solver) == self.name, contact_every_sweep(solver)
+        launches = [kind.bind(model, state) for kind, _ in model.colliders.kinds] if places or every_sweep else []
+        if places:
             # A clamp ends every sweep, or a kind clamps before the sweeps: the colliders are placed for this
             # substep before either.
-            launches = [kind.bind(model, state) for kind, _ in model.colliders.kinds]
             collide_first = [place for bound in launches for place in bound.before]
-        if contact_every_sweep(solver):
-            launches = [kind.bind(model, state) for kind, _ in model.colliders.kinds]
+        if every_sweep:
             clamps = [[task] for bound in launches for task in bound.clamps]
             phases, first = phases + clamps, first + clamps
         iterations = solver.settings.iterations
