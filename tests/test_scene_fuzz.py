@@ -387,7 +387,7 @@ def loaded_value(scene: Scene, path: tuple):
     if section == "cloth":
         spec = scene.cloths[path[1]]
         name = path[2]
-        v = getattr(spec, name)
+        v = getattr(spec, name) if hasattr(spec, name) else spec.options[name]  # else a constraint kind's key
         if name == "compliance":
             return v.get(path[3], 0.0)  # 0 (rigid) is dropped on loading
         if name == "particle_masses":
