@@ -173,6 +173,9 @@ class LineSolves(ConstraintSet):
         else:
             normal = wp.empty(0, dtype=wp.vec3, device=model.device)  # not read
             before, after = [], []
+        # On the CPU one thread runs every line, one lane a block: a tiled launch's shared memory is one buffer for
+        # the process there, so pieces of lines run by the relaxation's threads at once would write over each
+        # other (as for the tiled sweeps, constraints/sticks.py).
         threads = LINE_THREADS if model.device.is_cuda else 1
         kernel = line_solve_kernel(data.capacity, model.position_dtype, threads, LINE_MAX_REGISTERS)
 
