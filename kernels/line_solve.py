@@ -15,8 +15,10 @@ particle by -n_k . W n_{k+1}.
 A block solves it by cyclic reduction in shared memory (Hockney 1965): each level eliminates the odd equations of
 the one before, at a stride twice as long, so log2(P) levels of independent updates, a barrier between levels,
 carry the correction along the whole line; back substitution walks the levels down again. The system is padded to
-P (a power of two, the kernel's capacity) with identity equations. The block's threads take the equations of a
-level in turn; on the CPU one lane takes them all, in the same order, so the arithmetic is the same on every
+P (a power of two, the kernel's capacity) with identity equations. A block first stages its line's positions,
+inverse masses and contact normals in shared memory (each particle read from global memory once, every load of a
+thread issued before it waits on one), and writes each particle back once, moved. The block's threads take the
+equations of a level in turn; on the CPU one lane takes them all, in the same order, so the arithmetic is the same on every
 device. The coefficients and multipliers are float64: the matrix of a free chain of n particles has a condition
 number of about 0.4 n^2.
 """
