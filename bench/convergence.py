@@ -245,8 +245,26 @@ def simulate(scene, device: str, threads: int | None) -> dict:
     stretch = sim.stretch(x)
     out = {"ms_per_frame": best * 1e3, "ms_per_frame_mean": mean * 1e3, "rms": stretch.rms, "max": stretch.max,
            "positions": x, "torn": sim.torn_count() if tears else None, "lowest_y": float(x[:, 1].min()),
+           "inside": deepest_penetrations(scene, sim.time, x),
            "frames": frames}
     sim.close()
+    return out
+
+
+def deepest_penetrations(scene, time: float, x: np.ndarray) -> dict[str, float]:
+    """Per collider (by name), how far the deepest particle lies inside it at ``time``, in m (0 where none does):
+    its radius or plane plus its thickness, less the particle's distance from its centre or plane. The scenes'
+    colliders are spheres (a moving one placed at ``time``) and planes; any other kind is left out."""
+    x = np.asarray(x, np.float64)
+    out = {}
+    for c in scene.colliders:
+        if hasattr(c, "radius"):
+            depth = c.radius + c.thickness - np.linalg.norm(x - np.asarray(c.centre_at(time)), axis=1)
+        elif hasattr(c, "normal"):
+            depth = c.thickness - (x - np.asarray(c.point)) @ np.asarray(c.normal)
+        else:
+            continue
+        out[c.name] = float(max(0.0, depth.max()))
     return out
 
 
@@ -379,9 +397,17 @@ def peer_rows(sizes: list[int], device: str, references: dict | None = None) -> 
 
 def _line(r: dict) -> str:
     torn = f"  torn {r['torn']}" if r.get("torn") is not None else ""
+    inside = f"  inside {_inside(r)}" if r.get("inside") else ""
     return (f"{r['scene']:8s} {r['n']:5d}^2 {r['method']:18s} {r['substeps']:3d} x {r['iterations']:2d}  "
             f"{r['ms_per_frame']:9.2f} ms/frame  RMS {r['rms'] * 100:9.4f}%  max {r['max'] * 100:10.3f}%  "
-            f"pos RMS {r.get('pos_rms_m', float('nan')):.2e} m max {r.get('pos_max_m', float('nan')):.2e} m{torn}")
+            f"pos RMS {r.get('pos_rms_m', float('nan')):.2e} m max {r.get('pos_max_m', float('nan')):.2e} m{torn}"
+            f"{inside}")
+
+
+def _inside(r: dict) -> str:
+    """A row's deepest penetration of each collider, "ball 1.2e-08, ground 0" (m), or "—"."""
+    inside = r.get("inside") or {}
+    return ", ".join(f"{name} {depth:.2g}" for name, depth in inside.items()) or "—"
 
 
 # ---------------------------------------------------------------- the run
@@ -582,12 +608,13 @@ def _sci(v) -> str:
 def rows_table(rows: list[dict]) -> list[str]:
     net = any(r.get("torn") is not None for r in rows)
     head = ["method", "S × K", "ms/frame", "RMS stretch", "max stretch", "pos RMS (m)", "pos max (m)",
-            "pos RMS / size", "pos max / size", "pos resolved"] + (["torn sticks"] if net else [])
+            "pos RMS / size", "pos max / size", "pos resolved", "deepest inside (m)"] + (["torn sticks"] if net else [])
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in rows:
         cells = [r["method"], f"{r['substeps']} × {r['iterations']}", f"{r['ms_per_frame']:.3g}", _pct(r["rms"]),
                  _pct(r["max"]), _sci(r["pos_rms_m"]), _sci(r["pos_max_m"]), _pct(r["pos_rms_frac"]),
-                 _pct(r["pos_max_frac"]), "yes" if r.get("pos_resolved") else "no"] + ([str(r["torn"]) if r.get("torn") is not None else "—"] if net else [])
+                 _pct(r["pos_max_frac"]), "yes" if r.get("pos_resolved") else "no", _inside(r)]
+        cells += [str(r["torn"]) if r.get("torn") is not None else "—"] if net else []
         lines.append("| " + " | ".join(cells) + " |")
     return lines
 

@@ -47,6 +47,9 @@ def test_rows_are_finite(result):
             assert math.isfinite(r[key]) and r[key] >= 0.0, (r["scene"], r["method"], key, r[key])
         assert r["frames"] == FRAMES and r["device"] == "cpu"
         assert (r["torn"] is not None) == (r["scene"] == "torn_net")
+        # The net's ball and ground report how deep the deepest particle lies inside them; the hanging cloth has none.
+        assert set(r["inside"]) == ({"ball", "ground"} if r["scene"] == "torn_net" else set())
+        assert all(math.isfinite(d) and d >= 0.0 for d in r["inside"].values())
 
 
 @pytest.mark.slow
@@ -138,3 +141,24 @@ def test_main_writes_md_json_png(tmp_path):
     assert png.exists() and 0 < png.stat().st_size < 150_000
     with pytest.raises(SystemExit):
         conv.main(args + ["--methods", "typo"])
+
+
+def test_deepest_penetration_of_each_collider():
+    """A moving sphere placed at the time asked, and a plane with a thickness: each reports its deepest particle's
+    depth inside it (radius or plane plus thickness, less the particle's distance), 0 where none is inside."""
+    from warp_verlet.input.scene import parse_scene
+
+    scene = parse_scene({"cloth": [{"resolution": [2, 2], "size": [1.0, 1.0]}],
+                         "collider": [{"type": "sphere", "name": "ball", "radius": 0.5, "thickness": 0.01,
+                                       "path": [[0.0, 0.0, 0.0, 0.0], [1.0, 2.0, 0.0, 0.0]]},
+                                      {"type": "plane", "name": "floor", "point": [0.0, -1.0, 0.0], "thickness": 0.02},
+                                      {"type": "sphere", "name": "far", "radius": 0.1, "centre": [9.0, 9.0, 9.0]}]},
+                        file="<inside>")
+    x = np.array([[1.0 + 0.5, 0.0, 0.0],    # at t = 0.5 the ball's centre is (1, 0, 0): 0.01 inside (its thickness)
+                  [1.0, 0.3, 0.0],          # 0.21 inside the ball
+                  [5.0, -1.005, 0.0]])      # 0.025 inside the floor's thickness
+    inside = conv.deepest_penetrations(scene, 0.5, x)
+    assert inside["ball"] == pytest.approx(0.21, abs=1e-12)
+    assert inside["floor"] == pytest.approx(0.025, abs=1e-12)
+    assert inside["far"] == 0.0
+    assert conv.deepest_penetrations(scene, 0.0, x)["ball"] == 0.0  # at t = 0 the ball is at the origin
