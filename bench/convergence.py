@@ -29,6 +29,7 @@ Per row (scene, grid, method, budget S substeps x K sweeps):
   tears once a frame, as the runner does.
 - the RMS and max structural stretch |D - L| / L over intact sticks at the last frame;
 - the RMS and max particle distance to a converged reference at the last frame (m, and / cloth size);
+- the deepest penetration of each collider at the last frame (m; ``deepest_penetrations``);
 - torn_net: the sticks torn.
 
 The reference, per (scene, grid, device): the first method of ``REFERENCE_ORDER`` the scene accepts, at its
