@@ -27,5 +27,9 @@ def run(n, S, K, lines, sticks="auto", frames=90):
 
 print("| grid | sticks asked | form | S x K | line passes | ms/frame | RMS | max | frame: RMS%/max%/lowest y |")
 print("|---|---|---|---|---|---|---|---|---|")
-for args in [(1024, 64, 2, 0), (1024, 64, 2, 1), (1024, 64, 1, 0), (2048, 64, 1, 0), (2048, 64, 1, 1)]:
+# (grid, substeps, sweeps, line passes[, sticks]) of each run; the list differed between the leases:
+# probe-1.md: (1024, 64, 1, 1, "implicit"), (1024, 64, 1, 0, "implicit"), (1024, 64, 1, 1), (256, 64, 1, 1), (256, 32, 1, 1)
+# probe-2.md: the list below; probe-staged.md: (1024, 64, 1, 1), (1024, 64, 2, 1)
+RUNS = [(1024, 64, 2, 0), (1024, 64, 2, 1), (1024, 64, 1, 0), (2048, 64, 1, 0), (2048, 64, 1, 1)]
+for args in RUNS:
     run(*args)
