@@ -71,6 +71,8 @@ class LineData:
     def __init__(self, model, scene, device):
         import warp as wp
 
+        from ..core.model import grid_axes, squared_steps
+
         rows_table, cols_table, rest, passes = [], [], [], []
         longest = 1
         for slot, spec in zip(model.cloths, scene.cloths):
@@ -79,11 +81,10 @@ class LineData:
                 continue
             top = slot.topology
             rows, cols, first = top.rows, top.cols, slot.first
-            positions = np.asarray(model.rest_positions)[first:first + rows * cols].reshape(rows, cols, 3)
-            along_row = np.linalg.norm(positions[0, 1:] - positions[0, :-1], axis=1)
-            along_column = np.linalg.norm(positions[1:, 0] - positions[:-1, 0], axis=1)
+            # The sticks' rest lengths along a row and along a column, as the implicit grid sticks take them.
+            x, row = grid_axes(top)
             base = sum(len(r) for r in rest)
-            rest += [along_row, along_column]
+            rest += [np.sqrt(squared_steps(x, 1)), np.sqrt(squared_steps(row, 1))]
             if cols > 1:
                 rows_table += [(first + r * cols, cols - 1, 1, base, n) for r in range(rows)]
             if rows > 1:
