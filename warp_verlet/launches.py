@@ -84,6 +84,18 @@ def split(first: int, count: int, parts: int) -> list[tuple[int, int]]:
     return pieces
 
 
+def clamp_noting_normals(x, clamps: list, snapshot, normal) -> list[PhaseTask]:
+    """The colliders' ``clamps`` of the positions ``x``, between a copy of ``x`` into ``snapshot`` and the direction
+    each particle was moved into ``normal`` (0 where none was): the contact normals of a stage that works on the
+    clamped prediction (the global correction, the line solves). Kernels only: a CPU frame capture replays kernels,
+    not copies."""
+    from warp_verlet.kernels.global_solve import contact_normals, copy_positions
+
+    n = x.shape[0]
+    return [recorded(copy_positions, n, [x], [snapshot]), *clamps,
+            recorded(contact_normals, n, [x, snapshot], [normal])]
+
+
 def copy_back_phase(x, scratch, count: int, threads: int) -> list[PhaseTask | None]:
     """The phase that ends a Jacobi gather: ``scratch``'s first ``count`` positions copied over ``x``, cut into one
     piece per thread. The tasks hold the arrays, not a solver: worker threads keep their tasks alive, and must not

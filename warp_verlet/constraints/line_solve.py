@@ -25,7 +25,7 @@ from __future__ import annotations
 import numpy as np
 
 from .kind import ConstraintSet
-from ..launches import FLOAT, INT, VEC3, BoundStage, recorded
+from ..launches import FLOAT, INT, VEC3, BoundStage, clamp_noting_normals
 from ..scene_keys import Key, integer
 
 LINE_THREADS = 256
@@ -159,7 +159,6 @@ class LineSolves(ConstraintSet):
     def bind(self, model, state, solver) -> BoundStage:
         import warp as wp
 
-        from warp_verlet.kernels.global_solve import contact_normals, copy_positions
         from warp_verlet.kernels.line_solve import line_solve_kernel
 
         data, x = model.constraints[self.name], state.particle_q
@@ -169,11 +168,10 @@ class LineSolves(ConstraintSet):
         if clamps:
             snapshot = solver.scratch("line_snapshot", n, model.position_dtype)
             normal = solver.scratch("line_normals", n, wp.vec3)
-            before = [recorded(copy_positions, n, [x], [snapshot])]
-            after = [recorded(contact_normals, n, [x, snapshot], [normal])]
+            contact = clamp_noting_normals(x, clamps, snapshot, normal)
         else:
             normal = wp.empty(0, dtype=wp.vec3, device=model.device)  # not read
-            before, after = [], []
+            contact = []
         # On the CPU one thread runs every line, one lane a block: a tiled launch's shared memory is one buffer for
         # the process there, so pieces of lines run by the relaxation's threads at once would write over each
         # other (as for the tiled sweeps, constraints/sticks.py).
@@ -191,7 +189,7 @@ class LineSolves(ConstraintSet):
                 passes.append(lines(0, data.row_lines[p]))
             if data.column_lines[p]:
                 passes.append(lines(data.column_start, data.column_lines[p]))
-        tasks = [task.run for task in before] + [task.run for task in clamps] + [task.run for task in after]
+        tasks = [task.run for task in contact]
 
         def run(state, dt: float) -> None:
             for task in tasks:

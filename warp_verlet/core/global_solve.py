@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..launches import FLOAT, INT, VEC2I, VEC3, BoundStage, recorded
+from ..launches import FLOAT, INT, VEC2I, VEC3, BoundStage, clamp_noting_normals, recorded
 
 STIFFNESS = 1.0e3
 """k h^2 / m of the sticks' springs: a stick yields 1e-3 of what a particle's inertia resists over a step. Stiffer
@@ -324,8 +324,7 @@ class GlobalCorrection:
             tension = tension_scratch(model)
             hand_over = recorded(k.hand_over_tension, top.stick_count, [x, top.ends, top.rest, top.stiffness, 0.0],
                                  [tension])
-        before = recorded(k.copy_positions, n, [x], [self.x_before])
-        snapshot = recorded(k.contact_normals, n, [x, self.x_before], [self.contact])
+        clamp_prediction = clamp_noting_normals(x, clamps, self.x_before, self.contact)
         mean_mass = float(np.mean(1.0 / model.host_inv_mass[model.host_inv_mass > 0]))
 
         def run(state, dt: float) -> None:
@@ -336,10 +335,8 @@ class GlobalCorrection:
                 task.launch.set_param_by_name("rigid", STIFFNESS * mean_mass * inv_h2)
             for prepare in place:
                 prepare(dt)
-            before.run()
-            for clamp in clamps:
-                clamp.run()
-            snapshot.run()
+            for task in clamp_prediction:
+                task.run()
             for _ in range(self.newton):
                 for task in step:
                     task.run()
