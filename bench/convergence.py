@@ -257,16 +257,10 @@ def deepest_penetrations(scene, time: float, x: np.ndarray) -> dict[str, float]:
     its radius or plane plus its thickness, less the particle's distance from its centre or plane. The scenes'
     colliders are spheres (a moving one placed at ``time``) and planes; any other kind is left out."""
     x = np.asarray(x, np.float64)
-    out = {}
-    for c in scene.colliders:
-        if hasattr(c, "radius"):
-            depth = c.radius + c.thickness - np.linalg.norm(x - np.asarray(c.centre_at(time)), axis=1)
-        elif hasattr(c, "normal"):
-            depth = c.thickness - (x - np.asarray(c.point)) @ np.asarray(c.normal)
-        else:
-            continue
-        out[c.name] = float(max(0.0, depth.max()))
-    return out
+    depths = [(c.name, c.radius + c.thickness - np.linalg.norm(x - np.asarray(c.centre_at(time)), axis=1))
+              for c in scene.spheres]
+    depths += [(c.name, c.thickness - (x - np.asarray(c.point)) @ np.asarray(c.normal)) for c in scene.planes]
+    return {name: float(max(0.0, depth.max())) for name, depth in depths}
 
 
 def position_error(x: np.ndarray, ref: np.ndarray) -> tuple[float, float]:
