@@ -59,7 +59,7 @@ import numpy as np
 STIFFNESS = 1.0e4  # k h^2 / m: sticks 1e4 x stiffer than a particle's inertia over one substep
 CONTACT = 1.0e2  # contact penalty per unit of the particle's own diagonal
 DUAL_REGULARISATION = 1.0e-2  # the dual step's alpha per unit of its system's diagonal
-ON_SURFACE = 1.0e-7  # m: a particle this close to a collider's surface after the clamp is in contact
+ON_SURFACE = 1.0e-7  # m: a particle closer than this to a collider's surface after the clamp is in contact
 
 
 def _need(module: str):
@@ -95,15 +95,16 @@ class GlobalStep:
         cols = np.concatenate([3 * self.ends[:, :1] + np.arange(3), 3 * self.ends[:, 1:] + np.arange(3)], axis=1)
         self._j_cols = cols.ravel()
 
-    def contacts(self, x: np.ndarray):
-        """(index, normal, signed distance) of each particle inside a collider (sphere first, then ground)."""
+    def contacts(self, x: np.ndarray, within: float = 0.0):
+        """(index, normal, signed distance) of each particle inside a collider, or less than ``within`` (m) outside
+        it (sphere first, then ground)."""
         d = x - self.centre
         r = np.linalg.norm(d, axis=1)
-        inside = (r < self.radius) & self.free
+        inside = (r < self.radius + within) & self.free
         idx = [np.nonzero(inside)[0]]
         nrm = [d[inside] / r[inside, None]]
         phi = [r[inside] - self.radius]
-        g = (x[:, 1] < self.ground_y) & self.free
+        g = (x[:, 1] < self.ground_y + within) & self.free
         idx.append(np.nonzero(g)[0])
         nrm.append(np.tile([0.0, 1.0, 0.0], (int(g.sum()), 1)))
         phi.append(x[g, 1] - self.ground_y)
@@ -199,20 +200,6 @@ class GlobalStep:
 class DualStep(GlobalStep):
     """The dual form: Newton steps on the sticks' lengths with the contacts filtered out of W (module docstring)."""
 
-    def collider_normals(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(index, normal) of the particles on a collider's surface (after the clamp), the ball's last where a
-        particle touches both."""
-        idx, nrm = [], []
-        g = (x[:, 1] <= self.ground_y + ON_SURFACE) & self.free
-        idx.append(np.nonzero(g)[0])
-        nrm.append(np.tile([0.0, 1.0, 0.0], (int(g.sum()), 1)))
-        d = x - self.centre
-        r = np.linalg.norm(d, axis=1)
-        on = (r <= self.radius + ON_SURFACE) & self.free
-        idx.append(np.nonzero(on)[0])
-        nrm.append(d[on] / r[on, None])
-        return np.concatenate(idx), np.concatenate(nrm)
-
     def __call__(self, x: np.ndarray, x_pred: np.ndarray, h: float) -> np.ndarray:
         sp = self.sp
         w = np.where(self.free, 1.0 / np.where(self.free, self.mass, 1.0), 0.0)
@@ -226,7 +213,7 @@ class DualStep(GlobalStep):
             nrm = d / np.maximum(length, 1e-12)[:, None]
             c = length - self.rest
             blocks = w[:, None, None] * np.eye(3)[None]
-            idx, cn = self.collider_normals(x)
+            idx, cn, _ = self.contacts(x, ON_SURFACE)  # on a collider's surface, after the clamp
             blocks[idx] -= w[idx, None, None] * cn[:, :, None] * cn[:, None, :]
             rows = (3 * np.arange(self.n)[:, None, None] + np.arange(3)[None, :, None]).repeat(3, axis=2)
             cols = (3 * np.arange(self.n)[:, None, None] + np.arange(3)[None, None, :]).repeat(3, axis=1)
