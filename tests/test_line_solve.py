@@ -82,6 +82,46 @@ def test_a_pass_keeps_momentum():
     assert np.abs(momentum).max() < 1e-5 * mass.max() * moved
 
 
+def newton_step_on_lines(x: np.ndarray, w: np.ndarray, rest: np.ndarray, lines: list[np.ndarray]) -> np.ndarray:
+    """One Newton step on each line's stick lengths, one line after another, solved densely in numpy (no
+    contact): J W J^T lambda = -C, x += W J^T lambda."""
+    x = x.copy()
+    for line in lines:
+        e = x[line[1:]] - x[line[:-1]]
+        length = np.linalg.norm(e, axis=1)
+        n = e / length[:, None]
+        m = len(line) - 1
+        jacobian = np.zeros((m, 3 * (m + 1)))
+        for k in range(m):
+            jacobian[k, 3 * k:3 * k + 3] = -n[k]
+            jacobian[k, 3 * k + 3:3 * k + 6] = n[k]
+        weights = np.repeat(w[line], 3)
+        multipliers = np.linalg.solve((jacobian * weights) @ jacobian.T, rest[:m] - length)
+        x[line] += (weights * (jacobian.T @ multipliers)).reshape(-1, 3)
+    return x
+
+
+def test_a_pass_is_a_newton_step_on_each_line():
+    """On a crumpled 17 x 13 sheet with uneven masses and a pin, one pass moves every particle as a dense solve of
+    each row's and then each column's Newton step does (lines of 12 and 16 sticks, padded to 16 equations). The
+    kernel rounds the sticks' directions to float32 for the couplings and moves (a relative 6e-8 of moves of up to
+    5 cm): measured 1.2e-8 m apart."""
+    data = sheet(17, 13, pins=[[8, 6]], particle_masses=[[3, 4, 0.05], [10, 2, 0.01]])
+    data["simulation"]["precision"] = "float64"
+    sim = Simulator(parse_scene(data, file="<lines>"), "cpu", use_graph=False)
+    rng = np.random.default_rng(7)
+    crumpled = sim.model.rest_positions + rng.normal(0.0, 0.01, (sim.model.particle_count, 3))
+    sim.state.set_positions(crumpled)
+    one_pass(sim)
+    index = np.arange(17 * 13).reshape(17, 13)
+    spacing = np.linalg.norm(np.diff(sim.model.rest_positions.reshape(17, 13, 3), axis=1), axis=-1)[0]
+    across = np.linalg.norm(np.diff(sim.model.rest_positions.reshape(17, 13, 3), axis=0), axis=-1)[:, 0]
+    rows = newton_step_on_lines(crumpled, sim.model.host_inv_mass, spacing, list(index))
+    expected = newton_step_on_lines(rows, sim.model.host_inv_mass, across, list(index.T))
+    assert np.abs(expected - crumpled).max() > 5e-3  # the step moves the sheet
+    assert np.abs(sim.positions() - expected).max() < 1e-7
+
+
 def test_a_pass_never_moves_a_pin():
     sim, before, after = crumpled_pass(pins=["top-left", "top-right", [8, 6]])
     pinned = sim.model.host_inv_mass == 0
