@@ -74,41 +74,49 @@ def _make_kernel(capacity: int, vector, segments: int, threads: int, max_registe
     VEC = vector
     REAL = dict(POSITION_TYPES)[vector]
     THREADS = threads
-    # A thread's particles, segments and reduced equations, at most: compile-time counts.
-    PARTICLE_TURNS = -(-POINTS // threads)
+    # A thread's particles to stage, at most: a compile-time count, which Warp unrolls (up to its max_unroll), so
+    # that a thread issues all of its loads before it waits on any.
+    STAGING_TURNS = -(-POINTS // threads)
     SEGMENT_TURNS = -(-S // threads)
     REDUCED_TURNS = -(-R // threads)
 
     @wp.func_native("t.data(wp::tile_coord(i)) = value;")
+    def put_real(t: wp.tile(dtype=wp.float64, shape=(P,), storage="shared"), i: int, value: wp.float64): ...
+
+    @wp.func_native("t.data(wp::tile_coord(i)) = value;")
     def put_reduced(t: wp.tile(dtype=wp.float64, shape=(R,), storage="shared"), i: int, value: wp.float64): ...
 
-    @wp.func
-    def contact_normal_of(normal: wp.array(dtype=wp.vec3), contact: int, p: int):
-        c = wp.vec3d(0.0, 0.0, 0.0)
-        if contact == 1:
-            c = wp.vec3d(normal[p])
-        return c
+    @wp.func_native("t.data(wp::tile_coord(i)) = value;")
+    def put_direction(t: wp.tile(dtype=wp.vec3, shape=(P,), storage="shared"), i: int, value: wp.vec3): ...
+
+    @wp.func_native("t.data(wp::tile_coord(i)) = value;")
+    def put_point(t: wp.tile(dtype=VEC, shape=(POINTS,), storage="shared"), i: int, value: VEC): ...
+
+    @wp.func_native("t.data(wp::tile_coord(i)) = value;")
+    def put_weight(t: wp.tile(dtype=float, shape=(POINTS,), storage="shared"), i: int, value: float): ...
+
+    @wp.func_native("t.data(wp::tile_coord(i)) = value;")
+    def put_normal(t: wp.tile(dtype=wp.vec3, shape=(POINTS,), storage="shared"), i: int, value: wp.vec3): ...
 
     @wp.func
-    def stick_row(x: wp.array(dtype=VEC), inv_mass: wp.array(dtype=float), contact: int,
-                  normal: wp.array(dtype=wp.vec3), first: int, step: int, rest: wp.array(dtype=float),
-                  rest_first: int, sticks: int, k: int):
+    def stick_row(point: wp.tile(dtype=VEC, shape=(POINTS,), storage="shared"),
+                  weight: wp.tile(dtype=float, shape=(POINTS,), storage="shared"),
+                  contact_normal: wp.tile(dtype=wp.vec3, shape=(POINTS,), storage="shared"),
+                  rest: wp.array(dtype=float), rest_first: int, sticks: int, k: int):
         """Stick k's direction (float32, as the couplings and moves take it), diagonal and right-hand side; an
         identity equation past the line's end or where neither end can move along the stick."""
         a = wp.float64(1.0)
         d = wp.float64(0.0)
         n32 = wp.vec3(0.0)
         if k < sticks:
-            pa = first + k * step
-            pb = pa + step
-            e = wp.vec3d(x[pb] - x[pa])
+            e = wp.vec3d(point[k + 1] - point[k])
             length = wp.length(e)
-            wa = wp.float64(inv_mass[pa])
-            wb = wp.float64(inv_mass[pb])
+            wa = wp.float64(weight[k])
+            wb = wp.float64(weight[k + 1])
             if length > wp.float64(0.0):
                 n = e * (wp.float64(1.0) / length)
-                a = weighted_dot(n, n, wa, contact_normal_of(normal, contact, pa)) + weighted_dot(
-                    n, n, wb, contact_normal_of(normal, contact, pb))
+                a = weighted_dot(n, n, wa, wp.vec3d(contact_normal[k])) + weighted_dot(
+                    n, n, wb, wp.vec3d(contact_normal[k + 1]))
                 d = wp.float64(rest[rest_first + k]) - length
                 n32 = wp.vec3(n)
             if a <= wp.float64(1.0e-12) * (wa + wb) or length == wp.float64(0.0):
@@ -117,15 +125,15 @@ def _make_kernel(capacity: int, vector, segments: int, threads: int, max_registe
         return n32, a, d
 
     @wp.func
-    def coupling(inv_mass: wp.array(dtype=float), contact: int, normal: wp.array(dtype=wp.vec3), first: int,
-                 step: int, sticks: int, k: int, before: wp.vec3, after: wp.vec3):
+    def coupling(weight: wp.tile(dtype=float, shape=(POINTS,), storage="shared"),
+                 contact_normal: wp.tile(dtype=wp.vec3, shape=(POINTS,), storage="shared"),
+                 sticks: int, k: int, before: wp.vec3, after: wp.vec3):
         """The coupling of sticks k - 1 and k (directions ``before`` and ``after``) through particle k; 0 where
         either is not a stick of the line."""
         c = wp.float64(0.0)
         if k > 0 and k < sticks:
-            p = first + k * step
-            c = -weighted_dot(wp.vec3d(before), wp.vec3d(after), wp.float64(inv_mass[p]),
-                              contact_normal_of(normal, contact, p))
+            c = -weighted_dot(wp.vec3d(before), wp.vec3d(after), wp.float64(weight[k]),
+                              wp.vec3d(contact_normal[k]))
         return c
 
     options = {} if max_registers is None else {"cuda_max_registers": max_registers}
@@ -138,15 +146,10 @@ def _make_kernel(capacity: int, vector, segments: int, threads: int, max_registe
         normal: wp.array(dtype=wp.vec3),
         lines: wp.array(dtype=wp.vec4i),
         rest: wp.array(dtype=float),
-        eliminated: wp.array2d(dtype=wp.vec3d),
-        direction: wp.array2d(dtype=wp.vec3),
     ):
         """Block b solves line lines[b] = (first particle, sticks M, step between its particles, its first rest
         length in ``rest``); ``normal`` is read where ``contact`` is 1 (the contact normal of each particle, 0 where
-        none). ``eliminated[b]`` and ``direction[b]`` are the block's working rows (P each): equation i of segment j
-        at i S + j, so that a segment's lanes read and write neighbouring addresses; ``eliminated`` holds its
-        coupling to the segment's first unknown (the previous segment's last, for its first equation), to its last
-        (the next segment's first, for its last equation) and its right-hand side, which becomes its multiplier."""
+        none)."""
         block, lane = wp.tid()
         line = lines[block]
         first = line[0]
@@ -155,6 +158,13 @@ def _make_kernel(capacity: int, vector, segments: int, threads: int, max_registe
         rest_first = line[3]
         zero = wp.float64(0.0)
         one = wp.float64(1.0)
+        # A segment's eliminated equations, equation i of segment j at i S + j: its coupling to the segment's first
+        # unknown (the previous segment's last, for the first equation), to its last unknown (the next segment's
+        # first, for the last equation) and its right-hand side, which becomes its multiplier.
+        to_first = wp.tile_empty(shape=P, dtype=wp.float64, storage="shared")
+        to_last = wp.tile_empty(shape=P, dtype=wp.float64, storage="shared")
+        rhs = wp.tile_empty(shape=P, dtype=wp.float64, storage="shared")
+        direction = wp.tile_empty(shape=P, dtype=wp.vec3, storage="shared")
         # The reduced system, twice (parallel cyclic reduction reads one and writes the other).
         lower = wp.tile_empty(shape=R, dtype=wp.float64, storage="shared")
         diagonal = wp.tile_empty(shape=R, dtype=wp.float64, storage="shared")
@@ -164,6 +174,22 @@ def _make_kernel(capacity: int, vector, segments: int, threads: int, max_registe
         diagonal_next = wp.tile_empty(shape=R, dtype=wp.float64, storage="shared")
         upper_next = wp.tile_empty(shape=R, dtype=wp.float64, storage="shared")
         reduced_next = wp.tile_empty(shape=R, dtype=wp.float64, storage="shared")
+        point = wp.tile_empty(shape=POINTS, dtype=VEC, storage="shared")  # the line's particles, staged once
+        weight = wp.tile_empty(shape=POINTS, dtype=float, storage="shared")
+        contact_normal = wp.tile_empty(shape=POINTS, dtype=wp.vec3, storage="shared")
+
+        # The line's positions, inverse masses and contact normals, read from global memory once.
+        for turn in range(STAGING_TURNS):
+            q = lane + turn * THREADS
+            if q <= sticks:
+                p = first + q * step
+                put_point(point, q, x[p])
+                put_weight(weight, q, inv_mass[p])
+                if contact == 1:
+                    put_normal(contact_normal, q, normal[p])
+                else:
+                    put_normal(contact_normal, q, wp.vec3(0.0))
+        block_barrier()
 
         # 1. Each segment eliminated in order. Down: equation i (the segment's i-th) is left coupled to the
         # segment's first unknown and the next equation's unknown; up: to the first and the last unknowns.
@@ -173,59 +199,82 @@ def _make_kernel(capacity: int, vector, segments: int, threads: int, max_registe
                 s = j * M_SEG
                 before = wp.vec3(0.0)
                 if s > 0:
-                    before, unused_a, unused_d = stick_row(x, inv_mass, contact, normal, first, step, rest,
-                                                           rest_first, sticks, s - 1)
-                n, a, d = stick_row(x, inv_mass, contact, normal, first, step, rest, rest_first, sticks, s)
-                low = coupling(inv_mass, contact, normal, first, step, sticks, s, before, n)
-                previous = wp.vec3d(zero, zero, zero)  # the previous equation: to the first, to the next, rhs
+                    before, unused_a, unused_d = stick_row(point, weight, contact_normal, rest, rest_first, sticks,
+                                                           s - 1)
+                n, a, d = stick_row(point, weight, contact_normal, rest, rest_first, sticks, s)
+                low = coupling(weight, contact_normal, sticks, s, before, n)
+                previous_to_first = zero
+                previous_to_next = zero
+                previous_rhs = zero
                 for i in range(M_SEG):
                     k = s + i
-                    direction[block, i * S + j] = n
-                    after, a_next, d_next = stick_row(x, inv_mass, contact, normal, first, step, rest, rest_first,
-                                                      sticks, k + 1)
-                    up = coupling(inv_mass, contact, normal, first, step, sticks, k + 1, n, after)
-                    row = wp.vec3d(zero, zero, zero)
+                    put_direction(direction, k, n)
+                    after, a_next, d_next = stick_row(point, weight, contact_normal, rest, rest_first, sticks, k + 1)
+                    up = coupling(weight, contact_normal, sticks, k + 1, n, after)
+                    f = low
+                    t = up
+                    r = d
                     if i >= 2:  # eliminate the previous equation's unknown; its coupling to the first carries on
-                        pivot = one / (a - low * previous[1])
-                        row = wp.vec3d(-pivot * low * previous[0], pivot * up, pivot * (d - low * previous[2]))
+                        pivot = one / (a - low * previous_to_next)
+                        f = -pivot * low * previous_to_first
+                        t = pivot * up
+                        r = pivot * (d - low * previous_rhs)
                     else:
                         pivot = one / a
-                        row = wp.vec3d(pivot * low, pivot * up, pivot * d)
-                    eliminated[block, i * S + j] = row
-                    previous = row
+                        f = pivot * low
+                        t = pivot * up
+                        r = pivot * d
+                    put_real(to_first, i * S + j, f)
+                    put_real(to_last, i * S + j, t)
+                    put_real(rhs, i * S + j, r)
+                    previous_to_first = f
+                    previous_to_next = t
+                    previous_rhs = r
                     n = after
                     a = a_next
                     d = d_next
                     low = up
                 # Up: equations m - 3 .. 1 take in the one after them, so each couples to the last unknown only
-                # (equation m - 2 already does); then the first takes in the second.
+                # (equation m - 2 already does).
+                next_first = previous_to_first  # (unused for m = 2)
+                next_last = zero
+                next_rhs = zero
                 if M_SEG >= 3:
-                    following = eliminated[block, (M_SEG - 2) * S + j]
+                    next_first = to_first[(M_SEG - 2) * S + j]
+                    next_last = to_last[(M_SEG - 2) * S + j]
+                    next_rhs = rhs[(M_SEG - 2) * S + j]
                     i = M_SEG - 3
                     while i >= 1:
-                        row = eliminated[block, i * S + j]
-                        c = row[1]
-                        following = wp.vec3d(row[0] - c * following[0], -c * following[1],
-                                             row[2] - c * following[2])
-                        eliminated[block, i * S + j] = following
+                        c = to_last[i * S + j]
+                        f = to_first[i * S + j] - c * next_first
+                        t = -c * next_last
+                        r = rhs[i * S + j] - c * next_rhs
+                        put_real(to_first, i * S + j, f)
+                        put_real(to_last, i * S + j, t)
+                        put_real(rhs, i * S + j, r)
+                        next_first = f
+                        next_last = t
+                        next_rhs = r
                         i -= 1
-                    row = eliminated[block, j]
-                    c = row[1]
-                    pivot = one / (one - c * following[0])
-                    eliminated[block, j] = wp.vec3d(pivot * row[0], -pivot * c * following[1],
-                                                    pivot * (row[2] - c * following[2]))
+                    # The first equation takes in the second: it couples to the previous segment's last unknown
+                    # and this segment's last.
+                    c = to_last[j]
+                    pivot = one / (one - c * next_first)
+                    put_real(to_first, j, pivot * to_first[j])
+                    put_real(rhs, j, pivot * (rhs[j] - c * next_rhs))
+                    put_real(to_last, j, -pivot * c * next_last)
                 # The segment's first and last equations are rows 2 j and 2 j + 1 of the reduced system.
-                head = eliminated[block, j]
-                tail = eliminated[block, (M_SEG - 1) * S + j]
-                put_reduced(lower, 2 * j, head[0])
+                last = (M_SEG - 1) * S + j
+                put_reduced(lower, 2 * j, to_first[j])
                 put_reduced(diagonal, 2 * j, one)
-                put_reduced(upper, 2 * j, head[1])
-                put_reduced(reduced, 2 * j, head[2])
-                put_reduced(lower, 2 * j + 1, tail[0])
+                put_reduced(upper, 2 * j, to_last[j])
+                put_reduced(reduced, 2 * j, rhs[j])
+                put_reduced(lower, 2 * j + 1, to_first[last])
                 put_reduced(diagonal, 2 * j + 1, one)
-                put_reduced(upper, 2 * j + 1, tail[1])
-                put_reduced(reduced, 2 * j + 1, tail[2])
+                put_reduced(upper, 2 * j + 1, to_last[last])
+                put_reduced(reduced, 2 * j + 1, rhs[last])
         block_barrier()
+
         # 2. Parallel cyclic reduction of the reduced system: at stride h, equation e takes in e - h and e + h,
         # and then couples to e - 2 h and e + 2 h. After log2(R) steps each equation stands alone.
         h = int(1)
@@ -293,28 +342,24 @@ def _make_kernel(capacity: int, vector, segments: int, threads: int, max_registe
                     lambda_first = reduced_next[2 * j] / diagonal_next[2 * j]
                     lambda_last = reduced_next[2 * j + 1] / diagonal_next[2 * j + 1]
                 for i in range(1, M_SEG - 1):
-                    row = eliminated[block, i * S + j]
-                    eliminated[block, i * S + j] = wp.vec3d(row[0], row[1], row[2] - row[0] * lambda_first
-                                                            - row[1] * lambda_last)
-                eliminated[block, j] = wp.vec3d(zero, zero, lambda_first)
-                eliminated[block, (M_SEG - 1) * S + j] = wp.vec3d(zero, zero, lambda_last)
+                    o = i * S + j
+                    put_real(rhs, o, rhs[o] - to_first[o] * lambda_first - to_last[o] * lambda_last)
+                put_real(rhs, j, lambda_first)
+                put_real(rhs, (M_SEG - 1) * S + j, lambda_last)
         block_barrier()
 
         # Each particle moves by W (n_{q-1} lambda_{q-1} - n_q lambda_q): the second end of stick q - 1 and the
         # first of stick q.
-        for turn in range(PARTICLE_TURNS):
+        for turn in range(STAGING_TURNS):
             q = lane + turn * THREADS
             if q <= sticks:
                 pull = wp.vec3d(0.0, 0.0, 0.0)
                 if q > 0:
-                    o = ((q - 1) % M_SEG) * S + (q - 1) // M_SEG
-                    pull += wp.vec3d(direction[block, o]) * eliminated[block, o][2]
+                    pull += wp.vec3d(direction[q - 1]) * rhs[((q - 1) % M_SEG) * S + (q - 1) // M_SEG]
                 if q < sticks:
-                    o = (q % M_SEG) * S + q // M_SEG
-                    pull -= wp.vec3d(direction[block, o]) * eliminated[block, o][2]
-                p = first + q * step
-                cn = contact_normal_of(normal, contact, p)
-                move = (pull - cn * wp.dot(cn, pull)) * wp.float64(inv_mass[p])
-                x[p] = x[p] + VEC(REAL(move[0]), REAL(move[1]), REAL(move[2]))
+                    pull -= wp.vec3d(direction[q]) * rhs[(q % M_SEG) * S + q // M_SEG]
+                cn = wp.vec3d(contact_normal[q])
+                move = (pull - cn * wp.dot(cn, pull)) * wp.float64(weight[q])
+                x[first + q * step] = point[q] + VEC(REAL(move[0]), REAL(move[1]), REAL(move[2]))
 
     return solve_lines

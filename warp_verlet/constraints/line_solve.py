@@ -142,28 +142,23 @@ class LineSolves(ConstraintSet):
         return None
 
     def count(self, scene):
-        """(lines, rest lengths, whether the scene has colliders, the blocks' working rows) of the cloths with line
-        passes, or 0."""
+        """(lines, rest lengths, whether the scene has colliders) of the cloths with line passes, or 0."""
         cloths = _line_cloths(scene)
         if not cloths:
             return 0
-        sizes = [spec.resolution for spec in cloths]
-        rows = sum(r * (c > 1) for r, c in sizes)
-        columns = sum(c * (r > 1) for r, c in sizes)
-        rest = sum(r - 1 + c - 1 for r, c in sizes)
-        working = max(rows, columns) * capacity_of(max(max(r, c) - 1 for r, c in sizes))
-        return rows + columns, rest, int(bool(scene.colliders)), working
+        lines = sum(r * (c > 1) + c * (r > 1) for r, c in (spec.resolution for spec in cloths))
+        rest = sum(r - 1 + c - 1 for r, c in (spec.resolution for spec in cloths))
+        return lines, rest, int(bool(scene.colliders))
 
     def needed(self, req) -> bool:
         return bool(req.count(self.name))
 
     def device_bytes(self, req) -> int:
         # a vec4i per line, a rest length per row and column gap (Model); with colliders, a position snapshot and
-        # a contact normal per particle; the blocks' working rows, an eliminated equation (three float64) and a
-        # direction each (solver)
-        lines, rest, colliders, working = req.count(self.name)
+        # a contact normal per particle (solver)
+        lines, rest, colliders = req.count(self.name)
         contact = req.particles * (req.position_bytes + VEC3) if colliders else 0
-        return lines * 4 * INT + rest * FLOAT + contact + working * (3 * 8 + VEC3)
+        return lines * 4 * INT + rest * FLOAT + contact
 
     def build(self, model, scene, device):
         return LineData(model, scene, device)
@@ -190,15 +185,11 @@ class LineSolves(ConstraintSet):
         segments = segments_of(data.capacity, model.device)
         threads = segments if model.device.is_cuda else 1
         kernel = line_solve_kernel(data.capacity, model.position_dtype, segments, threads, LINE_MAX_REGISTERS)
-        # A block's working rows: an eliminated equation (three float64) and a direction (vec3) a stick.
-        shape = (max(data.row_lines[0], data.column_lines[0]), data.capacity)
-        eliminated = solver.scratch("line_eliminated", shape, wp.vec3d)
-        directions = solver.scratch("line_directions", shape, wp.vec3)
 
         def lines(first: int, count: int):
             return wp.launch_tiled(kernel, dim=[count], block_dim=threads, record_cmd=True, device=model.device,
                                    inputs=[x, model.inv_mass, int(bool(clamps)), normal,
-                                           data.lines[first:first + count], data.rest, eliminated, directions])
+                                           data.lines[first:first + count], data.rest])
 
         passes = []
         for p in range(data.passes):
