@@ -1,12 +1,11 @@
 """What one line pass costs: the line solves of a grid cloth (``line_passes``), launched alone on a crumpled sheet.
 
-    python -m bench.line_solve [--device cuda] [--sizes 256 1024 ...] [--segments 32 64 ...] [--registers 64 0]
+    python -m bench.line_solve [--device cuda] [--sizes 256 1024 ...] [--threads 128 256 ...] [--registers 64 0]
         [--repeats 50]
 
 A horizontal n x n sheet (structural sticks; shear and bend soft) lying 1 mm inside the ground and crumpled by
-0.1 spacing of noise, so that every particle is in contact and every stick is off its length. Per size and
-segment count (``--segments``, the segments a line is cut into: a CUDA block has a thread a segment, the CPU one
-lane; default: the simulator's choice) and register cap (``--registers``, 0: the
+0.1 spacing of noise, so that every particle is in contact and every stick is off its length. Per size and block
+size (``--threads``, the threads of a CUDA block; the CPU runs one lane) and register cap (``--registers``, 0: the
 compiler's choice): the time of the stage's per-substep run
 (snapshot, clamp, contact normals, one pass of rows and one of columns), the fastest of ``--repeats`` runs after
 a warm-up, in µs, per particle in ns, and the structural stretch (RMS / max) before and after one run.
@@ -21,16 +20,7 @@ import time
 import numpy as np
 
 
-def _chosen_segments():
-    from warp_verlet.constraints import line_solve
-
-    return line_solve.segments_of
-
-
-CHOSEN_SEGMENTS = _chosen_segments()
-
-
-def run(device: str, n: int, segments: int, registers: int, repeats: int) -> dict:
+def run(device: str, n: int, threads: int, registers: int, repeats: int) -> dict:
     import warp as wp
 
     from warp_verlet.constraints import line_solve
@@ -39,7 +29,7 @@ def run(device: str, n: int, segments: int, registers: int, repeats: int) -> dic
     from warp_verlet.input.scene import parse_scene
 
     wp.config.quiet = True
-    line_solve.segments_of = (lambda capacity, device: min(segments, capacity // 2)) if segments else CHOSEN_SEGMENTS
+    line_solve.LINE_THREADS = threads
     line_solve.LINE_MAX_REGISTERS = registers or None
     tables = {"simulation": {"substeps": 16, "iterations": 1},
               "cloth": [{"name": "sheet", "resolution": [n, n], "size": [1.0, 1.0], "origin": [-0.5, 0.0, -0.5],
@@ -67,7 +57,7 @@ def run(device: str, n: int, segments: int, registers: int, repeats: int) -> dic
             wp.synchronize_device()
             times.append(time.perf_counter() - start)
     best = min(times)
-    return {"n": n, "segments": segments or "default", "registers": registers or "–", "us": best * 1e6, "ns_per_particle": best * 1e9 / (n * n),
+    return {"n": n, "threads": threads, "registers": registers or "–", "us": best * 1e6, "ns_per_particle": best * 1e9 / (n * n),
             "before": before, "after": after}
 
 
@@ -75,16 +65,16 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--device", default="cpu")
     p.add_argument("--sizes", type=int, nargs="*", default=[64, 256])
-    p.add_argument("--segments", type=int, nargs="*", default=[0], help="segments a line (0: the simulator's choice)")
-    p.add_argument("--registers", type=int, nargs="*", default=[0])
+    p.add_argument("--threads", type=int, nargs="*", default=[256], choices=[32, 64, 128, 256, 512])
+    p.add_argument("--registers", type=int, nargs="*", default=[64])
     p.add_argument("--repeats", type=int, default=50)
     args = p.parse_args(argv)
-    print("| grid | segments | registers | µs a run | ns a particle | stretch before (RMS / max) | after |")
+    print("| grid | threads a block | registers | µs a run | ns a particle | stretch before (RMS / max) | after |")
     print("|---|---|---|---|---|---|---|")
     for n in args.sizes:
-        for segments, registers in itertools.product(args.segments, args.registers):
-            r = run(args.device, n, segments, registers, args.repeats)
-            print(f"| {n}² | {r['segments']} | {r['registers']} | {r['us']:.1f} | {r['ns_per_particle']:.2f} | {r['before'].rms:.2%} / "
+        for threads, registers in itertools.product(args.threads, args.registers):
+            r = run(args.device, n, threads, registers, args.repeats)
+            print(f"| {n}² | {threads} | {r['registers']} | {r['us']:.1f} | {r['ns_per_particle']:.2f} | {r['before'].rms:.2%} / "
                   f"{r['before'].max:.2%} | {r['after'].rms:.3%} / {r['after'].max:.3%} |", flush=True)
     return 0
 

@@ -28,9 +28,8 @@ from .kind import ConstraintSet
 from ..launches import FLOAT, INT, VEC3, BoundStage, clamp_noting_normals
 from ..scene_keys import Key, integer
 
-LINE_SEGMENTS = 64
-"""Segments a line is cut into, at most (kernels/line_solve.py): a CUDA block has a thread a segment, which
-eliminates it alone (the CPU runs one lane a block, which takes them in turn)."""
+LINE_THREADS = 256
+"""Threads of a CUDA block, which solves one line (the CPU runs one lane a block)."""
 LINE_MAX_REGISTERS: int | None = None
 """A CUDA thread's registers at most (None: the compiler's choice). A cap of 64 measured slower at 1024²
 (bench/results/line_solve/README.md), so there is none; bench.line_solve --registers tries others."""
@@ -59,12 +58,6 @@ def _line_cloths(scene) -> list:
 def capacity_of(sticks: int) -> int:
     """The kernel's capacity for lines of at most ``sticks`` sticks: the next power of two (at least 2)."""
     return max(2, 1 << (max(sticks, 1) - 1).bit_length())
-
-
-def segments_of(capacity: int, device) -> int:
-    """The segments of a line of the kernel's ``capacity`` on ``device``: on a GPU LINE_SEGMENTS, or fewer to leave
-    two equations a segment; on the CPU, whose one lane would take the segments in turn, one."""
-    return min(LINE_SEGMENTS, capacity // 2) if device.is_cuda else 1
 
 
 class LineData:
@@ -182,9 +175,8 @@ class LineSolves(ConstraintSet):
         # On the CPU one thread runs every line, one lane a block: a tiled launch's shared memory is one buffer for
         # the process there, so pieces of lines run by the relaxation's threads at once would write over each
         # other (as for the tiled sweeps, constraints/sticks.py).
-        segments = segments_of(data.capacity, model.device)
-        threads = segments if model.device.is_cuda else 1
-        kernel = line_solve_kernel(data.capacity, model.position_dtype, segments, threads, LINE_MAX_REGISTERS)
+        threads = LINE_THREADS if model.device.is_cuda else 1
+        kernel = line_solve_kernel(data.capacity, model.position_dtype, threads, LINE_MAX_REGISTERS)
 
         def lines(first: int, count: int):
             return wp.launch_tiled(kernel, dim=[count], block_dim=threads, record_cmd=True, device=model.device,
