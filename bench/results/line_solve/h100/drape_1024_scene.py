@@ -10,7 +10,13 @@ base = tomllib.load(open("scenes/drape_1024.toml", "rb"))
 base.pop("output", None)
 print("| S x K | compliance shear/bend | line passes | ms/frame | RMS | max | mean RMS 45-90 | frame: RMS%/max% |")
 print("|---|---|---|---|---|---|---|---|")
-for S, K, lines, soft in [(64, 2, 0, 1.0), (64, 1, 1, 1.0), (32, 2, 1, 1.0), (64, 2, 0, None)]:
+# Each row: substeps, sweeps, line passes, the shear and bend compliance (m/N; "rigid": none). Rows given as
+# arguments ("128,1,1,1.0" ...) replace these.
+ROWS = [(64, 2, 0, 1.0), (64, 1, 1, 1.0), (32, 2, 1, 1.0), (64, 2, 0, None)]
+if len(sys.argv) > 1:
+    ROWS = [(int(a), int(b), int(c), None if d == "rigid" else float(d))
+            for a, b, c, d in (arg.split(",") for arg in sys.argv[1:])]
+for S, K, lines, soft in ROWS:
     t = copy.deepcopy(base)
     t["simulation"].update(substeps=S, iterations=K)
     if soft:
