@@ -57,6 +57,10 @@ def test_heavy_end_on_a_light_chain_hangs_at_the_predicted_length(device):
     assert_all_pass(cases.heavy_chain(device))
 
 
+def test_line_passes_hang_a_heavy_ended_chain_at_its_length(device):
+    assert_all_pass(cases.line_chain(device))
+
+
 # ---------------------------------------------------------------------------------------------- extreme steps
 
 
@@ -187,6 +191,10 @@ def test_a_sheet_crumpling_onto_itself_keeps_its_layers_apart(device):
 
 def test_a_sheet_thrown_at_30_m_s_neither_enters_nor_passes_through_the_ball(device):
     assert_all_pass(cases.fast_impact(device))
+
+
+def test_a_sheet_with_line_passes_thrown_at_30_m_s_neither_enters_nor_passes_through_the_ball(device):
+    assert_all_pass(cases.fast_impact_line_pass(device))
 
 
 def test_the_contact_meters_see_a_particle_inside_a_collider_and_energy_gained():

@@ -10,14 +10,14 @@ a case says so. ``CASES`` maps each case's name to its function, in the order th
 
 from .air import air_carried_sheet, air_gale, air_hurricane, air_zero_density
 from .base import SIZES, Check, count_check
-from .contact import crumple, drape, fast_impact
+from .contact import crumple, drape, fast_impact, fast_impact_line_pass
 from .degenerate import coincident, small_sphere, start_inside, zero_area
 from .divergence import divergence
 from .extreme_steps import STEP_RANGE, dt_drop_energy, fixed_steps, frame_spike, long_stall, variable_steps
 from .loads import heavy_gravity, tearing_gale
 from .long_runs import long_run
 from .over_constrained import pins_apart, two_places
-from .stiff import bend_grid, heavy_chain, mass_ratio, stiff_iterations
+from .stiff import bend_grid, heavy_chain, line_chain, mass_ratio, stiff_iterations
 from .tethers import small_steps, tether_energy, tether_reach
 
 CASES = {
@@ -25,6 +25,7 @@ CASES = {
     "bend_grid": bend_grid,
     "mass_ratio": mass_ratio,
     "heavy_chain": heavy_chain,
+    "line_chain": line_chain,
     "fixed_steps": fixed_steps,
     "variable_steps": variable_steps,
     "dt_drop_energy": dt_drop_energy,
@@ -50,6 +51,7 @@ CASES = {
     "drape": drape,
     "crumple": crumple,
     "fast_impact": fast_impact,
+    "fast_impact_line_pass": fast_impact_line_pass,
 }
 
 __all__ = ["CASES", "SIZES", "STEP_RANGE", "Check", "count_check", *CASES]

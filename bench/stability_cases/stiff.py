@@ -119,3 +119,40 @@ def heavy_chain(device: str = "cpu", size: str = "test") -> list[Check]:
                   1e-5, "physics: a settled hanging chain is vertical; 1e-5 for float32"),
         ]
     return checks
+
+
+def line_chain(device: str = "cpu", size: str = "test") -> list[Check]:
+    """The heavy-end chain of ``heavy_chain`` (20 particles, 1 m, pinned, released horizontal, settled for 8 s)
+    with line passes (``line_passes``) and one sweep a substep, and a uniform 200-particle rope the same way with 8
+    sweeps (bench size only). A line pass is one Newton step on the chain's lengths, exact for a straight chain;
+    where the chain bends within a substep (the swing, a heavy end whipping its light links round) one step
+    leaves an error that the next substep's step starts from. Settled, the chain hangs straight down at its
+    length, L = 1 m: repeated passes (a Newton iteration) converge to it where the sweeps alone stretch the
+    chain to several times L (heavy_chain's estimate)."""
+    n, length, light = 20, 1.0, 1e-3
+    # (particles, end mass / link mass, sweeps, line passes, bound on |depth - L| / L): each bound is the
+    # measured value with a margin; a heavier end takes more passes (one pass at 1e3 x leaves the end 2.19 m deep,
+    # and at 1e4 x four passes leave it 2.90 m deep: docs/method.md, "Line solves").
+    runs = [(n, 1e2, 1, 1, 2e-3), (n, 1e3, 1, 4, 1e-4)]
+    if size != "test":
+        runs += [(200, 1.0, 8, 4, 0.05)]
+    checks = []
+    for particles, ratio, iterations, passes, bound in runs:
+        case = (f"stiff: line passes on a {particles}-particle chain, end {ratio:.0e} x, {iterations} sweep(s), "
+                f"{passes} pass(es)")
+        sc = scene({"iterations": iterations, "damping": damping(0.98)},
+                   {"name": "chain", "resolution": [1, particles], "size": [0.0, length], "mass": light * particles,
+                    "pins": ["top-left"], "particle_masses": [[0, particles - 1, light * ratio]],
+                    "line_passes": passes})
+        sim = Simulator(sc, device)
+        for _ in range(480):
+            sim.step_frame()
+        p = sim.positions().astype(np.float64)
+        depth = p[0, 1] - p[-1, 1]
+        checks += [
+            count_check(case, "particles with a NaN/inf coordinate", nonfinite(p)),
+            Check(case, "|hanging depth - L| / L", abs(depth - length) / length, bound,
+                  "analytic: a settled inextensible chain hangs L straight down; measured, with a margin",
+                  f"end {depth:.5f} m below the pin; sweeps alone at 1 sweep: 1.33 m (1e2 x), 4.08 m (1e3 x)"),
+        ]
+    return checks
