@@ -74,38 +74,6 @@ def _make_kernel(capacity: int, vector, threads: int, max_registers: int | None)
     @wp.func_native("t.data(wp::tile_coord(i)) = value;")
     def put_normal(t: wp.tile(dtype=wp.vec3, shape=(POINTS,), storage="shared"), i: int, value: wp.vec3): ...
 
-    @wp.func
-    def stick_direction(point: wp.tile(dtype=VEC, shape=(POINTS,), storage="shared"), k: int):
-        e = wp.vec3d(point[k + 1] - point[k])
-        length = wp.length(e)
-        n = wp.vec3d(0.0, 0.0, 0.0)
-        if length > wp.float64(0.0):
-            n = e / length
-        return n
-
-    @wp.func
-    def metric(point: wp.tile(dtype=VEC, shape=(POINTS,), storage="shared"),
-               weight: wp.tile(dtype=float, shape=(POINTS,), storage="shared"),
-               contact_normal: wp.tile(dtype=wp.vec3, shape=(POINTS,), storage="shared"),
-               stiffness: wp.array(dtype=float), first: int, step: int, offset: int, sticks: int, q: int):
-        """Particle q's inverse mass, made stiff across each of its sticks by that stick's tension in the last
-        solve (geometric stiffness), and projected onto its collider's tangent plane."""
-        w = wp.float64(weight[q])
-        result = wp.mat33d(wp.float64(0.0))
-        if w > wp.float64(0.0):
-            eye = wp.identity(n=3, dtype=wp.float64)
-            k_matrix = eye / w
-            if q > 0:
-                n = stick_direction(point, q - 1)
-                k_matrix += wp.float64(stiffness[first + (q - 1) * step + offset]) * (eye - wp.outer(n, n))
-            if q < sticks:
-                n = stick_direction(point, q)
-                k_matrix += wp.float64(stiffness[first + q * step + offset]) * (eye - wp.outer(n, n))
-            c = wp.vec3d(contact_normal[q])
-            tangent = eye - wp.outer(c, c)
-            result = tangent * wp.inverse(k_matrix) * tangent
-        return result
-
     options = {} if max_registers is None else {"cuda_max_registers": max_registers}
 
     @wp.kernel(module="unique", **options)
@@ -116,8 +84,6 @@ def _make_kernel(capacity: int, vector, threads: int, max_registers: int | None)
         normal: wp.array(dtype=wp.vec3),
         lines: wp.array(dtype=wp.vec4i),
         rest: wp.array(dtype=float),
-        stiffness: wp.array(dtype=float),
-        offset: int,
     ):
         """Block b solves line lines[b] = (first particle, sticks M, step between its particles, its first rest
         length in ``rest``); ``normal`` is read where ``contact`` is 1 (the contact normal of each particle, 0 where
@@ -166,8 +132,7 @@ def _make_kernel(capacity: int, vector, threads: int, max_registers: int | None)
                 cb = wp.vec3d(contact_normal[k + 1])
                 if length > zero:
                     n = e / length
-                    a = wp.dot(n, metric(point, weight, contact_normal, stiffness, first, step, offset, sticks, k) * n) + wp.dot(
-                        n, metric(point, weight, contact_normal, stiffness, first, step, offset, sticks, k + 1) * n)
+                    a = weighted_dot(n, n, wa, ca) + weighted_dot(n, n, wb, cb)
                     d = wp.float64(rest[rest_first + k]) - length
                     n32 = wp.vec3(n)
                 if a <= wp.float64(1.0e-12) * (wa + wb) or length == zero:
@@ -184,8 +149,8 @@ def _make_kernel(capacity: int, vector, threads: int, max_registers: int | None)
         # Sticks k and k + 1 couple through their shared particle.
         k = lane
         while k < sticks - 1:
-            coupling = -wp.dot(wp.vec3d(direction[k]), metric(point, weight, contact_normal, stiffness, first, step,
-                                                              offset, sticks, k + 1) * wp.vec3d(direction[k + 1]))
+            coupling = -weighted_dot(wp.vec3d(direction[k]), wp.vec3d(direction[k + 1]),
+                                     wp.float64(weight[k + 1]), wp.vec3d(contact_normal[k + 1]))
             put_real(upper, k, coupling)
             put_real(lower, k + 1, coupling)
             k += THREADS
@@ -243,18 +208,8 @@ def _make_kernel(capacity: int, vector, threads: int, max_registers: int | None)
                     f += wp.vec3d(direction[q - 1]) * rhs[q - 1]
                 if q < sticks:
                     f -= wp.vec3d(direction[q]) * rhs[q]
-                move = metric(point, weight, contact_normal, stiffness, first, step, offset, sticks, q) * f
+                c = wp.vec3d(contact_normal[q])
+                move = (f - c * wp.dot(c, f)) * wp.float64(weight[q])
                 x[first + q * step] = point[q] + VEC(REAL(move[0]), REAL(move[1]), REAL(move[2]))
-        block_barrier()
-        # Each stick's tension, as geometric stiffness for the next solve: -lambda / length (0 in compression).
-        k = lane
-        while k < sticks:
-            e = wp.vec3d(point[k + 1] - point[k])
-            length = wp.length(e)
-            g = wp.float64(0.0)
-            if length > wp.float64(0.0):
-                g = wp.max(-rhs[k], wp.float64(0.0)) / length
-            stiffness[first + k * step + offset] = float(g)
-            k += THREADS
 
     return solve_lines

@@ -179,13 +179,10 @@ class LineSolves(ConstraintSet):
         threads = LINE_THREADS if model.device.is_cuda else 1
         kernel = line_solve_kernel(data.capacity, model.position_dtype, threads, LINE_MAX_REGISTERS)
 
-        stiffness = solver.cached("line_stiffness", lambda: wp.zeros(2 * n, dtype=float, device=model.device))
-
         def lines(first: int, count: int):
             return wp.launch_tiled(kernel, dim=[count], block_dim=threads, record_cmd=True, device=model.device,
                                    inputs=[x, model.inv_mass, int(bool(clamps)), normal,
-                                           data.lines[first:first + count], data.rest, stiffness,
-                                           0 if first < data.column_start else n])
+                                           data.lines[first:first + count], data.rest])
 
         passes = []
         for p in range(data.passes):
