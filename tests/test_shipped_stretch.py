@@ -1,6 +1,6 @@
 """Every shipped scene, run to its last frame with its own settings, ends as cloth: under 1% RMS and 10% max
 structural stretch |D - L| / L. big_grid_1024 is checked on a GPU only (bench/gpu_session.sh
-runs it); on this 2-core CI machine it would take an hour. drape_1024 is left out: it ends near 2-3% RMS, the
+runs it); on this 2-core CI machine it would take an hour. drape_1024 is left out: it ends near 3% RMS, the
 measured limit of cloth held up by contact at that size (bench/results/line_solve/README.md, "The shipped 1024²
 drape")."""
 

@@ -106,10 +106,10 @@ def drape(device: str = "cpu", size: str = "test") -> list[Check]:
     every particle held up by contact alone. The stretch bound is the sweeps' measured end stretch with a margin;
     the line pass has its own, tighter one."""
     n, substeps = (24, 8) if size == "test" else (64, 16)
-    # One bound for both methods, about twice the sweeps' measured end stretch (bench/results/stability). The
-    # frictionless drape is chaotic: the correction's drape slides on the ball differently with each device's
-    # rounding, and its stretch with it, so this is a stability bound; the correction's accuracy is tested in
-    # tests/test_global_solve.py.
+    # One bound for the sweeps and the correction, about twice the sweeps' measured end stretch
+    # (bench/results/stability). The frictionless drape is chaotic: the correction's drape slides on the ball
+    # differently with each device's rounding, and its stretch with it, so this is a stability bound; the
+    # correction's accuracy is tested in tests/test_global_solve.py.
     bound_rms, bound_max = (0.025, 0.15) if size == "test" else (0.025, 0.18)
     # The line pass: measured 0.06% / 0.24% (24^2) and 0.10% / 0.62% (64^2) on the CPU, about 5x allowed.
     lines_rms, lines_max = (0.003, 0.015) if size == "test" else (0.005, 0.03)
