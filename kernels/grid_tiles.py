@@ -60,23 +60,24 @@ colour_floats = wp.types.vector(length=MAX_TILED_COLOURS, dtype=float)
 colour_ints = wp.types.vector(length=MAX_TILED_COLOURS, dtype=int)
 
 
-def relax_grid_tiles(tile: int, colours: tuple, max_registers: int | None = None):
+def relax_grid_tiles(tile: int, colours: tuple, max_registers: int | None = None, vector=wp.vec3):
     """The tiled sweep's kernel for tiles of ``tile`` x ``tile`` cells and the given colours, each
     ``(dr, dc, col_first, parity_axis, q, parity, soft)`` (parity_axis 0: rows, 1: columns; soft: XPBD, the
     colour's compliance, its first tension and its anchors per row given at launch), in sweep order. One
     kernel per (tile, colours, max_registers): the shared tiles' shapes and each colour's geometry are
     compile-time constants, so a colour's step unrolls to its own index arithmetic. ``max_registers`` caps a
-    CUDA thread's registers (None: the compiler's choice), so that more blocks fit on a multiprocessor."""
+    CUDA thread's registers (None: the compiler's choice), so that more blocks fit on a multiprocessor;
+    ``vector`` is the positions' type (wp.vec3 or wp.vec3d), which the shared region holds too."""
     if tile < 4 or tile % 4:
         raise AssertionError(f"a tile's side must be a multiple of 4 (a bend colour's parity repeats every 4 rows or "
                              f"columns, and two tiles apart must share no particle), got {tile}")
-    key = (tile, tuple(colours), max_registers)
+    key = (tile, tuple(colours), max_registers, vector)
     if key not in _KERNELS:
-        _KERNELS[key] = _make_kernel(tile, tuple(colours), max_registers)
+        _KERNELS[key] = _make_kernel(tile, tuple(colours), max_registers, vector)
     return _KERNELS[key]
 
 
-def _make_kernel(tile: int, colours: tuple, max_registers: int | None):
+def _make_kernel(tile: int, colours: tuple, max_registers: int | None, vector):
     TILE_SIDE = tile
     HALF = tile // 2
     REGION_ROWS = tile + 2
@@ -84,6 +85,7 @@ def _make_kernel(tile: int, colours: tuple, max_registers: int | None):
     REGION = REGION_ROWS * REGION_COLS
     STICKS = tile * tile // 2  # a colour's sticks in a tile: one axis keeps half its anchors
     COLOURS = colours
+    VEC = vector
 
     @wp.func
     def region_cell(e: int):
@@ -91,8 +93,8 @@ def _make_kernel(tile: int, colours: tuple, max_registers: int | None):
         return e // REGION_COLS, e % REGION_COLS
 
     @wp.func_native("t.data(wp::tile_coord(i, j)) = value;")
-    def put_point(t: wp.tile(dtype=wp.vec3, shape=(REGION_ROWS, REGION_COLS), storage="shared"), i: int, j: int,
-                  value: wp.vec3): ...
+    def put_point(t: wp.tile(dtype=VEC, shape=(REGION_ROWS, REGION_COLS), storage="shared"), i: int, j: int,
+                  value: VEC): ...
 
     @wp.func_native("t.data(wp::tile_coord(i, j)) = value;")
     def put_weight(t: wp.tile(dtype=float, shape=(REGION_ROWS, REGION_COLS), storage="shared"), i: int, j: int,
@@ -118,7 +120,7 @@ def _make_kernel(tile: int, colours: tuple, max_registers: int | None):
 
     @wp.kernel(module="unique", **options)
     def relax_grid_tiles(
-        x: wp.array(dtype=wp.vec3),
+        x: wp.array(dtype=VEC),
         inv_mass: wp.array(dtype=float),
         layout: GridColour,
         pins: wp.array(dtype=int),
@@ -153,7 +155,7 @@ def _make_kernel(tile: int, colours: tuple, max_registers: int | None):
         # Everything a projection reads is staged in shared memory first: the region's positions and weights,
         # and the rest-length tables over its columns and rows, so that the colours' steps, which a barrier
         # separates, wait on no global load.
-        region = wp.tile_empty(shape=(REGION_ROWS, REGION_COLS), dtype=wp.vec3, storage="shared")
+        region = wp.tile_empty(shape=(REGION_ROWS, REGION_COLS), dtype=VEC, storage="shared")
         weight = wp.tile_empty(shape=(REGION_ROWS, REGION_COLS), dtype=float, storage="shared")
         col_rest = wp.tile_empty(shape=(2, REGION_COLS), dtype=float, storage="shared")  # 1 and 2 columns apart
         col_step = wp.tile_empty(shape=REGION_COLS, dtype=wp.float64, storage="shared")  # squared, 1 apart

@@ -54,19 +54,24 @@ def sequential_tile_order(explicit: Simulator, tile: int):
     return m, ends, tile_order(ends, colour_of, COLS, tile)
 
 
-@pytest.mark.parametrize("tile, cloth", [
-    (4, {}),  # the smallest tile
-    (16, {}),  # the default
-    (16, {"particle_masses": [[4, 6, 0.05], [20, 17, 0.001]], "pins": ["top-left", [30, 40]]}),  # weights read
-    (8, {"sticks": ["structural", "bend"], "pins": ["top-edge"]}),  # no shear; more pins than the kernel checks
+@pytest.mark.parametrize("tile, cloth, precision", [
+    (4, {}, "float32"),  # the smallest tile
+    (16, {}, "float32"),  # the default
+    (16, {}, "float64"),  # float64 positions, held as float64 in the shared region
+    (16, {"particle_masses": [[4, 6, 0.05], [20, 17, 0.001]], "pins": ["top-left", [30, 40]]},
+     "float32"),  # weights read
+    (8, {"sticks": ["structural", "bend"], "pins": ["top-edge"]},
+     "float32"),  # no shear; more pins than the kernel checks
 ])
-def test_a_tiled_sweep_is_the_sequential_sweep_in_tile_order_bit_for_bit(tile, cloth, monkeypatch):
+def test_a_tiled_sweep_is_the_sequential_sweep_in_tile_order_bit_for_bit(tile, cloth, precision, monkeypatch):
     monkeypatch.setattr(sticks, "GRID_TILE", tile)
-    scene = sheet(**cloth)
+    scene = make_scene({"substeps": 2, "iterations": 4, "precision": precision}, resolution=[ROWS, COLS],
+                       size=[1.0, 1.2], **{"pins": ["top-left", "top-right"], **cloth})
     tiled = Simulator(scene, "cpu", threads=1, sticks="tiled")
     explicit = Simulator(scene, "cpu", threads=1, sticks="explicit")
     assert "grid tiles" in tiled.constraint_sets and "grid sticks" not in tiled.constraint_sets
-    start = perturbed(tiled)
+    vector = wp.vec3d if precision == "float64" else wp.vec3
+    start = perturbed(tiled).astype(tiled.model.host_position_dtype)
 
     tiled.state.set_positions(start)
     bound = GridTiles().bind(tiled.model, tiled.state, tiled.solver)
@@ -74,7 +79,7 @@ def test_a_tiled_sweep_is_the_sequential_sweep_in_tile_order_bit_for_bit(tile, c
     run_phases(bound)
 
     m, ends, order = sequential_tile_order(explicit, tile)
-    x = wp.array(start, dtype=wp.vec3, device="cpu")
+    x = wp.array(start, dtype=vector, device="cpu")
     wp.launch(relax_colour, len(order), device="cpu",
               inputs=[x, m.inv_mass, wp.array(ends[order], dtype=wp.vec2i, device="cpu"),
                       wp.array(m.stick_rest.numpy()[order], dtype=float, device="cpu"),
@@ -163,18 +168,19 @@ def one_tiled_substep(scene, device: str, start: np.ndarray) -> np.ndarray:
 
 @pytest.mark.cuda
 @pytest.mark.skipif(not wp.is_cuda_available(), reason="no CUDA device")
-@pytest.mark.parametrize("tile, cloth", [
-    (8, {}), (16, {}), (16, {"sticks": ["structural", "shear", "bend"], "compliance": {"bend": 0.05}})],
-                         ids=["8", "16", "16-soft-bend"])
-def test_a_tiled_sweep_on_cuda_is_the_sequential_sweep(tile, cloth, monkeypatch):
+@pytest.mark.parametrize("tile, cloth, precision", [
+    (8, {}, "float32"), (16, {}, "float32"),
+    (16, {"sticks": ["structural", "shear", "bend"], "compliance": {"bend": 0.05}}, "float32"), (16, {}, "float64")],
+                         ids=["8", "16", "16-soft-bend", "16-float64"])
+def test_a_tiled_sweep_on_cuda_is_the_sequential_sweep(tile, cloth, precision, monkeypatch):
     """A GPU block runs a colour's sticks at once and relies on one barrier after each colour (and after the
     staging) for the next colour to read them: a missing barrier reads positions a correction (about the 1 cm
     perturbation) old. The substep must equal the CPU's, which runs the sweep's projections one after another,
     to float32 rounding (1e-6 m, against sticks of about 3 cm), whatever the compiler contracts into fused
     multiply-adds."""
     monkeypatch.setattr(sticks, "GRID_TILE", tile)
-    scene = make_scene({"substeps": 1, "iterations": 1}, resolution=[ROWS, COLS], size=[1.0, 1.2],
-                       pins=["top-left", "top-right"], **cloth)
+    scene = make_scene({"substeps": 1, "iterations": 1, "precision": precision}, resolution=[ROWS, COLS],
+                       size=[1.0, 1.2], pins=["top-left", "top-right"], **cloth)
     start = perturbed(Simulator(scene, "cpu", threads=1, sticks="tiled"))
     sequential = one_tiled_substep(scene, "cpu", start)
     on_gpu = one_tiled_substep(scene, "cuda", start)
@@ -201,7 +207,6 @@ def test_tiled_sweeps_converge_as_the_coloured_sweeps_do(device):
 
 
 @pytest.mark.parametrize("cloth, simulation, words", [
-    ({}, {"precision": "float64"}, "float32"),
     ({"tear_threshold": 1.5}, {}, "can tear"),
 ])
 def test_tiled_sweeps_refuse_what_they_do_not_cover(cloth, simulation, words):

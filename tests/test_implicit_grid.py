@@ -121,14 +121,15 @@ def test_the_rule_picks_implicit_sticks_for_one_grid_cloth_that_cannot_tear(devi
         Simulator(grid, device, sticks="lazy")
 
 
-@pytest.mark.parametrize("compliance, smallest_tiled, sets, same_as", [
-    ({}, 0, ("tethers", "grid tiles"), "tiled"),  # rigid float32 sticks of a large grid: swept tile by tile
-    ({}, 64, ("tethers", "grid sticks"), "explicit"),  # a grid below the tiles' size: a launch per colour
-    ({"bend": 1e-3}, 0, ("tethers", "grid tiles"), "tiled"),  # a soft family of a large grid: tiled too
-    ({"bend": 1e-3}, 64, ("tethers", "grid sticks"), "explicit"),  # soft, below the tiles' size: a launch per colour
+@pytest.mark.parametrize("compliance, smallest_tiled, sets, same_as, precision", [
+    ({}, 0, ("tethers", "grid tiles"), "tiled", "float32"),  # rigid sticks of a large grid: swept tile by tile
+    ({}, 0, ("tethers", "grid tiles"), "tiled", "float64"),  # float64 positions: tiled too
+    ({}, 64, ("tethers", "grid sticks"), "explicit", "float32"),  # a grid below the tiles' size: a launch per colour
+    ({"bend": 1e-3}, 0, ("tethers", "grid tiles"), "tiled", "float32"),  # a soft family of a large grid: tiled too
+    ({"bend": 1e-3}, 64, ("tethers", "grid sticks"), "explicit", "float32"),  # soft, small: a launch per colour
 ])
 def test_auto_on_a_gpu_computes_the_sticks_and_keeps_the_tether_table(compliance, smallest_tiled, sets, same_as,
-                                                                      monkeypatch):
+                                                                      precision, monkeypatch):
     """What "auto" does on a GPU, on the CPU: the rule's device test answered as a GPU would."""
     import warp_verlet.core.model as model_module
 
@@ -136,7 +137,7 @@ def test_auto_on_a_gpu_computes_the_sticks_and_keeps_the_tether_table(compliance
     monkeypatch.setattr(stages, "MIN_TILED_PARTICLES", smallest_tiled)
     monkeypatch.setattr(model_module, "stick_form", lambda sticks, colouring, device: real(
         sticks, colouring, type("GPU", (), {"is_cpu": False})()))
-    scene = make_scene({"substeps": 2}, resolution=[7, 9], pins=["top-left", "top-right"],
+    scene = make_scene({"substeps": 2, "precision": precision}, resolution=[7, 9], pins=["top-left", "top-right"],
                        sticks=["structural", "shear", "bend"], compliance=compliance)
     sim = Simulator(scene, "cpu")
     assert sim.constraint_sets == sets

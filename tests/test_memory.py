@@ -127,9 +127,9 @@ IMPLICIT = ["coloured", "tethers", "compliance", "multilevel", "float64", "movin
             "rigid-patches", "self-contact", "self-contact-stride", "global", "line-solves", "line-solves-alone"]
 
 
-# The float32 cases that allow tiled sweeps (kernels/grid_tiles.py).
-TILED = ["coloured", "tethers", "compliance", "multilevel", "moving-sphere", "planes", "angle-limit", "rigid-patches",
-         "self-contact", "global", "line-solves"]
+# The cases that allow tiled sweeps (kernels/grid_tiles.py).
+TILED = ["coloured", "tethers", "compliance", "multilevel", "float64", "moving-sphere", "planes", "angle-limit",
+         "rigid-patches", "self-contact", "global", "line-solves"]
 
 
 # The float32 cases of the coloured solver that cannot tear, which allow clustered sweeps of stick arrays (soft

@@ -190,7 +190,7 @@ class GridTiles(ConstraintSet):
         # Rigid, the kernel has no soft colour and reads no tension: any float array fills the argument.
         tension = solver.scratch("grid_tension", g.soft_sticks, float) if g.soft_sticks else g.col_rest1
         registers = GRID_TILE_MAX_REGISTERS if g.rows * g.cols >= GRID_TILE_CAPPED_FROM else None
-        kernel = relax_grid_tiles(tile, geometry, registers)
+        kernel = relax_grid_tiles(tile, geometry, registers, model.position_dtype)
         tiles_down, tiles_across = -(-g.rows // tile), -(-g.cols // tile)
         tasks = []
         for row_parity in (0, 1):

@@ -105,14 +105,8 @@ class Requirements:
         )
         req = replace(req, **grid_counts(scene, sticks))
         req = replace(req, precision=resolve(scene, relaxes=RELAX.needed(req)))
-        if (sticks == "auto" and req.implicit_grid and req.precision == "float32"
-                and req.grid_rows * req.grid_cols >= MIN_TILED_PARTICLES):
+        if sticks == "auto" and req.implicit_grid and req.grid_rows * req.grid_cols >= MIN_TILED_PARTICLES:
             req = replace(req, grid_tiles=True)
-        if req.grid_tiles and req.precision != "float32":
-            from ..errors import ArgumentError
-
-            raise ArgumentError("sticks = 'tiled' holds float32 positions in shared memory, but the scene's positions "
-                                "are float64 (simulation.precision)")
         if (sticks == "auto" and not req.implicit_grid and req.particles >= MIN_CLUSTERED_PARTICLES
                 and cluster_obstacle(scene, req) is None):
             req = replace(req, stick_clusters=True)
@@ -141,10 +135,11 @@ def global_levels(scene: "Scene") -> tuple[tuple[int, int, int], ...]:
 
 STICK_FORMS = ("auto", "explicit", "implicit", "tiled", "clustered")
 MIN_TILED_PARTICLES = 512 * 512
-"""Where "auto" sweeps a grid's float32 sticks, rigid or soft, tile by tile (kernels/grid_tiles.py) on a GPU: from
-this many particles on. On an H100 the tiles reached the same RMS stretch as a launch per colour in less time at
-512^2, 1024^2 and 2048^2, rigid or with soft bend sticks, and took longer at 256^2, where a launch of a quarter of
-the tiles leaves most of the GPU idle (bench/results/grid_tiles)."""
+"""Where "auto" sweeps a grid's sticks, rigid or soft, tile by tile (kernels/grid_tiles.py) on a GPU: from this
+many particles on. On an H100 the tiles reached the same RMS stretch as a launch per colour in less time at 512^2,
+1024^2 and 2048^2, rigid or with soft bend sticks, and took longer at 256^2, where a launch of a quarter of the
+tiles leaves most of the GPU idle (bench/results/grid_tiles); with float64 positions, 14% less time on the 1024^2
+drape (bench/results/grid_tiles/float64)."""
 MIN_CLUSTERED_PARTICLES = 512 * 512
 """Where "auto" sweeps float32 stick arrays (a mesh cloth's, or several cloths') cluster by cluster on a GPU
 (constraints/stick_clusters.py): from this many particles on. On an H100 the clustered sweep took 28-60% less time

@@ -8,15 +8,17 @@ from warp_verlet.input.scene import parse_scene
 from warp_verlet.core.simulator import Simulator
 base = tomllib.load(open("scenes/drape_1024.toml", "rb"))
 base.pop("output", None)
-print("| S x K | compliance shear/bend | line passes | ms/frame | RMS | max | mean RMS 45-90 | frame: RMS%/max% |")
-print("|---|---|---|---|---|---|---|---|")
-# Each row: substeps, sweeps, line passes, the shear and bend compliance (m/N; "rigid": none). Rows given as
-# arguments ("128,1,1,1.0" ...) replace these.
-ROWS = [(64, 2, 0, 1.0), (64, 1, 1, 1.0), (32, 2, 1, 1.0), (64, 2, 0, None)]
+print("| S x K | compliance shear/bend | line passes | sticks | positions | ms/frame | RMS | max | mean RMS 45-90 | "
+      "frame: RMS%/max% |")
+print("|---|---|---|---|---|---|---|---|---|---|")
+# Each row: substeps, sweeps, line passes, the shear and bend compliance (m/N; "rigid": none) and, optionally,
+# the sticks' form (Simulator's sticks, default "auto"). Rows given as arguments ("128,1,1,1.0" or
+# "256,1,1,1.0,tiled" ...) replace these.
+ROWS = [(64, 2, 0, 1.0, "auto"), (64, 1, 1, 1.0, "auto"), (32, 2, 1, 1.0, "auto"), (64, 2, 0, None, "auto")]
 if len(sys.argv) > 1:
-    ROWS = [(int(a), int(b), int(c), None if d == "rigid" else float(d))
-            for a, b, c, d in (arg.split(",") for arg in sys.argv[1:])]
-for S, K, lines, soft in ROWS:
+    ROWS = [(int(f[0]), int(f[1]), int(f[2]), None if f[3] == "rigid" else float(f[3]), f[4] if len(f) > 4 else "auto")
+            for f in (arg.split(",") for arg in sys.argv[1:])]
+for S, K, lines, soft, form in ROWS:
     t = copy.deepcopy(base)
     t["simulation"].update(substeps=S, iterations=K)
     if soft:
@@ -24,7 +26,7 @@ for S, K, lines, soft in ROWS:
     else:
         t["cloth"][0].pop("compliance", None)  # all three families rigid
     t["cloth"][0]["line_passes"] = lines
-    sim = Simulator(parse_scene(t, file="scenes/drape_1024.toml"), "cuda")
+    sim = Simulator(parse_scene(t, file="scenes/drape_1024.toml"), "cuda", sticks=form)
     timed, hist, means = 0.0, [], []
     for f in range(90):
         wp.synchronize(); t0 = time.perf_counter(); sim.step_frame(); wp.synchronize()
@@ -35,5 +37,5 @@ for S, K, lines, soft in ROWS:
             if f >= 44:
                 means.append(s.rms)
     s = sim.stretch()
-    print(f"| {S} x {K} | {soft} | {lines} | {timed/88*1e3:.2f} | {100*s.rms:.3f}% | {100*s.max:.2f}% | {100*np.mean(means):.2f}% | {' '.join(hist)} |", flush=True)
+    print(f"| {S} x {K} | {soft} | {lines} | {sim.model.sticks_form} | {sim.model.precision} | {timed/88*1e3:.2f} | {100*s.rms:.3f}% | {100*s.max:.2f}% | {100*np.mean(means):.2f}% | {' '.join(hist)} |", flush=True)
     sim.close()
