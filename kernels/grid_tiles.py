@@ -64,7 +64,7 @@ def relax_grid_tiles(tile: int, colours: tuple, max_registers: int | None = None
     """The tiled sweep's kernel for tiles of ``tile`` x ``tile`` cells and the given colours, each
     ``(dr, dc, col_first, parity_axis, q, parity, soft)`` (parity_axis 0: rows, 1: columns; soft: XPBD, the
     colour's compliance, its first tension and its anchors per row given at launch), in sweep order. One
-    kernel per (tile, colours, max_registers): the shared tiles' shapes and each colour's geometry are
+    kernel per (tile, colours, max_registers, vector): the shared tiles' shapes and each colour's geometry are
     compile-time constants, so a colour's step unrolls to its own index arithmetic. ``max_registers`` caps a
     CUDA thread's registers (None: the compiler's choice), so that more blocks fit on a multiprocessor;
     ``vector`` is the positions' type (wp.vec3 or wp.vec3d), which the shared region holds too."""
