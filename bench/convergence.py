@@ -28,6 +28,8 @@ Per row (scene, grid, method, budget S substeps x K sweeps):
   a block down; the json's ms_per_frame_mean is the mean over all of them). A tearing scene also syncs its
   tears once a frame, as the runner does.
 - the RMS and max structural stretch |D - L| / L over intact sticks at the last frame;
+- the same over the run's second half: the mean RMS and the largest max at the ends of the timed blocks from
+  the run's middle on, read between blocks (a chaotic scene's last frame alone can swing widely);
 - the RMS and max particle distance to a converged reference at the last frame (m, and / cloth size);
 - the deepest penetration of each collider at the last frame (m; ``deepest_penetrations``);
 - torn_net: the sticks torn.
@@ -212,7 +214,9 @@ BLOCKS = 6  # frames 3..N are timed in up to this many blocks (of 5 frames or mo
 def simulate(scene, device: str, threads: int | None) -> dict:
     """Run ``scene`` for its frames and return its final positions, stretch and torn sticks, and its time:
     frames 3..N in up to BLOCKS synchronised blocks, ms/frame the fastest block's mean (other work on a shared
-    machine only slows a block down) and ms_per_frame_mean over all of them."""
+    machine only slows a block down) and ms_per_frame_mean over all of them. ``rms_late`` and ``max_late`` are
+    the mean RMS and the largest max stretch at the ends of the blocks in the run's second half, read between
+    blocks (outside the timing): a chaotic scene's last frame alone can swing widely (a frictionless drape)."""
     sim = Simulator(scene, device, threads=threads)
     frames = scene.simulation.frames
     tears = sim.model.tears
@@ -232,7 +236,7 @@ def simulate(scene, device: str, threads: int | None) -> dict:
         frame()
     timed = frames - warm
     blocks = [len(b) for b in np.array_split(np.arange(timed), max(1, min(BLOCKS, timed // 5)))] if timed else []
-    per_block = []
+    per_block, late, done = [], [], warm
     for size in blocks:
         wp.synchronize_device(sim.device)
         start = time.perf_counter()
@@ -240,11 +244,17 @@ def simulate(scene, device: str, threads: int | None) -> dict:
             frame()
         wp.synchronize_device(sim.device)
         per_block.append((time.perf_counter() - start, size))
+        done += size
+        if 2 * done >= frames:
+            late.append(sim.stretch())
     best = min(t / size for t, size in per_block) if per_block else float("nan")
     mean = sum(t for t, _ in per_block) / timed if timed else float("nan")
     x = sim.positions()
     stretch = sim.stretch(x)
+    if not late:
+        late = [stretch]
     out = {"ms_per_frame": best * 1e3, "ms_per_frame_mean": mean * 1e3, "rms": stretch.rms, "max": stretch.max,
+           "rms_late": float(np.mean([s.rms for s in late])), "max_late": max(s.max for s in late),
            "positions": x, "torn": sim.torn_count() if tears else None, "lowest_y": float(x[:, 1].min()),
            "inside": deepest_penetrations(scene, sim.time, x),
            "frames": frames}
@@ -395,8 +405,16 @@ def _line(r: dict) -> str:
     inside = f"  inside {_inside(r)}" if r.get("inside") else ""
     return (f"{r['scene']:8s} {r['n']:5d}^2 {r['method']:18s} {r['substeps']:3d} x {r['iterations']:2d}  "
             f"{r['ms_per_frame']:9.2f} ms/frame  RMS {r['rms'] * 100:9.4f}%  max {r['max'] * 100:10.3f}%  "
+            f"{_late(r)}"
             f"pos RMS {r.get('pos_rms_m', float('nan')):.2e} m max {r.get('pos_max_m', float('nan')):.2e} m{torn}"
             f"{inside}")
+
+
+def _late(r: dict) -> str:
+    """A row's stretch over the run's second half ("late RMS 0.1% max 2%  "), or nothing (a peer's row)."""
+    if r.get("rms_late") is None:
+        return ""
+    return f"late RMS {r['rms_late'] * 100:.4g}% max {r['max_late'] * 100:.4g}%  "
 
 
 def _inside(r: dict) -> str:
@@ -602,12 +620,13 @@ def _sci(v) -> str:
 
 def rows_table(rows: list[dict]) -> list[str]:
     net = any(r.get("torn") is not None for r in rows)
-    head = ["method", "S × K", "ms/frame", "RMS stretch", "max stretch", "pos RMS (m)", "pos max (m)",
+    head = ["method", "S × K", "ms/frame", "RMS stretch", "max stretch", "RMS, 2nd half", "max, 2nd half",
+            "pos RMS (m)", "pos max (m)",
             "pos RMS / size", "pos max / size", "pos resolved", "deepest inside (m)"] + (["torn sticks"] if net else [])
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in rows:
         cells = [r["method"], f"{r['substeps']} × {r['iterations']}", f"{r['ms_per_frame']:.3g}", _pct(r["rms"]),
-                 _pct(r["max"]), _sci(r["pos_rms_m"]), _sci(r["pos_max_m"]), _pct(r["pos_rms_frac"]),
+                 _pct(r["max"]), _pct(r.get("rms_late")), _pct(r.get("max_late")), _sci(r["pos_rms_m"]), _sci(r["pos_max_m"]), _pct(r["pos_rms_frac"]),
                  _pct(r["pos_max_frac"]), "yes" if r.get("pos_resolved") else "no", _inside(r)]
         cells += [str(r["torn"]) if r.get("torn") is not None else "—"] if net else []
         lines.append("| " + " | ".join(cells) + " |")

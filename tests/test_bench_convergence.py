@@ -162,3 +162,22 @@ def test_deepest_penetration_of_each_collider():
     assert inside["floor"] == pytest.approx(0.025, abs=1e-12)
     assert inside["far"] == 0.0
     assert conv.deepest_penetrations(scene, 0.0, x)["ball"] == 0.0  # at t = 0 the ball is at the origin
+
+
+def test_the_second_half_stretch_is_read_at_the_ends_of_its_timed_blocks():
+    """20 frames: frames 3-20 are timed in three blocks of 6, ending at frames 8, 14 and 20, and the second half's
+    samples are the last two. rms_late is the mean of the RMS stretch there, max_late the larger max, exactly as a
+    run stepped frame by frame reads them (the CPU is deterministic)."""
+    from warp_verlet.core.simulator import Simulator
+
+    scene = conv.build_scene("hanging", 16, "plain", 2, 2, 20)
+    r = conv.simulate(scene, "cpu", 1)
+    sim = Simulator(scene, "cpu", threads=1)
+    samples = []
+    for frame in range(1, 21):
+        sim.step_frame()
+        if frame in (14, 20):
+            samples.append(sim.stretch())
+    assert r["rms"] == samples[-1].rms and samples[0].rms != samples[1].rms
+    assert r["rms_late"] == pytest.approx(np.mean([s.rms for s in samples]), rel=1e-12)
+    assert r["max_late"] == max(s.max for s in samples)
