@@ -19,9 +19,9 @@ from warp_verlet.kernels.relax import relax_colour
 ROWS, COLS = 37, 45  # several tiles each way, neither a multiple of the tile
 
 
-def sheet(**cloth):
+def sheet(simulation: dict | None = None, **cloth):
     spec = {"resolution": [ROWS, COLS], "size": [1.0, 1.2], "pins": ["top-left", "top-right"], **cloth}
-    return make_scene({"substeps": 2, "iterations": 4}, **spec)
+    return make_scene({"substeps": 2, "iterations": 4, **(simulation or {})}, **spec)
 
 
 def tile_order(ends: np.ndarray, colour_of: np.ndarray, cols: int, tile: int) -> np.ndarray:
@@ -65,8 +65,7 @@ def sequential_tile_order(explicit: Simulator, tile: int):
 ])
 def test_a_tiled_sweep_is_the_sequential_sweep_in_tile_order_bit_for_bit(tile, cloth, precision, monkeypatch):
     monkeypatch.setattr(sticks, "GRID_TILE", tile)
-    scene = make_scene({"substeps": 2, "iterations": 4, "precision": precision}, resolution=[ROWS, COLS],
-                       size=[1.0, 1.2], **{"pins": ["top-left", "top-right"], **cloth})
+    scene = sheet({"precision": precision}, **cloth)
     tiled = Simulator(scene, "cpu", threads=1, sticks="tiled")
     explicit = Simulator(scene, "cpu", threads=1, sticks="explicit")
     assert "grid tiles" in tiled.constraint_sets and "grid sticks" not in tiled.constraint_sets

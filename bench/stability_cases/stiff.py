@@ -82,6 +82,21 @@ def mass_ratio(device: str = "cpu", size: str = "test") -> list[Check]:
     ]
 
 
+def settled_chain(device: str, particles: int, ratio: float, iterations: int, line_passes: int = 0) -> Simulator:
+    """A 1 m chain of ``particles`` pinned at one end, its last particle ``ratio`` x heavier than the others (1 g
+    each), released horizontal and settled for 8 s (damping 4.85 /s: 0.98 of the velocity kept per substep), with
+    ``iterations`` sweeps and ``line_passes`` line passes a substep."""
+    light = 1e-3
+    cloth = {"name": "chain", "resolution": [1, particles], "size": [0.0, 1.0], "mass": light * particles,
+             "pins": ["top-left"], "particle_masses": [[0, particles - 1, light * ratio]]}
+    if line_passes:
+        cloth["line_passes"] = line_passes
+    sim = Simulator(scene({"iterations": iterations, "damping": damping(0.98)}, cloth), device)
+    for _ in range(480):  # 8 s: the swing (period ~2.5 s) decays e-fold in ~50 substeps of damping
+        sim.step_frame()
+    return sim
+
+
 def heavy_chain(device: str = "cpu", size: str = "test") -> list[Check]:
     """A 20-particle, 1 m rope pinned at one end, its last particle 1e4 x heavier than the others, released
     horizontal and settled (damping 4.85 /s: 0.98 of the velocity kept per substep). The analytic hanging length
@@ -91,15 +106,10 @@ def heavy_chain(device: str = "cpu", size: str = "test") -> list[Check]:
     stick, about (N - 1) e over the chain: the PBD hanging length is L + (N - 1) e, -> L as K grows."""
     runs = [(1e4, 50)] if size == "test" else [(1e3, 8), (1e4, 50), (1e4, 200)]
     checks = []
-    n, length, light = 20, 1.0, 1e-3
+    n, length = 20, 1.0
     for ratio, iterations in runs:
         case = f"stiff: heavy end ({ratio:.0e} x) on a light chain, {iterations} iterations"
-        sc = scene({"iterations": iterations, "damping": damping(0.98)},
-                   {"name": "chain", "resolution": [1, n], "size": [0.0, length], "mass": light * n,
-                    "pins": ["top-left"], "particle_masses": [[0, n - 1, light * ratio]]})
-        sim = Simulator(sc, device)
-        for _ in range(480):  # 8 s: the swing (period ~2.5 s) decays e-fold in ~50 substeps of damping
-            sim.step_frame()
+        sim = settled_chain(device, n, ratio, iterations)
         p = sim.positions().astype(np.float64)
         dt = sim.settings.dt
         estimate = (n - 1) * G * dt * dt * (1.0 + ratio) / iterations
@@ -129,7 +139,7 @@ def line_chain(device: str = "cpu", size: str = "test") -> list[Check]:
     leaves an error that the next substep's step starts from. Settled, the chain hangs straight down at its
     length, L = 1 m: repeated passes (a Newton iteration) converge to it where the sweeps alone stretch the
     chain to several times L (heavy_chain's estimate)."""
-    n, length, light = 20, 1.0, 1e-3
+    n, length = 20, 1.0
     # (particles, end mass / link mass, sweeps, line passes, bound on |depth - L| / L), each bound the measured
     # value with a margin. One pass at 1e2 x is near its edge: 4.2e-4 on the CPU, 3.4e-3 on an H100 (the chain
     # still swinging 1.4e-4 m); two passes 1e-6 on both. A heavier end takes more passes: at 1e3 x one leaves the
@@ -142,14 +152,7 @@ def line_chain(device: str = "cpu", size: str = "test") -> list[Check]:
     for particles, ratio, iterations, passes, bound in runs:
         case = (f"stiff: line passes on a {particles}-particle chain, end {ratio:.0e} x, {iterations} sweep(s), "
                 f"{passes} pass(es)")
-        sc = scene({"iterations": iterations, "damping": damping(0.98)},
-                   {"name": "chain", "resolution": [1, particles], "size": [0.0, length], "mass": light * particles,
-                    "pins": ["top-left"], "particle_masses": [[0, particles - 1, light * ratio]],
-                    "line_passes": passes})
-        sim = Simulator(sc, device)
-        for _ in range(480):
-            sim.step_frame()
-        p = sim.positions().astype(np.float64)
+        p = settled_chain(device, particles, ratio, iterations, passes).positions().astype(np.float64)
         depth = p[0, 1] - p[-1, 1]
         checks += [
             count_check(case, "particles with a NaN/inf coordinate", nonfinite(p)),
