@@ -10,6 +10,7 @@ import warp as wp
 from warp_verlet.constraints.line_solve import LineSolves, capacity_of
 from warp_verlet.core.simulator import Simulator
 from warp_verlet.errors import SceneError
+from warp_verlet.kernels.line_solve import LINE_DAMPING
 from warp_verlet.input.scene import parse_scene
 
 SOFT = {"shear": 1.0, "bend": 1.0}  # m/N: a cloth that can drape without stretching
@@ -84,7 +85,8 @@ def test_a_pass_keeps_momentum():
 
 def newton_step_on_lines(x: np.ndarray, w: np.ndarray, rest: np.ndarray, lines: list[np.ndarray]) -> np.ndarray:
     """One Newton step on each line's stick lengths, one line after another, solved densely in numpy (no
-    contact): J W J^T lambda = -C, x += W J^T lambda."""
+    contact): J W J^T lambda = -C, x += W J^T lambda, the diagonal of the sticks between a line's first and last
+    pin (w = 0) scaled by 1 + LINE_DAMPING."""
     x = x.copy()
     for line in lines:
         e = x[line[1:]] - x[line[:-1]]
@@ -96,17 +98,22 @@ def newton_step_on_lines(x: np.ndarray, w: np.ndarray, rest: np.ndarray, lines: 
             jacobian[k, 3 * k:3 * k + 3] = -n[k]
             jacobian[k, 3 * k + 3:3 * k + 6] = n[k]
         weights = np.repeat(w[line], 3)
-        multipliers = np.linalg.solve((jacobian * weights) @ jacobian.T, rest[:m] - length)
+        matrix = (jacobian * weights) @ jacobian.T
+        pins = np.flatnonzero(w[line] == 0.0)
+        if len(pins) >= 2:
+            between = np.arange(pins[0], pins[-1])
+            matrix[between, between] *= 1.0 + LINE_DAMPING
+        multipliers = np.linalg.solve(matrix, rest[:m] - length)
         x[line] += (weights * (jacobian.T @ multipliers)).reshape(-1, 3)
     return x
 
 
 def test_a_pass_is_a_newton_step_on_each_line():
-    """On a crumpled 17 x 13 sheet with uneven masses and a pin, one pass moves every particle as a dense solve of
-    each row's and then each column's Newton step does (lines of 12 and 16 sticks, padded to 16 equations). The
-    kernel rounds the sticks' directions to float32 for the couplings and moves (a relative 6e-8 of moves of up to
-    5 cm): measured 1.2e-8 m apart."""
-    data = sheet(17, 13, pins=[[8, 6]], particle_masses=[[3, 4, 0.05], [10, 2, 0.01]])
+    """On a crumpled 17 x 13 sheet with uneven masses and pins, one pass moves every particle as a dense solve of
+    each row's and then each column's Newton step does (lines of 12 and 16 sticks, padded to 16 equations), damped
+    between two pins of one line (row 8). The kernel rounds the sticks' directions to float32 for the couplings and
+    moves (a relative 6e-8 of moves of up to 5 cm): measured 1.2e-8 m apart."""
+    data = sheet(17, 13, pins=[[8, 6], [8, 1]], particle_masses=[[3, 4, 0.05], [10, 2, 0.01]])
     data["simulation"]["precision"] = "float64"
     sim = Simulator(parse_scene(data, file="<lines>"), "cpu", use_graph=False)
     rng = np.random.default_rng(7)

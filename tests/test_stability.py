@@ -61,6 +61,10 @@ def test_line_passes_hang_a_heavy_ended_chain_at_its_length(device):
     assert_all_pass(cases.line_chain(device))
 
 
+def test_line_passes_keep_a_line_pinned_taut_at_both_ends_straight(device):
+    assert_all_pass(cases.taut_line(device))
+
+
 # ---------------------------------------------------------------------------------------------- extreme steps
 
 

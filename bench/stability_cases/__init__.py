@@ -17,7 +17,7 @@ from .extreme_steps import STEP_RANGE, dt_drop_energy, fixed_steps, frame_spike,
 from .loads import heavy_gravity, tearing_gale
 from .long_runs import long_run
 from .over_constrained import pins_apart, two_places
-from .stiff import bend_grid, heavy_chain, line_chain, mass_ratio, stiff_iterations
+from .stiff import bend_grid, heavy_chain, line_chain, mass_ratio, stiff_iterations, taut_line
 from .tethers import small_steps, tether_energy, tether_reach
 
 CASES = {
@@ -26,6 +26,7 @@ CASES = {
     "mass_ratio": mass_ratio,
     "heavy_chain": heavy_chain,
     "line_chain": line_chain,
+    "taut_line": taut_line,
     "fixed_steps": fixed_steps,
     "variable_steps": variable_steps,
     "dt_drop_energy": dt_drop_energy,

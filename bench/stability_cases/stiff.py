@@ -8,6 +8,8 @@ import numpy as np
 
 from warp_verlet.core.simulator import Simulator
 
+from ..common import HANGING_DAMPING, hanging_sheet
+
 from .base import G, Check, count_check, damping, hanging, nonfinite, run_with_energy, scene
 
 
@@ -159,5 +161,52 @@ def line_chain(device: str = "cpu", size: str = "test") -> list[Check]:
             Check(case, "|hanging depth - L| / L", abs(depth - length) / length, bound,
                   "analytic: a settled inextensible chain hangs L straight down; measured, with a margin",
                   f"end {depth:.5f} m below the pin; sweeps alone at 1 sweep: 1.33 m (1e2 x), 4.08 m (1e3 x)"),
+        ]
+    return checks
+
+
+TAUT_CHAIN_BOUND = {16: 6e-5, 64: 1e-5}
+"""taut_line's bound on the chain's length / L - 1, per substeps: measured 6.0e-6 and 9.5e-7 on the CPU, x10."""
+TAUT_SHEET_BOUND = {"test": {16: 2.5e-4, 64: 2e-5}, "bench": {16: 1e-3, 64: 6e-5}}
+"""taut_line's bound on the sheet's max stretch, per size and substeps: measured 5.0e-5 and 3.6e-6 at 16², 1.7e-4
+and 1.1e-5 at 64², on the CPU, x5."""
+
+
+def taut_line(device: str = "cpu", size: str = "test") -> list[Check]:
+    """Line passes on lines pinned at both ends at their rest length: a 20-particle, 1 m chain pinned at both ends
+    1 m apart, and the benchmark's vertical sheet hung by its two top corners, whose top row is such a line (with
+    tethers). 1 s at 16 and 64 substeps (dt = 1 / 3840 s at 64, near float32's limit), one sweep and one pass a
+    substep. Rigid sticks hold a taut line straight (an inextensible chain between pins its length apart cannot
+    sag), so the chain keeps its length and the sheet hangs at its length. A straight line's Newton system is
+    singular (kernels/line_solve.py): undamped, a pass threw the sheet to NaN within a frame from 16 substeps up."""
+    n = 16 if size == "test" else 64
+    checks = []
+    for substeps in (16, 64):
+        simulation = {"substeps": substeps, "iterations": 1, "damping": HANGING_DAMPING}
+        chain = {"name": "taut", "resolution": [1, 20], "size": [0.0, 1.0], "orientation": "horizontal",
+                 "pins": ["top-left", "top-right"], "line_passes": 1}
+        sim = Simulator(scene(simulation, chain), device)
+        for _ in range(60):
+            sim.step_frame()
+        p = sim.positions().astype(np.float64)
+        case = f"stiff: line passes on a chain pinned taut at both ends, {substeps} substeps"
+        length = float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum())
+        checks += [
+            count_check(case, "particles with a NaN/inf coordinate", nonfinite(p)),
+            Check(case, "chain length / L - 1", length - 1.0, TAUT_CHAIN_BOUND[substeps],
+                  "analytic: an inextensible chain pinned taut keeps its length L = 1 m; measured x10",
+                  f"sag {float(np.abs(p[:, 1] - p[0, 1]).max()):.2g} m"),
+        ]
+        sheet = hanging_sheet(n, tethers=True, line_passes=1)
+        sim = Simulator(scene(simulation, sheet), device)
+        for _ in range(60):
+            sim.step_frame()
+        p = sim.positions()
+        stretch = sim.stretch(p)
+        case = f"stiff: line passes on a {n}x{n} sheet hung by two corners, with tethers, {substeps} substeps"
+        checks += [
+            count_check(case, "particles with a NaN/inf coordinate", nonfinite(p)),
+            Check(case, "max structural stretch |D - L| / L", stretch.max, TAUT_SHEET_BOUND[size][substeps],
+                  "analytic 0 for rigid sticks; measured x5", f"RMS {stretch.rms:.3g}"),
         ]
     return checks
