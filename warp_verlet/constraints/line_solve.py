@@ -41,8 +41,10 @@ LINE_PASSES = Key(
     "line_passes", integer(0, 100), 0, type="integer", unit="passes", default_text="`0`", allowed="0 … 100",
     doc="Solves of every row and then every column of the cloth's structural sticks, at the start of each "
         "substep's relaxation, each a Newton step on the line's lengths (particles on a collider slide along it). "
-        "They carry a correction across the whole cloth at once, which the sweeps cannot, for a large cloth held up "
-        "by contact, which otherwise stretches. A pass is exact for a straight line; a line that bends sharply "
+        "They carry a correction across the whole cloth at once, which the sweeps cannot: a large cloth held up by "
+        "contact otherwise stretches, and with tethers a pinned cloth converges further (the sticks between two "
+        "pins of a line are damped, since a line pinned taut is singular). A pass is exact for a straight line; a "
+        "line that bends sharply "
         "within a substep (a long line swinging free, heavy particles hung on light ones) needs more passes. 0 "
         "leaves them out. A grid cloth with rigid structural sticks that cannot tear, at most 2049 particles a "
         "side; its shear and bend sticks should have a `compliance`, or the cloth cannot drape without stretching.")
