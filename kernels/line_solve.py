@@ -22,16 +22,15 @@ equations of a level in turn; on the CPU one lane takes them all, in the same or
 device. The coefficients and multipliers are float64: the matrix of a free chain of n particles has a condition
 number of about 0.4 n^2.
 
-Where a line runs between two pins, the step is damped as Levenberg and Marquardt damp Gauss-Newton: the diagonal
-of each stick between its first and last pin is scaled by 1 + ``LINE_DAMPING``. A line pinned at both ends at its
-rest length (the top row of a cloth hung by two corners) is straight, and a straight line between pins has a
-singular matrix: equal multipliers on all its sticks put no net force on any particle. Under gravity it sags by a
-fraction of a float32 ulp a substep, so its sticks' rounding (about 6e-8 of a coordinate) is all of C, and the
-undamped step divided that noise by the sag's square angle and threw the row off (NaN within a frame for a 16 x 16
-cloth hung by two corners at 16 substeps). Damped, a move out of noise C is at most about |C| / (2
-sqrt(LINE_DAMPING)). A line with at most one pin is never singular, and its long, slow modes are what the solve
-is for, so it is not damped: damping every stick by 1e-5 left 7e-5 of a uniform 20% stretch on a free 40-stick
-line, where the exact step leaves 2e-7.
+A pivot of the reduction that cancels to under ``PIVOT_FLOOR`` times its value before the level is raised to
+that (static pivoting with perturbation, as sparse direct solvers do: Li and Demmel 1998). A line's system is
+singular where a stretch of it cannot move along itself at both ends: a line pinned at both ends at its rest
+length (the top row of a cloth hung by two corners) is straight, and equal multipliers on all its sticks put no
+net force on any particle; so is a free particle between two neighbours that a collider holds along the line. In
+the singular direction the multipliers move no particle, so any finite value serves, but an exact zero pivot made
+NaN, and a near-zero one divided the sticks' rounding (about 6e-8 of a coordinate in float32) by the square of
+the line's sag angle and threw the row off (NaN within a frame for a 16 x 16 cloth hung by two corners at 16
+substeps). A well-conditioned line never cancels that far: a free straight line's pivots halve at each level.
 """
 
 import warp as wp
@@ -41,10 +40,9 @@ from .positions import POSITION_TYPES
 
 _KERNELS: dict = {}
 
-LINE_DAMPING = 1.0e-5
-"""The diagonal of a stick between two pins of its line is scaled by 1 + this (Levenberg-Marquardt damping), so
-that a straight line between pins, whose matrix is singular, moves a bounded distance
-(bench/results/line_solve/damping.md)."""
+PIVOT_FLOOR = 1.0e-6
+"""A reduction's pivot is at least this times its value before its level (bench/results/line_solve/README.md,
+"Singular lines")."""
 
 
 def line_solve_kernel(capacity: int, vector, threads: int, max_registers: int | None = None):
@@ -66,7 +64,7 @@ def weighted_dot(u: wp.vec3d, v: wp.vec3d, w: wp.float64, c: wp.vec3d):
 
 
 def _make_kernel(capacity: int, vector, threads: int, max_registers: int | None):
-    DAMPED = wp.float64(1.0 + LINE_DAMPING)
+    FLOOR = wp.float64(PIVOT_FLOOR)
     P = capacity
     POINTS = capacity + 1
     VEC = vector
@@ -100,20 +98,17 @@ def _make_kernel(capacity: int, vector, threads: int, max_registers: int | None)
         contact: int,
         normal: wp.array(dtype=wp.vec3),
         lines: wp.array(dtype=wp.vec4i),
-        pinned_span: wp.array(dtype=wp.vec2i),
         rest: wp.array(dtype=float),
     ):
         """Block b solves line lines[b] = (first particle, sticks M, step between its particles, its first rest
         length in ``rest``); ``normal`` is read where ``contact`` is 1 (the contact normal of each particle, 0 where
-        none); the sticks from ``pinned_span[b][0]`` up to ``pinned_span[b][1]`` (exclusive; the line's first and
-        last pin) are damped."""
+        none)."""
         block, lane = wp.tid()
         line = lines[block]
         first = line[0]
         sticks = line[1]
         step = line[2]
         rest_first = line[3]
-        span = pinned_span[block]
         zero = wp.float64(0.0)
         diagonal = wp.tile_empty(shape=P, dtype=wp.float64, storage="shared")
         lower = wp.tile_empty(shape=P, dtype=wp.float64, storage="shared")  # couples equation k to k - stride
@@ -153,8 +148,6 @@ def _make_kernel(capacity: int, vector, threads: int, max_registers: int | None)
                 if length > zero:
                     n = e / length
                     a = weighted_dot(n, n, wa, ca) + weighted_dot(n, n, wb, cb)
-                    if k >= span[0] and k < span[1]:
-                        a *= DAMPED
                     d = wp.float64(rest[rest_first + k]) - length
                     n32 = wp.vec3(n)
                 if a <= wp.float64(1.0e-12) * (wa + wb) or length == zero:
@@ -195,6 +188,7 @@ def _make_kernel(capacity: int, vector, threads: int, max_registers: int | None)
                     a += beta * lower[k + s]
                     d += beta * rhs[k + s]
                     up = beta * upper[k + s]
+                a = wp.max(a, FLOOR * diagonal[k])  # a cancels only where the line is (nearly) singular
                 put_real(diagonal, k, a)
                 put_real(rhs, k, d)
                 put_real(lower, k, low)

@@ -10,7 +10,6 @@ import warp as wp
 from warp_verlet.constraints.line_solve import LineSolves, capacity_of
 from warp_verlet.core.simulator import Simulator
 from warp_verlet.errors import SceneError
-from warp_verlet.kernels.line_solve import LINE_DAMPING
 from warp_verlet.input.scene import parse_scene
 
 SOFT = {"shear": 1.0, "bend": 1.0}  # m/N: a cloth that can drape without stretching
@@ -85,8 +84,7 @@ def test_a_pass_keeps_momentum():
 
 def newton_step_on_lines(x: np.ndarray, w: np.ndarray, rest: np.ndarray, lines: list[np.ndarray]) -> np.ndarray:
     """One Newton step on each line's stick lengths, one line after another, solved densely in numpy (no
-    contact): J W J^T lambda = -C, x += W J^T lambda, the diagonal of the sticks between a line's first and last
-    pin (w = 0) scaled by 1 + LINE_DAMPING."""
+    contact): J W J^T lambda = -C, x += W J^T lambda."""
     x = x.copy()
     for line in lines:
         e = x[line[1:]] - x[line[:-1]]
@@ -98,20 +96,15 @@ def newton_step_on_lines(x: np.ndarray, w: np.ndarray, rest: np.ndarray, lines: 
             jacobian[k, 3 * k:3 * k + 3] = -n[k]
             jacobian[k, 3 * k + 3:3 * k + 6] = n[k]
         weights = np.repeat(w[line], 3)
-        matrix = (jacobian * weights) @ jacobian.T
-        pins = np.flatnonzero(w[line] == 0.0)
-        if len(pins) >= 2:
-            between = np.arange(pins[0], pins[-1])
-            matrix[between, between] *= 1.0 + LINE_DAMPING
-        multipliers = np.linalg.solve(matrix, rest[:m] - length)
+        multipliers = np.linalg.solve((jacobian * weights) @ jacobian.T, rest[:m] - length)
         x[line] += (weights * (jacobian.T @ multipliers)).reshape(-1, 3)
     return x
 
 
 def test_a_pass_is_a_newton_step_on_each_line():
     """On a crumpled 17 x 13 sheet with uneven masses and pins, one pass moves every particle as a dense solve of
-    each row's and then each column's Newton step does (lines of 12 and 16 sticks, padded to 16 equations), damped
-    between two pins of one line (row 8). The kernel rounds the sticks' directions to float32 for the couplings and
+    each row's and then each column's Newton step does (lines of 12 and 16 sticks, padded to 16 equations; row 8
+    has two pins). The kernel rounds the sticks' directions to float32 for the couplings and
     moves (a relative 6e-8 of moves of up to 5 cm): measured 1.2e-8 m apart."""
     data = sheet(17, 13, pins=[[8, 6], [8, 1]], particle_masses=[[3, 4, 0.05], [10, 2, 0.01]])
     data["simulation"]["precision"] = "float64"
@@ -127,6 +120,27 @@ def test_a_pass_is_a_newton_step_on_each_line():
     expected = newton_step_on_lines(rows, sim.model.host_inv_mass, across, list(index.T))
     assert np.abs(expected - crumpled).max() > 5e-3  # the step moves the sheet
     assert np.abs(sim.positions() - expected).max() < 1e-7
+
+
+def test_a_line_held_along_itself_at_both_ends_stays_finite():
+    """A 3-particle rope hanging from a pin, its bottom particle starting 5 cm under the ground: the clamp holds the
+    bottom along the rope, so the middle particle sits between two ends that cannot move along the line, and the
+    line's system is singular (equal multipliers on both sticks move nothing). The pass must leave every particle
+    finite (an exact zero pivot made NaN: kernels/line_solve.py), the bottom on the ground and the middle between
+    its neighbours."""
+    ground = -0.15
+    data = {"simulation": {"fps": 60, "frames": 1, "substeps": 1, "iterations": 1},
+            "cloth": [{"name": "rope", "resolution": [3, 1], "size": [0.2, 0.0], "orientation": "vertical",
+                       "origin": [0.0, 0.0, 0.0], "mass": 0.03, "sticks": ["structural"], "line_passes": 1,
+                       "pins": ["top-left"]}],
+            "collider": [{"type": "plane", "name": "ground", "point": [0.0, ground, 0.0]}]}
+    sim = Simulator(parse_scene(data, file="<rope>"), "cpu", use_graph=False)
+    assert sim.positions()[2, 1] < ground - 0.04  # it starts under the ground
+    sim.step_frame()
+    y = sim.positions()[:, 1].astype(np.float64)
+    assert np.isfinite(sim.positions()).all()
+    assert y[0] == 0.0 and abs(y[2] - ground) < 1e-6
+    assert ground < y[1] < 0.0
 
 
 def test_a_pass_never_moves_a_pin():

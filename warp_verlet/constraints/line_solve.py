@@ -42,9 +42,8 @@ LINE_PASSES = Key(
     doc="Solves of every row and then every column of the cloth's structural sticks, at the start of each "
         "substep's relaxation, each a Newton step on the line's lengths (particles on a collider slide along it). "
         "They carry a correction across the whole cloth at once, which the sweeps cannot: a large cloth held up by "
-        "contact otherwise stretches, and with tethers a pinned cloth converges further (the sticks between two "
-        "pins of a line are damped, since a line pinned taut is singular). A pass is exact for a straight line; a "
-        "line that bends sharply "
+        "contact otherwise stretches, and with tethers a pinned cloth converges further. A pass is exact for a "
+        "straight line; a line that bends sharply "
         "within a substep (a long line swinging free, heavy particles hung on light ones) needs more passes. 0 "
         "leaves them out. A grid cloth with rigid structural sticks that cannot tear, at most 2049 particles a "
         "side; its shear and bend sticks should have a `compliance`, or the cloth cannot drape without stretching.")
@@ -67,9 +66,7 @@ class LineData:
     """The lines of every cloth with line passes: ``lines`` (L,) vec4i (first particle, sticks, step between its
     particles, the index of its first stick's rest length in ``rest``), every row, then every column (from
     ``column_start``), each group ordered by its cloth's passes, most first; ``rest`` float32 m (per cloth, its
-    stick lengths along a row, then along a column); ``pinned_span`` (L,) vec2i, each line's first and last pinned
-    particle (its index along the line; (0, 0) where the line has fewer than two pins), between which its sticks are
-    damped (kernels/line_solve.py); ``passes`` the most any cloth asks, and ``row_lines[p]`` and
+    stick lengths along a row, then along a column); ``passes`` the most any cloth asks, and ``row_lines[p]`` and
     ``column_lines[p]`` how many leading rows and columns pass p solves (those of the cloths asking more than p);
     ``capacity`` the kernel's, for the longest line."""
 
@@ -108,17 +105,7 @@ class LineData:
         self.column_start = len(rows_table)
         self.lines = wp.array(np.asarray([line[:4] for line in table], np.int32).reshape(-1, 4), dtype=wp.vec4i,
                               device=device)
-        pinned = model.host_inv_mass == 0.0
-        self.pinned_span = wp.array(np.asarray([pinned_span(pinned, *line[:3]) for line in table], np.int32)
-                                    .reshape(-1, 2), dtype=wp.vec2i, device=device)
         self.rest = wp.array(np.concatenate(rest).astype(np.float32), dtype=float, device=device)
-
-
-def pinned_span(pinned: np.ndarray, first: int, sticks: int, step: int) -> tuple[int, int]:
-    """The first and last pinned particle of the line (first, sticks, step) as indices along it, or (0, 0) where it
-    has fewer than two pins."""
-    along = np.flatnonzero(pinned[first:first + sticks * step + 1:step])
-    return (int(along[0]), int(along[-1])) if len(along) >= 2 else (0, 0)
 
 
 class LineSolves(ConstraintSet):
@@ -162,11 +149,11 @@ class LineSolves(ConstraintSet):
         return bool(req.count(self.name))
 
     def device_bytes(self, req) -> int:
-        # a vec4i and a vec2i per line, a rest length per row and column gap (Model); with colliders, a position
-        # snapshot and a contact normal per particle (solver)
+        # a vec4i per line, a rest length per row and column gap (Model); with colliders, a position snapshot and
+        # a contact normal per particle (solver)
         lines, rest, colliders = req.count(self.name)
         contact = req.particles * (req.position_bytes + VEC3) if colliders else 0
-        return lines * 6 * INT + rest * FLOAT + contact
+        return lines * 4 * INT + rest * FLOAT + contact
 
     def build(self, model, scene, device):
         return LineData(model, scene, device)
@@ -196,8 +183,7 @@ class LineSolves(ConstraintSet):
         def lines(first: int, count: int):
             return wp.launch_tiled(kernel, dim=[count], block_dim=threads, record_cmd=True, device=model.device,
                                    inputs=[x, model.inv_mass, int(bool(clamps)), normal,
-                                           data.lines[first:first + count],
-                                           data.pinned_span[first:first + count], data.rest])
+                                           data.lines[first:first + count], data.rest])
 
         passes = []
         for p in range(data.passes):
