@@ -104,8 +104,8 @@ def newton_step_on_lines(x: np.ndarray, w: np.ndarray, rest: np.ndarray, lines: 
 def test_a_pass_is_a_newton_step_on_each_line():
     """On a crumpled 17 x 13 sheet with uneven masses and pins, one pass moves every particle as a dense solve of
     each row's and then each column's Newton step does (lines of 12 and 16 sticks, padded to 16 equations; row 8
-    has two pins). The kernel rounds the sticks' directions to float32 for the couplings and
-    moves (a relative 6e-8 of moves of up to 5 cm): measured 1.2e-8 m apart."""
+    has two pins). The kernel rounds the sticks' directions to float32 for the couplings and moves (a relative 6e-8
+    of moves of up to 5 cm): measured 1.2e-8 m apart."""
     data = sheet(17, 13, pins=[[8, 6], [8, 1]], particle_masses=[[3, 4, 0.05], [10, 2, 0.01]])
     data["simulation"]["precision"] = "float64"
     sim = Simulator(parse_scene(data, file="<lines>"), "cpu", use_graph=False)
