@@ -115,6 +115,10 @@ def test_a_free_sheet_in_a_hurricane_is_carried_at_the_streams_speed_and_never_p
     assert_all_pass(cases.air_carried_sheet(device))
 
 
+def test_a_light_strip_stretched_by_the_air_stays_finite_and_bounded(device):
+    assert_all_pass(cases.air_stretched_strip(device))
+
+
 def test_air_of_density_zero_is_no_air(device):
     assert_all_pass(cases.air_zero_density(device))
 

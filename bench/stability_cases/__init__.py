@@ -8,7 +8,7 @@ passes). Sizes differ between ``size="test"`` and ``size="bench"``; the criteria
 a case says so. ``CASES`` maps each case's name to its function, in the order the suite runs them.
 """
 
-from .air import air_carried_sheet, air_gale, air_hurricane, air_zero_density
+from .air import air_carried_sheet, air_gale, air_hurricane, air_stretched_strip, air_zero_density
 from .base import SIZES, Check, count_check
 from .contact import crumple, drape, fast_impact, fast_impact_line_pass
 from .degenerate import coincident, small_sphere, start_inside, zero_area
@@ -48,6 +48,7 @@ CASES = {
     "air_gale": air_gale,
     "air_hurricane": air_hurricane,
     "air_carried_sheet": air_carried_sheet,
+    "air_stretched_strip": air_stretched_strip,
     "air_zero_density": air_zero_density,
     "drape": drape,
     "crumple": crumple,

@@ -74,7 +74,7 @@ def air_counts(scene: "Scene") -> AirCounts | None:
 def device_bytes(counts: AirCounts, particles: int, position_bytes: int, tears: bool) -> int:
     """The arrays :class:`AirModel` builds, the State's clock and the solver's scratch of face shares."""
     total = (counts.faces + 1) * INT + counts.corners * INT  # each face's corners
-    total += counts.faces * VEC3  # (C_d, C_l, lightest areal density) per face
+    total += counts.faces * VEC3  # (C_d, C_l, lightest areal density x rest area) per face
     total += (particles + 1) * INT + counts.corners * INT  # each particle's faces
     total += counts.corners * INT if tears else 0  # each side's tear entry
     total += 2 * INT + counts.keys * (FLOAT + VEC3)  # the velocity's keyframes
@@ -119,7 +119,8 @@ class AirModel:
 
     ``face_start`` (F + 1,) and ``face_corner`` (C,) int: each face's corners (global particle indices), the faces
     of the cloths that feel air, cloth after cloth. ``face_params`` (F,) vec3: (C_d, C_l, the lightest areal
-    density of its corners, kg/m^2: a corner's mass over its share of its faces' rest areas, +inf for a pin).
+    density of its corners times its rest area, kg: a corner's mass over its share of its faces' rest areas, +inf
+    for a face of pins).
     ``particle_face_start`` (N + 1,) and ``particle_face`` (C,) int: each particle's faces in increasing order,
     the gather's fixed order. ``side_entry`` (C,) int, only when a cloth can tear: per corner, the tear entry of
     the stick along the side to the next corner (-1 where that side is no stick). ``key_start``, ``key_times``,
@@ -155,7 +156,9 @@ class AirModel:
         with np.errstate(divide="ignore", invalid="ignore"):
             sigma = np.where((inv_mass > 0) & (share > 0), 1.0 / (inv_mass * share), np.inf)
         lightest = np.minimum.reduceat(sigma[corner], face_start[:-1])
-        face_params = np.concatenate([np.concatenate(params), lightest[:, None]], axis=1).astype(np.float32)
+        with np.errstate(invalid="ignore"):  # inf x 0: a face of pins with no area never moves
+            rest_mass = np.where(np.isinf(lightest), np.inf, lightest * area)
+        face_params = np.concatenate([np.concatenate(params), rest_mass[:, None]], axis=1).astype(np.float32)
         face_of_corner = np.repeat(np.arange(len(counts_of_face)), counts_of_face)
         order = np.lexsort((face_of_corner, corner))  # by particle, then face: the gather's order
         particle_face_start = np.r_[0, np.cumsum(np.bincount(corner, minlength=n))]
