@@ -1,0 +1,184 @@
+"""Random scenes, run to look for what the stability suite's chosen cases miss: a position that ends non-finite, or
+an error that is not one clear refusal.
+
+    python -m bench.fuzz [--kind lines|features|extreme] [--seed N] [--scenes N] [--frames N] [--out DIR]
+
+Kinds (each a generator of scene tables, drawn from ``numpy.random.default_rng(seed)`` in a fixed order, so a seed
+gives the same scenes on every machine):
+
+- **lines**: one grid cloth with ``line_passes`` (1 to 3): 2 to 23 particles a side, 0.2 to 2 m, either orientation,
+  0.01 to 2 kg, named and interior pins, tethers or not, soft or rigid shear and bend, a ball and a ground plane that
+  may cut the cloth, 1 to 64 substeps of 1, 2 or 8 sweeps; 30 frames;
+- **features**: one or two grid cloths with any of self-collision, line passes, tearing and tethers off; a ball,
+  a ground plane and the table mesh of ``scenes/assets``, each with or without friction; the air at up to 20 m/s;
+  1 to 32 substeps; 20 frames;
+- **extreme**: ``features`` with sizes from 1 cm to 32 m along each axis (faces up to 3000 times longer than wide),
+  masses from 10 mg to 1 t, and up to 64 substeps.
+
+A scene the loader refuses (a ``SceneError``, one clear message) counts as refused; one the simulator stops with a
+``WarpVerletError`` (a divergence it detects, named) as stopped. Every other error, and a run whose positions end
+non-finite, is a finding: printed with its scene tables, so that it can be run again by itself. Exits 1 when
+there is a finding.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import warp as wp
+
+from warp_verlet.core.simulator import Simulator
+from warp_verlet.errors import SceneError, WarpVerletError
+from warp_verlet.input.scene import parse_scene
+
+from .common import arg_parser, machine, quiet_warp, write_table
+
+NAMED_PINS = ["top-left", "top-right", "bottom-left", "bottom-right", "top-edge", "left-edge"]
+TABLE = Path(__file__).resolve().parent.parent / "scenes" / "assets" / "table.obj"
+
+
+def lines_scene(rng: np.random.Generator) -> dict:
+    """A grid cloth with line passes, among pins and colliders (the kind that found singular lines)."""
+    r, c = int(rng.integers(2, 24)), int(rng.integers(2, 24))
+    pins = [str(p) for p in rng.choice(NAMED_PINS, size=int(rng.integers(0, 3)), replace=False)]
+    pins += [[int(rng.integers(0, r)), int(rng.integers(0, c))] for _ in range(int(rng.integers(0, 3)))]
+    substeps, iterations = int(rng.choice([1, 4, 16, 64])), int(rng.choice([1, 2, 8]))
+    cloth = {"name": "c", "resolution": [r, c], "size": [float(rng.uniform(0.2, 2)), float(rng.uniform(0.2, 2))],
+             "orientation": str(rng.choice(["horizontal", "vertical"])), "mass": float(rng.uniform(0.01, 2)),
+             "sticks": ["structural", "shear", "bend"], "line_passes": int(rng.integers(1, 4)),
+             "tethers": bool(rng.integers(0, 2)) and bool(pins), "pins": pins}
+    if rng.integers(0, 2):
+        cloth["compliance"] = {"shear": 1.0, "bend": 1.0}
+    colliders = []
+    if rng.integers(0, 2):
+        colliders.append({"type": "sphere", "name": "ball", "radius": 0.3, "centre": [0.2, -0.4, 0.1]})
+    if rng.integers(0, 2):
+        colliders.append({"type": "plane", "name": "ground", "point": [0, -1.0, 0]})
+    data = {"simulation": {"fps": 60, "frames": 30, "substeps": substeps, "iterations": iterations},
+            "cloth": [cloth]}
+    if colliders:
+        data["collider"] = colliders
+    return data
+
+
+def features_scene(rng: np.random.Generator, extreme: bool = False) -> dict:
+    """One or two grid cloths with a random set of features, among random colliders and air."""
+    cloths = []
+    for ci in range(int(rng.integers(1, 3))):
+        r, c = int(rng.integers(2, 20)), int(rng.integers(2, 20))
+        pins = [str(p) for p in rng.choice(NAMED_PINS, size=int(rng.integers(0, 3)), replace=False)]
+        pins += [[int(rng.integers(0, r)), int(rng.integers(0, c))] for _ in range(int(rng.integers(0, 2)))]
+        if extreme:
+            size = [float(10 ** rng.uniform(-2, 1.5)), float(10 ** rng.uniform(-2, 1.5))]
+        else:
+            size = [float(rng.uniform(0.2, 1.5)), float(rng.uniform(0.2, 1.5))]
+        orientation = str(rng.choice(["horizontal", "vertical"]))
+        mass = float(10 ** rng.uniform(-5, 3)) if extreme else float(rng.uniform(0.01, 2))
+        cloth = {"name": f"c{ci}", "resolution": [r, c], "size": size, "orientation": orientation, "mass": mass,
+                 "origin": [float(rng.uniform(-0.7, 0.0)), float(rng.uniform(0.3, 1.5)), float(rng.uniform(-0.7, 0.0))],
+                 "sticks": ["structural", "shear", "bend"], "pins": pins}
+        rng.integers(0, 6)  # a draw the recorded seeds were made with
+        if rng.integers(0, 2):
+            cloth["compliance"] = {"shear": float(rng.choice([0.01, 1.0])), "bend": 1.0}
+        if rng.integers(0, 3) == 0:
+            cloth["self_collision"] = True
+        if rng.integers(0, 3) == 0:
+            cloth["line_passes"] = int(rng.integers(1, 3))
+        elif rng.integers(0, 3) == 0:
+            cloth["tear_threshold"] = float(rng.uniform(1.05, 2.0))
+        if rng.integers(0, 4) == 0:
+            cloth["tethers"] = False
+        cloths.append(cloth)
+    colliders = []
+    if rng.integers(0, 2):
+        colliders.append({"type": "sphere", "name": "ball", "radius": float(rng.uniform(0.05, 0.4)),
+                          "centre": [0.0, float(rng.uniform(-0.2, 0.8)), 0.0],
+                          "friction_coefficient": float(rng.choice([0, 0.5]))})
+    if rng.integers(0, 2):
+        colliders.append({"type": "plane", "name": "ground", "point": [0, float(rng.uniform(-0.5, 0.3)), 0],
+                          "friction_coefficient": float(rng.choice([0, 0.6]))})
+    if rng.integers(0, 3) == 0:
+        colliders.append({"type": "mesh", "name": "table", "mesh": str(TABLE), "thickness": 0.01,
+                          "friction_coefficient": float(rng.choice([0, 0.5]))})
+    substeps = int(rng.choice([1, 2, 8, 32, 64] if extreme else [1, 2, 8, 32]))
+    simulation = {"fps": 60, "frames": 20, "substeps": substeps, "iterations": int(rng.choice([1, 4, 8]))}
+    if rng.integers(0, 4) == 0:
+        simulation["air"] = {"velocity": [float(rng.uniform(0, 20)), 0.0, 0.0], "density": 1.2}
+    data = {"simulation": simulation, "cloth": cloths}
+    if colliders:
+        data["collider"] = colliders
+    return data
+
+
+KINDS = {"lines": lines_scene, "features": features_scene,
+         "extreme": lambda rng: features_scene(rng, extreme=True)}
+"""Kind -> generator of one scene's tables from the random generator."""
+
+
+def run_scene(data: dict, frames: int, device: str = "cpu") -> str:
+    """Run the scene tables ``data`` for ``frames`` frames: "finite", "refused: ...", "stopped: ..." or a finding,
+    "non-finite at frame F" or "error: ...". Never raises."""
+    try:
+        sim = Simulator(parse_scene(data, file="<fuzz>"), device)
+    except SceneError as e:
+        return f"refused: {str(e)[:200]}"
+    except Exception as e:  # noqa: BLE001 - a fuzz reports whatever it finds
+        return f"error: {type(e).__name__}: {str(e)[:300]}"
+    try:
+        for frame in range(frames):
+            sim.step_frame()
+            if not np.isfinite(sim.positions()).all():
+                return f"non-finite at frame {frame}"
+    except WarpVerletError as e:
+        return f"stopped: {str(e)[:200]}"
+    except Exception as e:  # noqa: BLE001
+        return f"error: {type(e).__name__}: {str(e)[:300]}"
+    finally:
+        sim.close()
+    return "finite"
+
+
+def is_finding(outcome: str) -> bool:
+    return outcome.startswith(("non-finite", "error"))
+
+
+def fuzz(kind: str, seed: int, scenes: int, frames: int, device: str = "cpu", log=print) -> dict[str, int]:
+    """Generate and run ``scenes`` scenes of ``kind`` from ``seed``; print each finding with its tables. The count
+    of each outcome: finite, refused, stopped, findings."""
+    rng = np.random.default_rng(seed)
+    counts = {"finite": 0, "refused": 0, "stopped": 0, "findings": 0}
+    for index in range(scenes):
+        data = KINDS[kind](rng)
+        outcome = run_scene(data, frames, device)
+        if is_finding(outcome):
+            counts["findings"] += 1
+            log(f"finding: scene {index}: {outcome}\n  {data}")
+        else:
+            counts[outcome.split(":")[0]] += 1
+    return counts
+
+
+def main(argv=None) -> int:
+    p = arg_parser("bench.fuzz", __doc__)
+    p.add_argument("--kind", choices=list(KINDS), default="features")
+    p.add_argument("--seed", type=int, default=1)
+    p.add_argument("--scenes", type=int, default=100)
+    p.add_argument("--frames", type=int, default=None, help="frames each (default: the kind's, 30 for lines, 20 "
+                                                            "for the others)")
+    p.add_argument("--device", default="cpu")
+    p.add_argument("--out", type=Path, default=None, help="write fuzz-KIND-SEED.md and .csv there")
+    args = p.parse_args(argv)
+    quiet_warp()
+    frames = args.frames or (30 if args.kind == "lines" else 20)
+    counts = fuzz(args.kind, args.seed, args.scenes, frames, args.device)
+    command = ["bench.fuzz", *(argv if argv is not None else sys.argv[1:])]
+    header = "\n".join(machine(args.device).lines(command))
+    write_table([{"kind": args.kind, "seed": args.seed, "scenes": args.scenes, "frames": frames, **counts}],
+                args.out, f"fuzz-{args.kind}-{args.seed}", f"Fuzz: {args.kind}, seed {args.seed}\n\n{header}")
+    return 1 if counts["findings"] else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
