@@ -221,6 +221,8 @@ def test_bad_limits_are_refused(value, problem):
 def test_a_tearing_cloth_and_a_cloth_without_structural_sticks_take_no_limit():
     with pytest.raises(SceneError, match=r"cloth\[0\]\.max_bend_angle: a cloth that can tear"):
         make_scene(max_bend_angle=30.0, tear_threshold=1.5)
+    with pytest.raises(SceneError, match=r"cloth\[0\]\.max_bend_angle: a cloth that can tear"):
+        make_scene(max_bend_angle=30.0, tear_tension=20.0)  # joints across a torn stick threw a cloth to NaN
     with pytest.raises(SceneError, match=r"cloth\[0\]\.max_bend_angle: bounds the angle between structural"):
         make_scene(max_bend_angle=30.0, sticks=["shear"])
 

@@ -206,3 +206,17 @@ def test_a_run_that_has_not_converged_names_the_cloth_and_what_helps_it(tmp_path
     assert "has not converged in cloth 'big' (a 32 x 32 grid) at 1 substeps x 1 iterations a frame" in warning
     for fix in ("more substeps", "target_stretch", "tethers = true", "multilevel = true", "30 m/s^2"):
         assert fix in warning
+
+
+def test_the_unconverged_warning_offers_no_multilevel_pass_to_a_cloth_that_can_tear(tmp_path):
+    """The multilevel pass refuses a cloth that can tear, by stretch or by tension, so the warning does not offer
+    it to either."""
+    for tear in ({"tear_threshold": 50.0}, {"tear_tension": 1.0e6}):
+        s = parse_scene({"simulation": {"fps": 30, "frames": 15, "substeps": 1, "iterations": 1,
+                                        "gravity": [0.0, -30.0, 0.0]},
+                         "cloth": [{"name": "big", "resolution": [32, 32], "size": [1.0, 1.0],
+                                    "origin": [0.0, 1.0, 0.0], "pins": ["top-left", "top-right"], "tethers": False,
+                                    **tear}]}, "<unconverged, tearing>")
+        summary = runner.run_scene(s, tmp_path / "c.usdc", device="cpu")
+        (warning,) = [line for line in summary.format().splitlines() if line.startswith("warning")]
+        assert "more substeps" in warning and "multilevel" not in warning

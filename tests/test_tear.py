@@ -257,6 +257,23 @@ def test_cache_hides_exactly_the_faces_beside_torn_sticks(tmp_path, solver, torn
     assert {len(flag_points.Get(t)) for t in flag_points.GetTimeSamples()} == {rows * cols}
 
 
+def test_a_cloth_that_tears_by_tension_alone_writes_its_torn_faces(tmp_path):
+    """tear_tension without tear_threshold: the run tears sticks, and the cache hides the faces beside them (the
+    writer was once told such a cloth does not tear, and the run stopped before writing its cache)."""
+    data = {"simulation": {"fps": 60, "frames": 30, "substeps": 8, "iterations": 4},
+            "cloth": [{"name": "sheet", "resolution": [8, 8], "size": [1.0, 1.0], "orientation": "horizontal",
+                       "origin": [-0.5, 1.0, -0.5], "mass": 5.0, "pins": ["left-edge", "right-edge"],
+                       "sticks": ["structural", "shear"], "tear_tension": 2.0}]}
+    out = tmp_path / "tension.usda"
+    summary = run_scene(parse_scene(data, "<tension>"), out, device="cpu")
+    assert summary.torn
+    stage = Usd.Stage.Open(str(out))
+    counts = UsdGeom.Mesh.Get(stage, "/World/sheet").GetFaceVertexCountsAttr()  # the default: torn faces removed
+    last = counts.GetTimeSamples()[-1]
+    assert len(counts.Get(0)) == 7 * 7 and len(counts.Get(last)) < 7 * 7
+    assert validate_cache(out) == []
+
+
 def test_stretch_statistics_leave_torn_sticks_out():
     scene = gale()
     sim = Simulator(scene, "cpu")

@@ -201,7 +201,7 @@ def unconverged_advice(scene: Scene, sim, points: np.ndarray) -> str:
     if spec.pin_count and not spec.uses_tethers:
         fixes.append("tethers = true (with a tether_scale above its tear_threshold)" if spec.tear_threshold
                      else "tethers = true")
-    if spec.mesh is None and spec.tear_threshold is None and not settings.multilevel:
+    if spec.mesh is None and not spec.tears and not settings.multilevel:
         fixes.append("multilevel = true")
     fixes.append(f"or a lighter load (gravity + wind: {load:.3g} m/s^2)")
     return (f"in cloth '{spec.name}' ({shape}) at {sim.substeps} substeps x {settings.iterations} iterations a "
@@ -260,7 +260,7 @@ def cached_shape(topology, spec, override: bool, tears: bool = False):
     from ..output.usd_writer import CachedShape
 
     return CachedShape(topology.name, topology.cache_faces, topology.uvs, topology.vertex_count,
-                       tears=tears or spec.tear_threshold is not None, uv_interpolation=topology.uv_interpolation,
+                       tears=tears or spec.tears, uv_interpolation=topology.uv_interpolation,
                        left_handed=topology.left_handed,
                        prim_path=spec.mesh.mesh.source.prim_path if override else None)
 

@@ -8,8 +8,8 @@ untouched, and its corrections are weighted by inverse mass (a pin does not move
 coloured by :func:`warp_verlet.geometry.colouring.colour`, projected after the sticks in every sweep
 (kernels/angle_limit.py). A limit of 180 degrees builds nothing.
 
-A torn stick would leave its joints holding the torn pieces at an angle, so a cloth with ``tear_threshold``
-takes no ``max_bend_angle``.
+A torn stick would leave its joints holding the torn pieces at an angle, so a cloth that can tear
+(``tear_threshold`` or ``tear_tension``) takes no ``max_bend_angle``.
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ MAX_BEND_ANGLE = Key(
     doc="The most a cloth may bend: on a grid or a rope, the angle between two successive structural sticks "
         "along a row or a column (0 when straight); on a mesh, the angle between the two faces across each "
         "interior edge (0 when flat). Unilateral (a straighter cloth is untouched) and weighted by inverse "
-        "mass. 180 changes nothing. Not with `tear_threshold`.")
+        "mass. 180 changes nothing. Not with `tear_threshold` or `tear_tension`.")
 
 
 def limit_of(spec) -> float | None:
@@ -130,9 +130,10 @@ class AngleJoints(ConstraintSet):
     def check_cloth(self, spec, table):
         if spec.options.get(MAX_BEND_ANGLE.name) is None:
             return None
-        if spec.tear_threshold is not None:
-            raise table.error(MAX_BEND_ANGLE.name, "a cloth that can tear takes no max_bend_angle (a torn stick "
-                              "would leave its joints holding the pieces at an angle); remove one of the two")
+        if spec.tears:
+            raise table.error(MAX_BEND_ANGLE.name, "a cloth that can tear (tear_threshold or tear_tension) takes no "
+                              "max_bend_angle (a torn stick would leave its joints holding the pieces at an angle); "
+                              "remove one of the two")
         if spec.mesh is None and "structural" not in spec.sticks:
             raise table.error(MAX_BEND_ANGLE.name, "bounds the angle between structural sticks, and sticks = "
                               f"{list(spec.sticks)} builds none: add \"structural\"")
