@@ -276,7 +276,7 @@ SIMULATION_KEYS: tuple[Key, ...] = (
         doc="The most substeps per frame a `target_stretch` budget may choose."),
     Key("multilevel", _boolean, False, "boolean",
         doc="A coarse-to-fine pass over each grid's hierarchy before every substep's sweeps (see \"Multilevel pass\" "
-            "below). Not with `tear_threshold` or soft structural sticks."),
+            "below). Not with a cloth that can tear (`tear_threshold` or `tear_tension`) or soft structural sticks."),
     Key("multilevel_sweeps", integer(1, 1000), 1, "integer", "sweeps", allowed="1 … 1000",
         doc="Sweeps of each coarse level per substep."),
     Key("contact_projection", choice(CONTACT_PROJECTIONS), "after_sweeps", "string",
