@@ -1,7 +1,7 @@
 """Random scenes, run to look for what the stability suite's chosen cases miss: a position that ends non-finite, or
 an error that is not one clear refusal.
 
-    python -m bench.fuzz [--kind lines|features|extreme] [--seed N] [--scenes N] [--frames N] [--out DIR]
+    python -m bench.fuzz [--kind lines|features|extreme|assorted] [--seed N] [--scenes N] [--frames N] [--out DIR]
 
 Kinds (each a generator of scene tables, drawn from ``numpy.random.default_rng(seed)`` in a fixed order, so a seed
 gives the same scenes on every machine):
@@ -13,7 +13,11 @@ gives the same scenes on every machine):
   a ground plane and the table mesh of ``scenes/assets``, each with or without friction; the air at up to 20 m/s;
   1 to 32 substeps; 20 frames;
 - **extreme**: ``features`` with sizes from 1 cm to 32 m along each axis (so faces can be thousands of times longer
-  than wide), masses from 10 mg to 1 t, and up to 64 substeps.
+  than wide), masses from 10 mg to 1 t, and up to 64 substeps;
+- **assorted**: one or two cloths, each the tablecloth mesh of ``scenes/assets`` scaled 0.1 to 10 times or a grid
+  with pins, a heavy particle and a rigid patch, with any of a soft bend, a bend limit, self-collision, tearing by
+  tension and tethers off; a keyframed ball, the ground and a moved table mesh of thickness 0 to 5 cm; float32 or
+  float64; the air at up to 30 m/s and gravity up to 1000 m/s^2; 1 to 64 substeps; 15 frames.
 
 A scene the loader refuses (a ``SceneError``, one clear message) counts as refused; one the simulator stops with a
 ``WarpVerletError`` (a divergence it detects, named) as stopped. Every other error, and a run whose positions end
@@ -112,8 +116,73 @@ def features_scene(rng: np.random.Generator, extreme: bool = False) -> dict:
     return data
 
 
+CLOTH_MESH = Path(__file__).resolve().parent.parent / "scenes" / "assets" / "tablecloth.obj"
+
+
+def assorted_scene(rng: np.random.Generator) -> dict:
+    """Mesh and grid cloths with the features the other kinds leave out, among moving colliders."""
+    cloths = []
+    for ci in range(int(rng.integers(1, 3))):
+        if rng.integers(0, 2):
+            cloth = {"name": f"m{ci}", "mesh": str(CLOTH_MESH),
+                     "translate": [0.0, float(rng.uniform(0.5, 1.5)), 0.0], "scale": float(10 ** rng.uniform(-1, 1)),
+                     "mass": float(10 ** rng.uniform(-3, 1)), "sticks": ["structural", "bend"]}
+        else:
+            r, c = int(rng.integers(2, 16)), int(rng.integers(2, 16))
+            cloth = {"name": f"g{ci}", "resolution": [r, c],
+                     "size": [float(rng.uniform(0.2, 1.5)), float(rng.uniform(0.2, 1.5))],
+                     "orientation": str(rng.choice(["horizontal", "vertical"])),
+                     "mass": float(10 ** rng.uniform(-3, 1)),
+                     "origin": [float(rng.uniform(-0.7, 0.0)), float(rng.uniform(0.3, 1.5)),
+                                float(rng.uniform(-0.7, 0.0))],
+                     "sticks": ["structural", "shear", "bend"],
+                     "pins": [str(p) for p in rng.choice(NAMED_PINS, size=int(rng.integers(0, 3)), replace=False)]}
+            if rng.integers(0, 3) == 0:
+                cloth["particle_masses"] = [[int(rng.integers(0, r)), int(rng.integers(0, c)),
+                                             float(10 ** rng.uniform(-4, 2))]]
+            if rng.integers(0, 3) == 0:  # a box over the cloth's left part (or none of it: a clear refusal)
+                box = {"min": [-2.0, -2.0, -2.0], "max": [float(rng.uniform(-0.6, 0.5)), 3.0, 3.0]}
+                cloth["rigid_patches"] = [[box]]
+        if rng.integers(0, 2):
+            cloth["compliance"] = {"bend": float(10 ** rng.uniform(-3, 1))}
+        if rng.integers(0, 3) == 0:
+            cloth["max_bend_angle"] = float(rng.uniform(1, 90))
+        if rng.integers(0, 3) == 0:
+            cloth["self_collision"] = True
+        if rng.integers(0, 3) == 0:
+            cloth["tear_tension"] = float(10 ** rng.uniform(-3, 1))
+        if rng.integers(0, 4) == 0:
+            cloth["tethers"] = False
+        cloths.append(cloth)
+    colliders = []
+    if rng.integers(0, 2):
+        end = float(rng.uniform(0.1, 1.0))
+        colliders.append({"type": "sphere", "name": "ball", "radius": float(rng.uniform(0.05, 0.4)),
+                          "path": [[0.0, 0.0, float(rng.uniform(-0.5, 1.5)), 0.0],
+                                   [end, float(rng.uniform(-1, 1)), float(rng.uniform(-0.5, 1.5)), 0.0]],
+                          "friction_coefficient": float(rng.choice([0, 0.5]))})
+    if rng.integers(0, 2):
+        colliders.append({"type": "plane", "name": "ground", "point": [0, float(rng.uniform(-0.5, 0.3)), 0],
+                          "friction_coefficient": float(rng.choice([0, 0.6]))})
+    if rng.integers(0, 3) == 0:
+        colliders.append({"type": "mesh", "name": "table", "mesh": str(TABLE),
+                          "thickness": float(rng.choice([0.0, 0.01, 0.05])),
+                          "friction_coefficient": float(rng.choice([0, 0.5])),
+                          "translate": [float(rng.uniform(-0.5, 0.5)), float(rng.uniform(-0.5, 0.5)), 0.0]})
+    simulation = {"fps": 60, "frames": 15, "substeps": int(rng.choice([1, 4, 16, 64])),
+                  "iterations": int(rng.choice([1, 4, 8])), "precision": str(rng.choice(["auto", "float64"]))}
+    if rng.integers(0, 4) == 0:
+        simulation["air"] = {"velocity": [float(rng.uniform(0, 30)), 0.0, 0.0]}
+    if rng.integers(0, 4) == 0:
+        simulation["gravity"] = [0.0, float(-10 ** rng.uniform(0, 3)), 0.0]
+    data = {"simulation": simulation, "cloth": cloths}
+    if colliders:
+        data["collider"] = colliders
+    return data
+
+
 KINDS = {"lines": lines_scene, "features": features_scene,
-         "extreme": lambda rng: features_scene(rng, extreme=True)}
+         "extreme": lambda rng: features_scene(rng, extreme=True), "assorted": assorted_scene}
 """Kind -> generator of one scene's tables from the random generator."""
 
 
@@ -144,14 +213,15 @@ def is_finding(outcome: str) -> bool:
     return outcome.startswith(("non-finite", "error"))
 
 
-def fuzz(kind: str, seed: int, scenes: int, frames: int, device: str = "cpu", log=print) -> dict[str, int]:
-    """Generate and run ``scenes`` scenes of ``kind`` from ``seed``; print each finding with its tables. The count
-    of each outcome: finite, refused, stopped, findings."""
+def fuzz(kind: str, seed: int, scenes: int, frames: int | None = None, device: str = "cpu",
+         log=print) -> dict[str, int]:
+    """Generate and run ``scenes`` scenes of ``kind`` from ``seed`` for ``frames`` frames each (None: each scene's
+    own); print each finding with its tables. The count of each outcome: finite, refused, stopped, findings."""
     rng = np.random.default_rng(seed)
     counts = {"finite": 0, "refused": 0, "stopped": 0, "findings": 0}
     for index in range(scenes):
         data = KINDS[kind](rng)
-        outcome = run_scene(data, frames, device)
+        outcome = run_scene(data, frames or data["simulation"]["frames"], device)
         if is_finding(outcome):
             counts["findings"] += 1
             log(f"finding: scene {index}: {outcome}\n  {data}")
@@ -165,17 +235,18 @@ def main(argv=None) -> int:
     p.add_argument("--kind", choices=list(KINDS), default="features")
     p.add_argument("--seed", type=int, default=1)
     p.add_argument("--scenes", type=int, default=100)
-    p.add_argument("--frames", type=int, default=None, help="frames each (default: the kind's, 30 for lines, 20 "
-                                                            "for the others)")
+    p.add_argument("--frames", type=int, default=None, help="frames each (default: the kind's own, the scene's "
+                                                            "frames)")
     p.add_argument("--device", default="cpu")
     p.add_argument("--out", type=Path, default=None, help="write fuzz-KIND-SEED.md and .csv there")
     args = p.parse_args(argv)
     quiet_warp()
-    frames = args.frames or (30 if args.kind == "lines" else 20)
+    frames = args.frames
     counts = fuzz(args.kind, args.seed, args.scenes, frames, args.device)
     command = ["bench.fuzz", *(argv if argv is not None else sys.argv[1:])]
     header = "\n".join(machine(args.device).lines(command))
-    write_table([{"kind": args.kind, "seed": args.seed, "scenes": args.scenes, "frames": frames, **counts}],
+    write_table([{"kind": args.kind, "seed": args.seed, "scenes": args.scenes,
+                  "frames": frames or "each scene's", **counts}],
                 args.out, f"fuzz-{args.kind}-{args.seed}", f"Fuzz: {args.kind}, seed {args.seed}\n\n{header}")
     return 1 if counts["findings"] else 0
 
