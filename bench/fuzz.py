@@ -19,6 +19,9 @@ gives the same scenes on every machine):
   tension and tethers off; a keyframed ball, the ground and a moved table mesh of thickness 0 to 5 cm; float32 or
   float64; the air at up to 30 m/s and gravity up to 1000 m/s^2; 1 to 64 substeps; 15 frames.
 
+With ``--cache`` each scene runs as ``warp-verlet run`` runs it (``warp_verlet.apps.runner.run_scene``), writing its
+USD point cache, which must then pass ``validate_cache``; a cache that does not is a finding too.
+
 A scene the loader refuses (a ``SceneError``, one clear message) counts as refused; one the simulator stops with a
 ``WarpVerletError`` (a divergence it detects, named) as stopped. Every other error, and a run whose positions end
 non-finite, is a finding: printed with its scene tables, so that it can be run again by itself. Exits 1 when
@@ -28,10 +31,10 @@ there is a finding.
 from __future__ import annotations
 
 import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
-import warp as wp
 
 from warp_verlet.core.simulator import Simulator
 from warp_verlet.errors import SceneError, WarpVerletError
@@ -186,13 +189,19 @@ KINDS = {"lines": lines_scene, "features": features_scene,
 """Kind -> generator of one scene's tables from the random generator."""
 
 
-def run_scene(data: dict, frames: int, device: str = "cpu") -> str:
+def run_scene(data: dict, frames: int, device: str = "cpu", cache: Path | None = None) -> str:
     """Run the scene tables ``data`` for ``frames`` frames: "finite", "refused: ...", "stopped: ..." or a finding,
-    "non-finite at frame F" or "error: ...". Never raises."""
+    "non-finite at frame F", "invalid cache: ..." or "error: ...". With ``cache`` (a path ending .usdc or .usda),
+    run it as ``warp-verlet run`` does, writing its cache there, and validate the cache. Never raises."""
     try:
-        sim = Simulator(parse_scene(data, file="<fuzz>"), device)
+        scene = parse_scene(data, file="<fuzz>")
+        if cache is not None:
+            return _run_with_cache(scene, frames, device, cache)
+        sim = Simulator(scene, device)
     except SceneError as e:
         return f"refused: {str(e)[:200]}"
+    except WarpVerletError as e:
+        return f"stopped: {str(e)[:200]}"
     except Exception as e:  # noqa: BLE001 - a fuzz reports whatever it finds
         return f"error: {type(e).__name__}: {str(e)[:300]}"
     try:
@@ -209,19 +218,34 @@ def run_scene(data: dict, frames: int, device: str = "cpu") -> str:
     return "finite"
 
 
+def _run_with_cache(scene, frames: int, device: str, cache: Path) -> str:
+    from warp_verlet.apps.runner import run_scene as run_to_cache
+    from warp_verlet.output.usd_writer import validate_cache
+
+    try:
+        run_to_cache(scene, cache, device=device, frames=frames)
+        problems = validate_cache(cache)
+    finally:
+        for leftover in cache.parent.glob(f"{cache.stem}*"):
+            leftover.unlink()
+    return f"invalid cache: {'; '.join(problems)[:300]}" if problems else "finite"
+
+
 def is_finding(outcome: str) -> bool:
-    return outcome.startswith(("non-finite", "error"))
+    return outcome.startswith(("non-finite", "invalid cache", "error"))
 
 
 def fuzz(kind: str, seed: int, scenes: int, frames: int | None = None, device: str = "cpu",
-         log=print) -> dict[str, int]:
+         cache_dir: Path | None = None, log=print) -> dict[str, int]:
     """Generate and run ``scenes`` scenes of ``kind`` from ``seed`` for ``frames`` frames each (None: each scene's
-    own); print each finding with its tables. The count of each outcome: finite, refused, stopped, findings."""
+    own), writing and validating each cache in ``cache_dir`` when given; print each finding with its tables. The
+    count of each outcome: finite, refused, stopped, findings."""
     rng = np.random.default_rng(seed)
     counts = {"finite": 0, "refused": 0, "stopped": 0, "findings": 0}
     for index in range(scenes):
         data = KINDS[kind](rng)
-        outcome = run_scene(data, frames or data["simulation"]["frames"], device)
+        cache = None if cache_dir is None else cache_dir / f"scene{index}{'.usda' if index % 2 else '.usdc'}"
+        outcome = run_scene(data, frames or data["simulation"]["frames"], device, cache)
         if is_finding(outcome):
             counts["findings"] += 1
             log(f"finding: scene {index}: {outcome}\n  {data}")
@@ -238,16 +262,22 @@ def main(argv=None) -> int:
     p.add_argument("--frames", type=int, default=None, help="frames each (default: the kind's own, the scene's "
                                                             "frames)")
     p.add_argument("--device", default="cpu")
+    p.add_argument("--cache", action="store_true", help="run each scene as warp-verlet run does, writing its USD "
+                                                        "cache (.usdc and .usda in turn), and validate the cache")
     p.add_argument("--out", type=Path, default=None, help="write fuzz-KIND-SEED.md and .csv there")
     args = p.parse_args(argv)
     quiet_warp()
     frames = args.frames
-    counts = fuzz(args.kind, args.seed, args.scenes, frames, args.device)
+    with tempfile.TemporaryDirectory() as scratch:
+        counts = fuzz(args.kind, args.seed, args.scenes, frames, args.device,
+                      Path(scratch) if args.cache else None)
     command = ["bench.fuzz", *(argv if argv is not None else sys.argv[1:])]
     header = "\n".join(machine(args.device).lines(command))
     write_table([{"kind": args.kind, "seed": args.seed, "scenes": args.scenes,
-                  "frames": frames or "each scene's", **counts}],
-                args.out, f"fuzz-{args.kind}-{args.seed}", f"Fuzz: {args.kind}, seed {args.seed}\n\n{header}")
+                  "frames": frames or "each scene's", "caches": "written and validated" if args.cache else "none",
+                  **counts}],
+                args.out, f"fuzz-{args.kind}-{args.seed}{'-cache' if args.cache else ''}",
+                f"Fuzz: {args.kind}, seed {args.seed}\n\n{header}")
     return 1 if counts["findings"] else 0
 
 

@@ -33,6 +33,22 @@ def test_a_run_that_ends_non_finite_is_a_finding(monkeypatch):
     assert outcome == "non-finite at frame 0" and fuzz.is_finding(outcome)
 
 
+def test_with_a_cache_the_scene_runs_as_warp_verlet_run_does_and_its_cache_is_validated(tmp_path, monkeypatch):
+    assert fuzz.run_scene(SMALL, 2, cache=tmp_path / "a.usdc") == "finite"
+    assert list(tmp_path.iterdir()) == []  # the cache is removed once validated
+    from warp_verlet.output import usd_writer
+    monkeypatch.setattr(usd_writer, "validate_cache", lambda path: ["a bad cache"])
+    outcome = fuzz.run_scene(SMALL, 2, cache=tmp_path / "b.usda")
+    assert outcome == "invalid cache: a bad cache" and fuzz.is_finding(outcome)
+
+
+def test_the_command_writes_its_counts(tmp_path):
+    assert fuzz.main(["--kind", "lines", "--seed", "3", "--scenes", "2", "--frames", "1", "--cache",
+                      "--out", str(tmp_path)]) == 0
+    text = (tmp_path / "fuzz-lines-3-cache.md").read_text()
+    assert "| lines | 3 | 2 | 1 | written and validated |" in text
+
+
 @pytest.mark.parametrize("kind", list(fuzz.KINDS))
 def test_a_seed_gives_the_same_scenes(kind):
     assert scene_of(kind, 5, 3) == scene_of(kind, 5, 3)
