@@ -28,7 +28,7 @@ One thread per face (a triangle, a quad or any polygon of k corners, as the clot
   (A / A0) / sigma, is then at most |v . n|, so the face never overtakes the air. Where it does not bind (|v|
   below sigma A0 / (1/2 rho (C_d + C_l) dt A)) the force is exact. The area now counts because a stretched
   face presents more area to the flow while its corners keep their mass: bounded by the rest area alone, a
-  light strip stretched 28 times its width in a 17 m/s flow took more force each step and went to NaN.
+  light strip stretched many times its width in a 17 m/s flow took more force each step and went to NaN.
 
 Each face writes its force divided by its corner count to its own slot of ``share``; ``air_acceleration``
 gathers a particle's shares over its faces in a fixed order (a CSR built on the host), so the sum does not

@@ -156,7 +156,7 @@ class AirModel:
         with np.errstate(divide="ignore", invalid="ignore"):
             sigma = np.where((inv_mass > 0) & (share > 0), 1.0 / (inv_mass * share), np.inf)
         lightest = np.minimum.reduceat(sigma[corner], face_start[:-1])
-        with np.errstate(invalid="ignore"):  # inf x 0: a face of pins with no area never moves
+        with np.errstate(invalid="ignore"):  # a face of pins is never limited, whatever its area (inf x 0 is NaN)
             rest_mass = np.where(np.isinf(lightest), np.inf, lightest * area)
         face_params = np.concatenate([np.concatenate(params), rest_mass[:, None]], axis=1).astype(np.float32)
         face_of_corner = np.repeat(np.arange(len(counts_of_face)), counts_of_face)
