@@ -148,6 +148,16 @@ def test_multilevel_refuses_what_its_limits_would_break(cloth, key, words):
     assert key in str(err.value) and words in str(err.value) and "scene.toml" in str(err.value)
 
 
+def test_multilevel_and_the_global_correction_are_refused_together():
+    """Each carries a correction across the whole grid, and together they fed each other until a free cloth at rest
+    (no gravity, nothing to correct) moved and diverged within a frame at 32 substeps: one clear error instead."""
+    with pytest.raises(SceneError) as err:
+        parse_scene(hanging(9, multilevel=True, global_iterations=1), file="scene.toml")
+    assert "simulation.multilevel" in str(err.value) and "global_iterations" in str(err.value)
+    parse_scene(hanging(9, multilevel=True), file="scene.toml")  # each alone is taken
+    parse_scene(hanging(9, global_iterations=1), file="scene.toml")
+
+
 def test_multilevel_keys_are_checked():
     with pytest.raises(SceneError, match="multilevel_sweeps"):
         parse_scene(hanging(9, multilevel=True, multilevel_sweeps=0), file="s.toml")

@@ -276,7 +276,8 @@ SIMULATION_KEYS: tuple[Key, ...] = (
         doc="The most substeps per frame a `target_stretch` budget may choose."),
     Key("multilevel", _boolean, False, "boolean",
         doc="A coarse-to-fine pass over each grid's hierarchy before every substep's sweeps (see \"Multilevel pass\" "
-            "below). Not with a cloth that can tear (`tear_threshold` or `tear_tension`) or soft structural sticks."),
+            "below). Not with a cloth that can tear (`tear_threshold` or `tear_tension`), soft structural sticks or "
+            "`global_iterations`."),
     Key("multilevel_sweeps", integer(1, 1000), 1, "integer", "sweeps", allowed="1 … 1000",
         doc="Sweeps of each coarse level per substep."),
     Key("contact_projection", choice(CONTACT_PROJECTIONS), "after_sweeps", "string",
@@ -735,6 +736,11 @@ def check_scene(scene: Scene) -> None:
                                  "(each stick's tension is what its own projections add up to, and a Jacobi "
                                  "particle averages its sticks' moves); remove tear_tension or set "
                                  'simulation.relaxation = "coloured"')
+    if simulation.multilevel and simulation.global_iterations:
+        raise SceneError(file, "simulation.multilevel", "the multilevel pass and the global correction "
+                         "(global_iterations) each carry a correction across the whole grid, and together they fed "
+                         "each other until an unpinned cloth at rest diverged: set multilevel = false or "
+                         "global_iterations = 0")
     if simulation.multilevel:
         for i, spec in enumerate(cloth_specs):
             if spec.mesh is not None:
