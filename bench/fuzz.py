@@ -1,7 +1,7 @@
 """Random scenes, run to look for what the stability suite's chosen cases miss: a position that ends non-finite, or
 an error that is not one clear refusal.
 
-    python -m bench.fuzz [--kind lines|features|extreme|assorted] [--seed N] [--scenes N] [--frames N] [--out DIR]
+    python -m bench.fuzz [--kind KIND] [--seed N] [--scenes N] [--frames N] [--cache] [--out DIR]
 
 Kinds (each a generator of scene tables, drawn from ``numpy.random.default_rng(seed)`` in a fixed order, so a seed
 gives the same scenes on every machine):
@@ -17,7 +17,10 @@ gives the same scenes on every machine):
 - **assorted**: one or two cloths, each the tablecloth mesh of ``scenes/assets`` scaled 0.1 to 10 times or a grid
   with pins, a heavy particle and a rigid patch, with any of a soft bend, a bend limit, self-collision, tearing by
   tension and tethers off; a keyframed ball, the ground and a moved table mesh of thickness 0 to 5 cm; float32 or
-  float64; the air at up to 30 m/s and gravity up to 1000 m/s^2; 1 to 64 substeps; 15 frames.
+  float64; the air at up to 30 m/s and gravity up to 1000 m/s^2; 1 to 64 substeps; 15 frames;
+- **solvers**: grids (some tearing) and the tablecloth mesh under random solver settings: coloured or Jacobi
+  relaxation, the contact projection, damping, precision, a ``target_stretch`` budget, the global correction, the
+  multilevel pass, wind; a ball, the ground and the table mesh; 12 frames.
 
 With ``--cache`` each scene runs as ``warp-verlet run`` runs it (``warp_verlet.apps.runner.run_scene``), writing its
 USD point cache, which must then pass ``validate_cache``; a cache that does not is a finding too.
@@ -184,8 +187,72 @@ def assorted_scene(rng: np.random.Generator) -> dict:
     return data
 
 
+def solvers_scene(rng: np.random.Generator) -> dict:
+    """Grids and the tablecloth mesh under random solver settings: the relaxation, the contact projection, damping,
+    precision, a target_stretch budget, the global correction, the multilevel pass and wind."""
+    cloths = []
+    for ci in range(int(rng.integers(1, 3))):
+        if rng.integers(0, 4) == 0:
+            cloth = {"name": f"m{ci}", "mesh": str(CLOTH_MESH),
+                     "translate": [0.0, float(rng.uniform(0.5, 1.5)), 0.0],
+                     "mass": float(10 ** rng.uniform(-2, 0.5)), "sticks": ["structural", "bend"]}
+        else:
+            r, c = int(rng.integers(2, 24)), int(rng.integers(2, 24))
+            cloth = {"name": f"g{ci}", "resolution": [r, c],
+                     "size": [float(rng.uniform(0.2, 1.5)), float(rng.uniform(0.2, 1.5))],
+                     "orientation": str(rng.choice(["horizontal", "vertical"])),
+                     "mass": float(10 ** rng.uniform(-2, 0.5)),
+                     "origin": [float(rng.uniform(-0.7, 0.0)), float(rng.uniform(0.3, 1.5)),
+                                float(rng.uniform(-0.7, 0.0))],
+                     "sticks": [s for s in ["structural", "shear", "bend"] if s == "structural" or rng.integers(0, 2)],
+                     "pins": [str(p) for p in rng.choice(NAMED_PINS, size=int(rng.integers(0, 3)), replace=False)]}
+            if rng.integers(0, 3) == 0:
+                cloth["tear_threshold"] = float(rng.uniform(1.05, 3))
+        if rng.integers(0, 2):
+            cloth["compliance"] = {"bend": float(10 ** rng.uniform(-3, 1))}
+        if rng.integers(0, 3) == 0:
+            cloth["self_collision"] = True
+        if rng.integers(0, 4) == 0:
+            cloth["tethers"] = bool(rng.integers(0, 2))
+        if rng.integers(0, 4) == 0:
+            cloth["tether_scale"] = float(rng.uniform(1.0, 2.0))
+        cloths.append(cloth)
+    simulation = {"fps": float(rng.choice([24, 30, 60, 120])), "frames": 12, "iterations": int(rng.choice([1, 2, 8])),
+                  "relaxation": str(rng.choice(["coloured", "jacobi"])),
+                  "contact_projection": str(rng.choice(["after_sweeps", "every_sweep"])),
+                  "damping": float(rng.choice([0.0, 0.5, 5.0])),
+                  "precision": str(rng.choice(["auto", "float32", "float64"]))}
+    if rng.integers(0, 3) == 0:
+        simulation["target_stretch"] = float(10 ** rng.uniform(-4, -1))
+        simulation["max_substeps"] = 64
+    else:
+        simulation["substeps"] = int(rng.choice([1, 4, 16, 64]))
+    if rng.integers(0, 3) == 0:
+        simulation["global_iterations"] = int(rng.integers(1, 6))
+    if rng.integers(0, 4) == 0:
+        simulation["multilevel"] = True
+    if rng.integers(0, 4) == 0:
+        simulation["wind"] = [float(rng.uniform(-5, 5)), 0.0, float(rng.uniform(-5, 5))]
+    colliders = []
+    if rng.integers(0, 2):
+        colliders.append({"type": "sphere", "name": "ball", "radius": float(rng.uniform(0.1, 0.4)),
+                          "centre": [0.0, float(rng.uniform(-0.2, 0.8)), 0.0],
+                          "thickness": float(rng.choice([0.0, 0.01]))})
+    if rng.integers(0, 2):
+        colliders.append({"type": "plane", "name": "ground", "point": [0, float(rng.uniform(-0.5, 0.3)), 0],
+                          "friction_coefficient": float(rng.choice([0, 0.6])),
+                          "static_friction_coefficient": float(rng.choice([0.6, 1.0]))})
+    if rng.integers(0, 4) == 0:
+        colliders.append({"type": "mesh", "name": "table", "mesh": str(TABLE)})
+    data = {"simulation": simulation, "cloth": cloths}
+    if colliders:
+        data["collider"] = colliders
+    return data
+
+
 KINDS = {"lines": lines_scene, "features": features_scene,
-         "extreme": lambda rng: features_scene(rng, extreme=True), "assorted": assorted_scene}
+         "extreme": lambda rng: features_scene(rng, extreme=True), "assorted": assorted_scene,
+         "solvers": solvers_scene}
 """Kind -> generator of one scene's tables from the random generator."""
 
 
