@@ -125,24 +125,36 @@ def features_scene(rng: np.random.Generator, extreme: bool = False) -> dict:
 CLOTH_MESH = Path(__file__).resolve().parent.parent / "scenes" / "assets" / "tablecloth.obj"
 
 
+def mesh_cloth(rng: np.random.Generator, name: str, log_mass: tuple[float, float], scaled: bool = False) -> dict:
+    """The tablecloth mesh 0.5 to 1.5 m up, scaled 0.1 to 10 times when ``scaled``, of 10^log_mass kg."""
+    cloth = {"name": name, "mesh": str(CLOTH_MESH), "translate": [0.0, float(rng.uniform(0.5, 1.5)), 0.0]}
+    if scaled:
+        cloth["scale"] = float(10 ** rng.uniform(-1, 1))
+    return {**cloth, "mass": float(10 ** rng.uniform(*log_mass)), "sticks": ["structural", "bend"]}
+
+
+def grid_cloth(rng: np.random.Generator, name: str, sides_below: int, log_mass: tuple[float, float],
+               some_families: bool = False) -> dict:
+    """A grid of 2 to ``sides_below`` - 1 particles a side, 0.2 to 1.5 m, of 10^log_mass kg, with up to two named pins;
+    structural sticks and, with ``some_families``, each of shear and bend at random (else both)."""
+    r, c = int(rng.integers(2, sides_below)), int(rng.integers(2, sides_below))
+    return {"name": name, "resolution": [r, c], "size": [float(rng.uniform(0.2, 1.5)), float(rng.uniform(0.2, 1.5))],
+            "orientation": str(rng.choice(["horizontal", "vertical"])), "mass": float(10 ** rng.uniform(*log_mass)),
+            "origin": [float(rng.uniform(-0.7, 0.0)), float(rng.uniform(0.3, 1.5)), float(rng.uniform(-0.7, 0.0))],
+            "sticks": [s for s in ["structural", "shear", "bend"]
+                       if s == "structural" or not some_families or rng.integers(0, 2)],
+            "pins": [str(p) for p in rng.choice(NAMED_PINS, size=int(rng.integers(0, 3)), replace=False)]}
+
+
 def assorted_scene(rng: np.random.Generator) -> dict:
     """Mesh and grid cloths with the features the other kinds leave out, among moving colliders."""
     cloths = []
     for ci in range(int(rng.integers(1, 3))):
         if rng.integers(0, 2):
-            cloth = {"name": f"m{ci}", "mesh": str(CLOTH_MESH),
-                     "translate": [0.0, float(rng.uniform(0.5, 1.5)), 0.0], "scale": float(10 ** rng.uniform(-1, 1)),
-                     "mass": float(10 ** rng.uniform(-3, 1)), "sticks": ["structural", "bend"]}
+            cloth = mesh_cloth(rng, f"m{ci}", (-3, 1), scaled=True)
         else:
-            r, c = int(rng.integers(2, 16)), int(rng.integers(2, 16))
-            cloth = {"name": f"g{ci}", "resolution": [r, c],
-                     "size": [float(rng.uniform(0.2, 1.5)), float(rng.uniform(0.2, 1.5))],
-                     "orientation": str(rng.choice(["horizontal", "vertical"])),
-                     "mass": float(10 ** rng.uniform(-3, 1)),
-                     "origin": [float(rng.uniform(-0.7, 0.0)), float(rng.uniform(0.3, 1.5)),
-                                float(rng.uniform(-0.7, 0.0))],
-                     "sticks": ["structural", "shear", "bend"],
-                     "pins": [str(p) for p in rng.choice(NAMED_PINS, size=int(rng.integers(0, 3)), replace=False)]}
+            cloth = grid_cloth(rng, f"g{ci}", 16, (-3, 1))
+            r, c = cloth["resolution"]
             if rng.integers(0, 3) == 0:
                 cloth["particle_masses"] = [[int(rng.integers(0, r)), int(rng.integers(0, c)),
                                              float(10 ** rng.uniform(-4, 2))]]
@@ -193,19 +205,9 @@ def solvers_scene(rng: np.random.Generator) -> dict:
     cloths = []
     for ci in range(int(rng.integers(1, 3))):
         if rng.integers(0, 4) == 0:
-            cloth = {"name": f"m{ci}", "mesh": str(CLOTH_MESH),
-                     "translate": [0.0, float(rng.uniform(0.5, 1.5)), 0.0],
-                     "mass": float(10 ** rng.uniform(-2, 0.5)), "sticks": ["structural", "bend"]}
+            cloth = mesh_cloth(rng, f"m{ci}", (-2, 0.5))
         else:
-            r, c = int(rng.integers(2, 24)), int(rng.integers(2, 24))
-            cloth = {"name": f"g{ci}", "resolution": [r, c],
-                     "size": [float(rng.uniform(0.2, 1.5)), float(rng.uniform(0.2, 1.5))],
-                     "orientation": str(rng.choice(["horizontal", "vertical"])),
-                     "mass": float(10 ** rng.uniform(-2, 0.5)),
-                     "origin": [float(rng.uniform(-0.7, 0.0)), float(rng.uniform(0.3, 1.5)),
-                                float(rng.uniform(-0.7, 0.0))],
-                     "sticks": [s for s in ["structural", "shear", "bend"] if s == "structural" or rng.integers(0, 2)],
-                     "pins": [str(p) for p in rng.choice(NAMED_PINS, size=int(rng.integers(0, 3)), replace=False)]}
+            cloth = grid_cloth(rng, f"g{ci}", 24, (-2, 0.5), some_families=True)
             if rng.integers(0, 3) == 0:
                 cloth["tear_threshold"] = float(rng.uniform(1.05, 3))
         if rng.integers(0, 2):
