@@ -621,13 +621,14 @@ def _sci(v) -> str:
 def rows_table(rows: list[dict]) -> list[str]:
     net = any(r.get("torn") is not None for r in rows)
     head = ["method", "S × K", "ms/frame", "RMS stretch", "max stretch", "RMS, 2nd half", "max, 2nd half",
-            "pos RMS (m)", "pos max (m)",
-            "pos RMS / size", "pos max / size", "pos resolved", "deepest inside (m)"] + (["torn sticks"] if net else [])
+            "pos RMS (m)", "pos max (m)", "pos RMS / size", "pos max / size", "pos resolved",
+            "deepest inside (m)"] + (["torn sticks"] if net else [])
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in rows:
         cells = [r["method"], f"{r['substeps']} × {r['iterations']}", f"{r['ms_per_frame']:.3g}", _pct(r["rms"]),
-                 _pct(r["max"]), _pct(r.get("rms_late")), _pct(r.get("max_late")), _sci(r["pos_rms_m"]), _sci(r["pos_max_m"]), _pct(r["pos_rms_frac"]),
-                 _pct(r["pos_max_frac"]), "yes" if r.get("pos_resolved") else "no", _inside(r)]
+                 _pct(r["max"]), _pct(r.get("rms_late")), _pct(r.get("max_late")), _sci(r["pos_rms_m"]),
+                 _sci(r["pos_max_m"]), _pct(r["pos_rms_frac"]), _pct(r["pos_max_frac"]),
+                 "yes" if r.get("pos_resolved") else "no", _inside(r)]
         cells += [str(r["torn"]) if r.get("torn") is not None else "—"] if net else []
         lines.append("| " + " | ".join(cells) + " |")
     return lines

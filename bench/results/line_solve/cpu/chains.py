@@ -13,5 +13,6 @@ for n, ratio in [(20, 1e2), (20, 1e3), (20, 1e4), (200, 1)]:
         for passes in (0, 1, 4):
             sim = settled_chain("cpu", n, ratio, sweeps, passes)
             p = sim.positions().astype(float)
-            print(f"| {n} particles | {ratio:g} | {sweeps} | {passes} | {p[0, 1] - p[-1, 1]:.4f} | {sim.stretch().max:.3g} |",
+            depth = p[0, 1] - p[-1, 1]
+            print(f"| {n} particles | {ratio:g} | {sweeps} | {passes} | {depth:.4f} | {sim.stretch().max:.3g} |",
                   flush=True)
