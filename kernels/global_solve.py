@@ -133,8 +133,14 @@ def sideways(rest: float, residual: float):
     """The stiffness across a stretched stick, per unit of its stiffness along it: (L - L0) / L, the part of the
     spring's Hessian that Gauss-Newton drops. Without it a flat cloth has no stiffness out of its plane but its
     mass, and a step would throw a particle far along any small force there. A slack stick gets none (its true
-    value is negative: keeping the matrix positive definite)."""
-    return wp.max(residual, 0.0) / (rest + residual)
+    value is negative: keeping the matrix positive definite).
+
+    The slack case returns before dividing: a stick that a collider folds to nearly a point (two particles
+    clamped onto one spot of the ground) has a length below float32's resolution of its rest length, so
+    ``rest + residual`` is exactly 0, and 0 / 0 would poison the whole solve with NaN."""
+    if residual > 0.0:
+        return residual / (rest + residual)
+    return float(0.0)
 
 
 @wp.func
