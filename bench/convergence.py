@@ -373,7 +373,11 @@ def reference(kind: str, n: int, device: str, threads: int | None, budget: tuple
 
 # ---------------------------------------------------------------- the peer
 
-def peer_rows(sizes: list[int], device: str, references: dict | None = None) -> list[dict]:
+PEER_SOLVERS = ("style3d", "vbd")
+
+
+def peer_rows(sizes: list[int], device: str, references: dict | None = None,
+              solvers: tuple[str, ...] = PEER_SOLVERS) -> list[dict]:
     try:
         from bench import newton_style3d as peer
     except ImportError:
@@ -383,7 +387,7 @@ def peer_rows(sizes: list[int], device: str, references: dict | None = None) -> 
         print("peer: Newton is not installed (pip install newton); skipped")
         return []
     rows = []
-    for solver in ("style3d", "vbd"):
+    for solver in solvers:
         for n in sizes:
             try:
                 r = peer.run_peer(solver, n, frames=60, device=device)
@@ -428,7 +432,7 @@ def _inside(r: dict) -> str:
 def run(plan: dict[str, list[int]], methods: list[str], budgets: list[tuple[int, int]], device: str = "cpu",
         ref_budget: tuple[int, int] | None = None, out: Path | None = None, cache: dict | None = None,
         fresh: bool = False, frames: int | None = None, peer: bool = False, peer_sizes: list[int] | None = None,
-        method_table: dict | None = None, log=print) -> dict:
+        method_table: dict | None = None, log=print, peer_solvers: tuple[str, ...] = PEER_SOLVERS) -> dict:
     """Every (scene, size) of ``plan`` x accepted method x budget, with its reference; ``cache`` (the json's
     "references", updated in place). Returns {"rows", "references", "skipped"}."""
     kind_of_device = device_kind(device)
@@ -457,7 +461,7 @@ def run(plan: dict[str, list[int]], methods: list[str], budgets: list[tuple[int,
                     log(_line(row) + f"  [{time.perf_counter() - started:.0f} s]", flush=True)
     if peer:
         hanging_sizes = plan.get("hanging", [])
-        rows += peer_rows(peer_sizes or hanging_sizes, device, refs)
+        rows += peer_rows(peer_sizes or hanging_sizes, device, refs, peer_solvers)
     for (kind, n), ref in refs.items():
         if ref is not None:
             ref["check"] = self_consistency(ref, rows)
@@ -750,6 +754,8 @@ def main(argv=None) -> int:
     p.add_argument("--frames", type=int, default=None, help="override every scene's frames (smoke tests)")
     p.add_argument("--peer", action="store_true", help="run Newton Style3D and VBD on the hanging cloth too")
     p.add_argument("--peer-sizes", type=int, nargs="*", default=None)
+    p.add_argument("--peer-solvers", nargs="+", choices=PEER_SOLVERS, default=list(PEER_SOLVERS),
+                   help="which of Newton's solvers --peer runs (default: both)")
     p.add_argument("--out", type=Path, default=Path("bench/results/convergence"))
     p.add_argument("--stem", default="convergence", help="output names: STEM.md, STEM.json, STEM-SCENE-N.png")
     p.add_argument("--fresh", action="store_true", help="recompute the references even when cached")
@@ -769,7 +775,7 @@ def main(argv=None) -> int:
     plan = {s: v for s, v in plan.items() if v}
     cache = load_cache(args.out / f"{args.stem}.json")
     res = run(plan, args.methods, args.budgets or DEFAULT_BUDGETS[kind], device, args.ref, args.out, cache,
-              args.fresh, args.frames, args.peer, args.peer_sizes)
+              args.fresh, args.frames, args.peer, args.peer_sizes, peer_solvers=tuple(args.peer_solvers))
     write_outputs(res, args.out, args.stem, device, ["bench.convergence", *argv], plot=not args.no_plot)
     for j in judge_targets(res["rows"]):
         print(f"target {j['target']}: {j['status']}")
