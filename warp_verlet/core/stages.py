@@ -405,7 +405,10 @@ class Relax:
             # substep before either.
             collide_first = [place for bound in launches for place in bound.before]
         if every_sweep:
-            clamps = [[task] for bound in launches for task in bound.clamps]
+            # A clamp is one launch over every particle, so the CPU thread team's member 0 runs it and the other
+            # threads wait at its barrier; a phase still needs an entry per thread.
+            idle = [None] * (solver.threads - 1)
+            clamps = [[task, *idle] for bound in launches for task in bound.clamps]
             phases, first = phases + clamps, first + clamps
         iterations = solver.settings.iterations
         team = solver.team(first + phases * (iterations - 1), repeats=1) if first != phases else solver.team(phases)
