@@ -26,8 +26,9 @@ With ``--cache`` each scene runs as ``warp-verlet run`` runs it (``warp_verlet.a
 USD point cache, which must then pass ``validate_cache``; a cache that does not is a finding too.
 
 A scene the loader refuses (a ``SceneError``, one clear message) counts as refused; one the simulator stops with a
-``WarpVerletError`` (a divergence it detects, named) as stopped. Every other error, and a run whose positions end
-non-finite, is a finding: printed with its scene tables, so that it can be run again by itself. Exits 1 when
+``WarpVerletError`` of its own (a divergence it detects, a step below the float type's limit, memory it lacks:
+named) as stopped. An ``ArgumentError`` or ``StateError`` is the project calling itself wrongly, not a refusal of
+the scene: it, every other error, and a run whose positions end non-finite, is a finding: printed with its scene tables, so that it can be run again by itself. Exits 1 when
 there is a finding.
 """
 
@@ -40,7 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from warp_verlet.core.simulator import Simulator
-from warp_verlet.errors import SceneError, WarpVerletError
+from warp_verlet.errors import ArgumentError, SceneError, StateError, WarpVerletError
 from warp_verlet.input.scene import parse_scene
 
 from .common import arg_parser, machine, quiet_warp, write_table
@@ -258,6 +259,14 @@ KINDS = {"lines": lines_scene, "features": features_scene,
 """Kind -> generator of one scene's tables from the random generator."""
 
 
+def _stopped(e: WarpVerletError) -> str:
+    """A WarpVerletError's outcome: "stopped: ..." where the simulator refuses to go on, a finding ("error: ...")
+    where the project passed itself a wrong argument or used an object in a wrong state."""
+    if isinstance(e, (ArgumentError, StateError)):
+        return f"error: {type(e).__name__}: {str(e)[:300]}"
+    return f"stopped: {str(e)[:200]}"
+
+
 def run_scene(data: dict, frames: int, device: str = "cpu", cache: Path | None = None) -> str:
     """Run the scene tables ``data`` for ``frames`` frames: "finite", "refused: ...", "stopped: ..." or a finding,
     "non-finite at frame F", "invalid cache: ..." or "error: ...". With ``cache`` (a path ending .usdc or .usda),
@@ -270,7 +279,7 @@ def run_scene(data: dict, frames: int, device: str = "cpu", cache: Path | None =
     except SceneError as e:
         return f"refused: {str(e)[:200]}"
     except WarpVerletError as e:
-        return f"stopped: {str(e)[:200]}"
+        return _stopped(e)
     except Exception as e:  # noqa: BLE001 - a fuzz reports whatever it finds
         return f"error: {type(e).__name__}: {str(e)[:300]}"
     try:
@@ -279,7 +288,7 @@ def run_scene(data: dict, frames: int, device: str = "cpu", cache: Path | None =
             if not np.isfinite(sim.positions()).all():
                 return f"non-finite at frame {frame}"
     except WarpVerletError as e:
-        return f"stopped: {str(e)[:200]}"
+        return _stopped(e)
     except Exception as e:  # noqa: BLE001
         return f"error: {type(e).__name__}: {str(e)[:300]}"
     finally:

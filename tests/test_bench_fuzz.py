@@ -33,6 +33,24 @@ def test_a_run_that_ends_non_finite_is_a_finding(monkeypatch):
     assert outcome == "non-finite at frame 0" and fuzz.is_finding(outcome)
 
 
+def test_the_project_calling_itself_wrongly_is_a_finding_and_a_refusal_to_go_on_is_not(monkeypatch):
+    from warp_verlet.errors import ArgumentError, WarpVerletError
+
+    def wrong_call(self):
+        raise ArgumentError("every phase needs one entry per thread")
+
+    monkeypatch.setattr(Simulator, "step_frame", wrong_call)
+    outcome = fuzz.run_scene(SMALL, 2)
+    assert outcome == "error: ArgumentError: every phase needs one entry per thread" and fuzz.is_finding(outcome)
+
+    def out_of_memory(self):
+        raise WarpVerletError("the scene needs 90 GiB, but cuda:0 has only 80 GiB free")
+
+    monkeypatch.setattr(Simulator, "step_frame", out_of_memory)
+    outcome = fuzz.run_scene(SMALL, 2)
+    assert outcome.startswith("stopped: ") and not fuzz.is_finding(outcome)
+
+
 def test_with_a_cache_the_scene_runs_as_warp_verlet_run_does_and_its_cache_is_validated(tmp_path, monkeypatch):
     assert fuzz.run_scene(SMALL, 2, cache=tmp_path / "a.usdc") == "finite"
     assert list(tmp_path.iterdir()) == []  # the cache is removed once validated
