@@ -204,8 +204,29 @@ def test_a_run_that_has_not_converged_names_the_cloth_and_what_helps_it(tmp_path
     assert summary.stretch_max > runner.UNCONVERGED_STRETCH
     (warning,) = [line for line in summary.format().splitlines() if line.startswith("warning")]
     assert "has not converged in cloth 'big' (a 32 x 32 grid) at 1 substeps x 1 iterations a frame" in warning
-    for fix in ("more substeps", "target_stretch", "tethers = true", "multilevel = true", "30 m/s^2"):
+    for fix in ("more substeps", "target_stretch", "tethers = true", "line_passes = 1", "multilevel = true",
+                "30 m/s^2"):
         assert fix in warning
+    assert "sixth of its spacing" not in warning  # a landing's rule is for cloth that colliders hold up
+
+
+def test_the_unconverged_warning_offers_a_cloth_held_up_by_contact_line_passes_and_no_multilevel_pass(tmp_path):
+    """A cloth with no pins that lands on a ball and clings to it (friction): the multilevel pass, which ignores
+    contact, would stretch it more, so the warning does not offer it; line passes need soft shear and bend sticks
+    to drape, and converge a landing slower than a sixth of the spacing a substep, which the warning works out
+    (1 m / 47 / 6 = 3.5 mm)."""
+    s = parse_scene({"simulation": {"fps": 30, "frames": 20, "substeps": 1, "iterations": 1},
+                     "cloth": [{"name": "sheet", "resolution": [48, 48], "size": [1.0, 1.0], "origin": [-0.5, 0.4, -0.5],
+                                "orientation": "horizontal", "sticks": ["structural", "shear", "bend"],
+                                "compliance": {"bend": 1.0}}],
+                     "collider": [{"type": "sphere", "radius": 0.25, "centre": [0.0, 0.0, 0.0],
+                                   "friction_coefficient": 1.0}]}, "<drape>")
+    summary = runner.run_scene(s, tmp_path / "c.usdc", device="cpu")
+    assert summary.stretch_max > runner.UNCONVERGED_STRETCH
+    (warning,) = [line for line in summary.format().splitlines() if line.startswith("warning")]
+    assert "line_passes = 1 and a compliance on its shear sticks (rigid, they make it a plate" in warning
+    assert "sixth of its spacing, 3.5 mm, a substep" in warning
+    assert "multilevel" not in warning and "tethers" not in warning
 
 
 def test_the_unconverged_warning_offers_no_multilevel_pass_to_a_cloth_that_can_tear(tmp_path):

@@ -21,6 +21,7 @@ import numpy as np
 
 from .. import __version__
 from ..output.background_writer import BackgroundWriter
+from ..constraints.line_solve import passes_of, why_no_lines
 from ..errors import DivergenceError, SceneError
 from ..output.output_file import CacheOutput, input_files
 from ..input.scene import Scene
@@ -201,11 +202,29 @@ def unconverged_advice(scene: Scene, sim, points: np.ndarray) -> str:
     if spec.pin_count and not spec.uses_tethers:
         fixes.append("tethers = true (with a tether_scale above its tear_threshold)" if spec.tear_threshold
                      else "tethers = true")
-    if spec.mesh is None and not spec.tears and not settings.multilevel:
+    if not passes_of(spec) and why_no_lines(spec) is None:
+        fixes.append(line_pass_advice(spec))
+    # The multilevel pass moves fine particles by their coarse neighbours' moves, which knows nothing of contact:
+    # a cloth that only colliders hold up stretches more with it (docs/method.md), so it is offered to pinned cloth.
+    if spec.mesh is None and spec.pin_count and not spec.tears and not settings.multilevel:
         fixes.append("multilevel = true")
     fixes.append(f"or a lighter load (gravity + wind: {load:.3g} m/s^2)")
     return (f"in cloth '{spec.name}' ({shape}) at {sim.substeps} substeps x {settings.iterations} iterations a "
             f"frame; what helps: {'; '.join(fixes)}")
+
+
+def line_pass_advice(spec) -> str:
+    """What line passes would take for the grid cloth ``spec``: a cloth that colliders hold up drapes only if its
+    shear and bend sticks are soft, and its landing converges only while it moves under about a sixth of its
+    spacing a substep (bench/results/line_solve/README.md)."""
+    advice = "line_passes = 1"
+    if spec.pin_count == 0:
+        spacing = min(size / (n - 1) for size, n in zip(spec.size, spec.resolution) if n > 1)
+        rigid = [f for f in ("shear", "bend") if f in spec.sticks and f not in spec.compliance]
+        soft = f" and a compliance on its {' and '.join(rigid)} sticks (rigid, they make it a plate that cannot drape)" if rigid else ""
+        advice += (f"{soft}; a cloth landing on a collider holds its length with line passes once it moves under "
+                   f"about a sixth of its spacing, {spacing / 6 * 1000:.2g} mm, a substep")
+    return advice
 
 
 def load_kernels(sim) -> float:

@@ -57,6 +57,21 @@ def _line_cloths(scene) -> list:
     return [c for c in scene.cloths if passes_of(c)]
 
 
+def why_no_lines(spec) -> str | None:
+    """Why the cloth ``spec`` cannot take line passes, or None when it can."""
+    if spec.mesh is not None:
+        return "a mesh cloth has no rows and columns"
+    if "structural" not in spec.sticks:
+        return "the cloth has no structural sticks"
+    if "structural" in spec.compliance:
+        return "its structural sticks are soft (compliance), and a line solve makes them exact"
+    if spec.tears:
+        return "the cloth can tear (tear_threshold or tear_tension), and a torn row is no longer one line"
+    if max(spec.resolution) - 1 > MAX_LINE_STICKS:
+        return f"its lines are longer than {MAX_LINE_STICKS} sticks ({max(spec.resolution) - 1})"
+    return None
+
+
 def capacity_of(sticks: int) -> int:
     """The kernel's capacity for lines of at most ``sticks`` sticks: the next power of two (at least 2)."""
     return max(2, 1 << (max(sticks, 1) - 1).bit_length())
@@ -120,17 +135,7 @@ class LineSolves(ConstraintSet):
     def check_cloth(self, spec, table):
         if not passes_of(spec):
             return None
-        why = None
-        if spec.mesh is not None:
-            why = "a mesh cloth has no rows and columns"
-        elif "structural" not in spec.sticks:
-            why = "the cloth has no structural sticks"
-        elif "structural" in spec.compliance:
-            why = "its structural sticks are soft (compliance), and a line solve makes them exact"
-        elif spec.tears:
-            why = "the cloth can tear (tear_threshold or tear_tension), and a torn row is no longer one line"
-        elif max(spec.resolution) - 1 > MAX_LINE_STICKS:
-            why = f"its lines are longer than {MAX_LINE_STICKS} sticks ({max(spec.resolution) - 1})"
+        why = why_no_lines(spec)
         if why is not None:
             raise table.error(LINE_PASSES.name, f"line passes need a grid cloth with rigid structural sticks that "
                                                 f"cannot tear, at most {MAX_LINE_STICKS + 1} particles a side; {why}")
