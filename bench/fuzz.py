@@ -28,8 +28,8 @@ USD point cache, which must then pass ``validate_cache``; a cache that does not 
 A scene the loader refuses (a ``SceneError``, one clear message) counts as refused; one the simulator stops with a
 ``WarpVerletError`` of its own (a divergence it detects, a step below the float type's limit, memory it lacks:
 named) as stopped. An ``ArgumentError`` or ``StateError`` is the project calling itself wrongly, not a refusal of
-the scene: it, every other error, and a run whose positions end non-finite, is a finding: printed with its scene tables, so that it can be run again by itself. Exits 1 when
-there is a finding.
+the scene: it, every other error, and a run whose positions end non-finite, is a finding: printed with its scene
+tables, so that it can be run again by itself. Exits 1 when there is a finding.
 """
 
 from __future__ import annotations

@@ -221,7 +221,8 @@ def line_pass_advice(spec) -> str:
     if spec.pin_count == 0:
         spacing = min(size / (n - 1) for size, n in zip(spec.size, spec.resolution) if n > 1)
         rigid = [f for f in ("shear", "bend") if f in spec.sticks and f not in spec.compliance]
-        soft = f" and a compliance on its {' and '.join(rigid)} sticks (rigid, they make it a plate that cannot drape)" if rigid else ""
+        soft = (f" and a compliance on its {' and '.join(rigid)} sticks (rigid, they make it a plate that cannot "
+                f"drape)") if rigid else ""
         advice += (f"{soft}; a cloth landing on a collider holds its length with line passes once it moves under "
                    f"about a sixth of its spacing, {spacing / 6 * 1000:.2g} mm, a substep")
     return advice
