@@ -67,6 +67,9 @@ def test_without_a_target_the_substeps_are_the_scene_s():
     ({"target_stretch": 0.0}, "target_stretch"),
     ({"target_stretch": 1.0}, "target_stretch"),
     ({"max_substeps": 0}, "max_substeps"),
+    ({"min_substeps": 8}, "no target_stretch: set substeps instead"),
+    ({"target_stretch": 0.01, "min_substeps": 64, "max_substeps": 32}, "at most max_substeps (32), got 64"),
+    ({"target_stretch": 0.01, "min_substeps": 0}, "min_substeps"),
 ])
 def test_budget_keys_are_checked(simulation, words):
     data = hanging(8)
@@ -129,3 +132,53 @@ def test_the_budget_starts_at_the_default_substeps_as_docs_say():
     assert SimulationSettings().substeps == 4 and sim.substeps == 4
     sim.step_frame()
     assert sim.state.steps == 4 and dict(sim.budget.frames_at) == {4: 1}
+
+
+def test_min_substeps_starts_the_budget_there_and_halving_stops_at_it():
+    b = Budget(target=0.01, substeps=16, max_substeps=64, min_substeps=16)
+    for _ in range(3 * CALM_FRAMES):
+        b.observe(0.0)
+    assert b.substeps == 16 and b.frames_at == {16: 3 * CALM_FRAMES}
+    sim = Simulator(scene(0.01, n=8, min_substeps=16), "cpu")
+    assert sim.substeps == 16 and sim.budget.min_substeps == 16
+    sim.step_frame()
+    assert sim.state.steps == 16
+    assert Simulator(scene(0.01, n=8, min_substeps=2), "cpu").substeps == 4  # the default start, if more
+
+
+def test_the_report_counts_the_frames_a_sudden_load_stretched_and_suggests_min_substeps():
+    b = Budget(target=0.01, substeps=4, max_substeps=64)
+    for rms in (0.001, 0.05, 0.03, 0.02, 0.005, 0.005):  # a landing in frame 2: 4 -> 8 -> 16 -> 32
+        b.observe(rms)
+    report = b.report()
+    assert b.over_while_adding == 3 and b.worst_while_adding == (0.05, 2, 4)
+    assert "3 frames ended over the target while it added substeps (worst rms 5.000%, frame 2 at 4 substeps)" in report
+    assert "min_substeps = 32 starts where it ended up" in report
+
+
+def drape_run(tmp_path, **simulation):
+    """A 48 x 48 sheet with a line pass dropped onto a ball under a 0.5% budget, 40 frames: its budget line."""
+    from warp_verlet.apps.runner import run_scene
+
+    data = {"simulation": {"fps": 60, "frames": 40, "target_stretch": 0.005, "iterations": 1, **simulation},
+            "cloth": [{"name": "sheet", "resolution": [48, 48], "size": [1.0, 1.0], "origin": [-0.5, 0.4, -0.5],
+                       "orientation": "horizontal", "sticks": ["structural", "shear", "bend"],
+                       "compliance": {"shear": 1.0, "bend": 1.0}, "line_passes": 1}],
+            "collider": [{"type": "sphere", "radius": 0.25, "centre": [0.0, 0.0, 0.0]}]}
+    summary = run_scene(parse_scene(data, file="<drape>"), tmp_path / "drape.usdc", device="cpu")
+    return summary.budget
+
+
+def test_a_landing_the_budget_let_through_is_reported_and_min_substeps_holds_it(tmp_path):
+    """In free fall the stretch is nil, so the budget halves to 2 substeps; the landing then stretches the
+    frames it takes to double back up, and the report says so and what min_substeps would start there. Run again
+    with it, no frame ends over the target and the budget never goes below it."""
+    import re
+
+    first = drape_run(tmp_path)
+    assert "frames ended over the target while it added substeps" in first
+    floor = int(re.search(r"min_substeps = (\d+) starts where it ended up", first).group(1))
+    assert floor >= 8
+    again = drape_run(tmp_path, min_substeps=floor)
+    assert "ended over the target" not in again
+    assert min(int(s) for s in re.findall(r"(\d+) x \d+", again.split("(substeps x frames)")[0])) >= floor

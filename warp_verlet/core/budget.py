@@ -10,9 +10,13 @@ the budget doubles or halves the substeps of the next frame from the RMS structu
   times when the steps double, so a quarter keeps a margin and does not oscillate);
 - never above ``max_substeps``, nor above the float32 floor on dt when the positions are float32 ("auto"
   precision is resolved from the scene's starting budget; ``precision = "float64"`` lifts the floor), never
-  below 1.
+  below ``min_substeps`` (1 by default).
 
-It starts at the scene's ``substeps``: 4, the default, since a scene with a target gives none (a live session
+Because it reads the stretch after a frame, a load that comes at once (a cloth landing on a collider, a cloth
+released from rest) stretches the frames it takes to double up to what the load needs. The report counts those
+frames and names the worst; ``min_substeps`` starts the budget where it ended up, so that they are not stretched.
+
+It starts at the scene's ``substeps``: 4, the default, or ``min_substeps`` if more, since a scene with a target gives none (a live session
 that turns a target on starts from the substeps it runs at). The same start as a scene without a target means
 the same first step, and "auto" precision is resolved from that step.
 
@@ -40,6 +44,9 @@ class Budget:
     frames_at: Counter = field(default_factory=Counter)  # substeps -> frames run with it
     last_rms: float | None = None
     over_at_max: int = 0  # frames over the target with no substeps left to add
+    min_substeps: int = 1  # the floor: halving never goes below it
+    over_while_adding: int = 0  # frames over the target while substeps could still be added (a sudden load)
+    worst_while_adding: tuple[float, int, int] | None = None  # (rms, frame number from 1, substeps it ran)
     _calm: int = 0
 
     def observe(self, rms: float, substeps: int | None = None) -> None:
@@ -55,9 +62,12 @@ class Budget:
             self._calm = 0
             if self.substeps * 2 <= self.max_substeps:
                 self.substeps *= 2
+                self.over_while_adding += 1
+                if self.worst_while_adding is None or rms > self.worst_while_adding[0]:
+                    self.worst_while_adding = (rms, sum(self.frames_at.values()), ran)
             else:
                 self.over_at_max += 1
-        elif rms < 0.25 * self.target and self.substeps > 1:
+        elif rms < 0.25 * self.target and self.substeps // 2 >= max(self.min_substeps, 1):
             self._calm += 1
             if self._calm >= self.calm_frames:
                 self.substeps //= 2
@@ -70,6 +80,15 @@ class Budget:
         chosen = ", ".join(f"{s} x {n}" for s, n in sorted(self.frames_at.items()))
         last = f"{self.last_rms:.3%}" if self.last_rms is not None else "-"
         line = f"target rms {self.target:.3%}: substeps {chosen} (substeps x frames); last frame rms {last}"
+        if self.over_while_adding:
+            rms, frame, ran = self.worst_while_adding
+            most = max(self.frames_at)
+            frames = "1 frame" if self.over_while_adding == 1 else f"{self.over_while_adding} frames"
+            line += (f"; {frames} ended over the target while it added substeps (worst "
+                     f"rms {rms:.3%}, frame {frame} at {ran} substeps): a load that comes at once, such as a "
+                     f"landing, outruns a budget that reads the stretch after each frame")
+            if most > ran:
+                line += f"; min_substeps = {most} starts where it ended up"
         if self.over_at_max:
             line += f"; over the target on {self.over_at_max} frames at {self.max_substeps} substeps, "
             if self.capped_by == FLOAT32_FLOOR:

@@ -226,9 +226,10 @@ class Simulator:
         if self.settings.target_stretch is None:
             return None
         floor = int(1.0 / (self.settings.fps * self.min_dt)) if self.min_dt > 0 else self.settings.max_substeps
-        return Budget(self.settings.target_stretch, self.settings.substeps,
-                      max(1, min(self.settings.max_substeps, floor)),
-                      FLOAT32_FLOOR if floor < self.settings.max_substeps else MAX_SUBSTEPS)
+        cap = max(1, min(self.settings.max_substeps, floor))
+        return Budget(self.settings.target_stretch, self.settings.substeps, cap,
+                      FLOAT32_FLOOR if floor < self.settings.max_substeps else MAX_SUBSTEPS,
+                      min_substeps=min(self.settings.min_substeps, cap))
 
     @property
     def substeps(self) -> int:
@@ -438,7 +439,7 @@ class Simulator:
         self.scene, self.settings, self.solver = scene, settings, solver
         self.min_dt = solver.min_dt
         self._frame_graphs.clear()  # they replay the old solver's launches
-        if changes.keys() & {"target_stretch", "substeps", "max_substeps"}:
+        if changes.keys() & {"target_stretch", "substeps", "max_substeps", "min_substeps"}:
             self.settle_budget()
             self.budget = self._new_budget()
 

@@ -119,6 +119,7 @@ class SimulationSettings:
     global_preconditioner: str = "multigrid"  # or "jacobi"; a scene with a mesh cloth always gets "jacobi"
     target_stretch: float | None = None  # RMS structural stretch (fraction) the substeps are chosen to stay under
     max_substeps: int = 1024  # the most substeps a target_stretch budget may choose
+    min_substeps: int = 1  # the fewest substeps a target_stretch budget may choose (it starts at least there)
     max_dt_ratio: float = 2.0
     max_frame_time: float = 0.1
     position_bound: float = 1.0e4
@@ -274,6 +275,11 @@ SIMULATION_KEYS: tuple[Key, ...] = (
             "\"A budget from `target_stretch`\" below. Not with `substeps`."),
     Key("max_substeps", integer(1, 100_000), 1024, "integer", "substeps", allowed="1 … 100 000",
         doc="The most substeps per frame a `target_stretch` budget may choose."),
+    Key("min_substeps", integer(1, 100_000), 1, "integer", "substeps", allowed="1 … 100 000; at most `max_substeps`",
+        doc="The fewest substeps per frame a `target_stretch` budget may choose: it starts there (or at 4, if "
+            "more) and never halves below. The budget reads the stretch after each frame, so a sudden load, "
+            "such as a cloth landing on a collider, stretches the frames it takes to add the substeps; this "
+            "holds them from the start. Only with `target_stretch`."),
     Key("multilevel", _boolean, False, "boolean",
         doc="A coarse-to-fine pass over each grid's hierarchy before every substep's sweeps (see \"Multilevel pass\" "
             "below). Not with a cloth that can tear (`tear_threshold` or `tear_tension`), soft structural sticks or "
@@ -363,6 +369,14 @@ def read_simulation(file: str, data: Any, path: str = "simulation") -> Simulatio
                       '"coloured" (graph-coloured Gauss-Seidel) or "jacobi"')
     settings = SimulationSettings(**{key.name: key.take(t) for key in SIMULATION_KEYS})
     t.finish()
+    if "min_substeps" in t.data:
+        if settings.target_stretch is None:
+            raise t.error("min_substeps", "bounds the substeps a target_stretch budget chooses, and this scene has "
+                          "no target_stretch: set substeps instead, or add target_stretch")
+        if settings.min_substeps > settings.max_substeps:
+            raise t.error("min_substeps", f"at most max_substeps ({settings.max_substeps}), got "
+                          f"{settings.min_substeps}")
+        settings = replace(settings, substeps=max(settings.substeps, settings.min_substeps))
     if settings.target_stretch is not None:
         if "substeps" in t.data:
             raise t.error("target_stretch", "substeps chosen by the scene: with target_stretch the simulator "
