@@ -144,6 +144,10 @@ def test_min_substeps_starts_the_budget_there_and_halving_stops_at_it():
     sim.step_frame()
     assert sim.state.steps == 16
     assert Simulator(scene(0.01, n=8, min_substeps=2), "cpu").substeps == 4  # the default start, if more
+    below = Budget(target=0.01, substeps=4, max_substeps=64, min_substeps=16)  # a live session's target, turned on
+    for expected in (8, 16, 16):
+        below.observe(0.0)
+        assert below.substeps == expected  # it climbs to its floor, doubling a frame at most (max_dt_ratio)
 
 
 def test_the_report_counts_the_frames_a_sudden_load_stretched_and_suggests_min_substeps():

@@ -67,6 +67,9 @@ class Budget:
                     self.worst_while_adding = (rms, sum(self.frames_at.values()), ran)
             else:
                 self.over_at_max += 1
+        elif self.substeps < self.min_substeps:  # started below its floor (a live session turning a target on)
+            self._calm = 0
+            self.substeps = min(self.substeps * 2, self.max_substeps)
         elif rms < 0.25 * self.target and self.substeps // 2 >= max(self.min_substeps, 1):
             self._calm += 1
             if self._calm >= self.calm_frames:
