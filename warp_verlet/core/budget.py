@@ -16,9 +16,10 @@ Because it reads the stretch after a frame, a load that comes at once (a cloth l
 released from rest) stretches the frames it takes to double up to what the load needs. The report counts those
 frames and names the worst; ``min_substeps`` starts the budget where it ended up, so that they are not stretched.
 
-It starts at the scene's ``substeps``: 4, the default, or ``min_substeps`` if more, since a scene with a target gives none (a live session
-that turns a target on starts from the substeps it runs at). The same start as a scene without a target means
-the same first step, and "auto" precision is resolved from that step.
+It starts at the scene's ``substeps``: 4, the default, or ``min_substeps`` if more, since a scene with a target
+gives none (a live session that turns a target on starts from the substeps it runs at, and climbs to
+``min_substeps`` a doubling a frame). The same start as a scene without a target means the same first step, and
+"auto" precision is resolved from that step.
 
 It reports what it chose: how many frames ran at each substep count, the last stretch against the target and,
 when the target was missed at the cap, which cap it was and what lifts it.
