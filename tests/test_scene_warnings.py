@@ -217,8 +217,8 @@ def test_the_unconverged_warning_offers_a_cloth_held_up_by_contact_line_passes_a
     (1 m / 47 / 6 = 3.5 mm)."""
     s = parse_scene({"simulation": {"fps": 30, "frames": 20, "substeps": 1, "iterations": 1},
                      "cloth": [{"name": "sheet", "resolution": [48, 48], "size": [1.0, 1.0],
-                                "origin": [-0.5, 0.4, -0.5], "orientation": "horizontal", "sticks": ["structural", "shear", "bend"],
-                                "compliance": {"bend": 1.0}}],
+                                "origin": [-0.5, 0.4, -0.5], "orientation": "horizontal",
+                                "sticks": ["structural", "shear", "bend"], "compliance": {"bend": 1.0}}],
                      "collider": [{"type": "sphere", "radius": 0.25, "centre": [0.0, 0.0, 0.0],
                                    "friction_coefficient": 1.0}]}, "<drape>")
     summary = runner.run_scene(s, tmp_path / "c.usdc", device="cpu")
