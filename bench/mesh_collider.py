@@ -199,9 +199,11 @@ class ClampTimer:
         self.sim, self.substeps = sim, substeps
         self.pairs = [(wp.empty_like(a), a) for a in (state.particle_q, state.particle_q_inertial, state.particle_dq)]
         q, inertial, dq = (scratch for scratch, _ in self.pairs)
+        no_pushes = wp.empty(0, dtype=wp.vec3, device=sim.device)  # no stage reads the clamp's pushes here
         self.launch = wp.launch(collide_meshes, model.particle_count,
                                 inputs=[q, inertial, dq, model.inv_mass, c.mesh_ids, state.mesh_offsets, c.mesh_reach,
-                                        c.mesh_thickness, c.mesh_friction], device=sim.device, record_cmd=True)
+                                        c.mesh_thickness, c.mesh_friction, no_pushes], device=sim.device,
+                                record_cmd=True)
 
     def frame_ms(self) -> float:
         for scratch, source in self.pairs:

@@ -79,6 +79,7 @@ def collide_meshes(
     reach: wp.array(dtype=float),
     thickness: wp.array(dtype=float),
     friction: wp.array(dtype=wp.vec2),  # (mu_k, mu_s) per collider
+    pushes: wp.array(dtype=wp.vec3),  # empty, or each particle's pushes summed (collide_response.py)
 ):
     """Keeps each free particle ``thickness`` outside every mesh: along the face's normal where its closest point
     lies inside a face, else along the outward direction from that point."""
@@ -93,7 +94,7 @@ def collide_meshes(
             normal = x.dtype(wp.mesh_eval_face_normal(meshes[m], query.face))
             n, depth = surface_depth(xi, closest, normal, query.u, query.v, query.sign, thickness[m])
             if depth > type(depth)(0.0):
-                xi = project_out(i, xi, n, depth, friction[m], x_inertial, delta)
+                xi = project_out(i, xi, n, depth, friction[m], x_inertial, delta, pushes)
     x[i] = xi
 
 
@@ -115,6 +116,7 @@ def collide_moving_meshes(
     reach: wp.array(dtype=float),
     thickness: wp.array(dtype=float),
     friction: wp.array(dtype=wp.vec2),  # (mu_k, mu_s) per collider
+    pushes: wp.array(dtype=wp.vec3),  # empty, or each particle's pushes summed (collide_response.py)
 ):
     """``collide_meshes`` for scenes where a mesh moves: each BVH holds its mesh in its own frame, placed by a
     rotation and a translation (the State's, at the end of the substep; ``*_before`` at its start), and the
@@ -139,7 +141,8 @@ def collide_moving_meshes(
                 if deforms[m] != 0:
                     was = on_surface - wp.mesh_eval_velocity(meshes[m], query.face, query.u, query.v)
                 surface_step = closest - x.dtype(wp.quat_rotate(rotations_before[m], was) + offsets_before[m])
-                xi = project_out_moving(i, xi, n, depth, friction[m], x_inertial, delta, surface_step)
+                xi = project_out_moving(i, xi, n, depth, friction[m], x_inertial, delta, surface_step,
+                                        pushes)
     x[i] = xi
 
 

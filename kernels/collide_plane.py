@@ -18,6 +18,7 @@ def collide_planes(
     normals: wp.array(dtype=wp.vec3),
     thickness: wp.array(dtype=float),
     friction: wp.array(dtype=wp.vec2),  # (mu_k, mu_s) per collider
+    pushes: wp.array(dtype=wp.vec3),  # empty, or each particle's pushes summed (collide_response.py)
 ):
     """Collider data is float32; it is converted to the positions' precision (x.dtype) before any use."""
     i = wp.tid()
@@ -28,7 +29,7 @@ def collide_planes(
         n = x.dtype(normals[p])
         depth = type(xi[0])(thickness[p]) - wp.dot(xi - x.dtype(points[p]), n)
         if depth > type(depth)(0.0):
-            xi = project_out(i, xi, n, depth, friction[p], x_inertial, delta)
+            xi = project_out(i, xi, n, depth, friction[p], x_inertial, delta, pushes)
     x[i] = xi
 
 

@@ -76,11 +76,17 @@ def project_out_moving(
     x_inertial: wp.array(dtype=Any),
     delta: wp.array(dtype=Any),
     surface_step: Any,
+    pushes: wp.array(dtype=wp.vec3),
 ):
     """``project_out`` against a moving surface: friction acts on the particle's displacement over the substep
     relative to ``surface_step``, how far the surface point it touches moved over the same substep, so that a
-    particle stuck to a moving body is carried along with it."""
-    xi = xi + normal * depth
+    particle stuck to a moving body is carried along with it. Where ``pushes`` has an entry a particle, the push
+    out (normal x depth) is added to it: a stage that needs the contact's normal (launches.clamp_noting_normals)
+    reads it there, since friction tilts the particle's whole move off the normal."""
+    push = normal * depth
+    xi = xi + push
+    if pushes.shape[0] > 0:
+        pushes[i] = pushes[i] + wp.vec3(float(push[0]), float(push[1]), float(push[2]))
     if friction[1] > 0.0:  # mu_s >= mu_k, so no static friction means no friction (and the frictionless bits)
         step = xi - (x_inertial[i] - delta[i]) - surface_step
         tangential = step - normal * wp.dot(step, normal)
@@ -97,8 +103,9 @@ def project_out(
     friction: wp.vec2,
     x_inertial: wp.array(dtype=Any),
     delta: wp.array(dtype=Any),
+    pushes: wp.array(dtype=wp.vec3),
 ):
     """Move xi out by depth along normal, apply Coulomb friction (``friction`` = (mu_k, mu_s), mu_s >= mu_k) to
     its tangential displacement over the substep, return the new position: ``project_out_moving`` against a
     surface that stays put."""
-    return project_out_moving(i, xi, normal, depth, friction, x_inertial, delta, type(xi)(0.0))
+    return project_out_moving(i, xi, normal, depth, friction, x_inertial, delta, type(xi)(0.0), pushes)

@@ -18,6 +18,7 @@ def collide_spheres(
     centres: wp.array(dtype=wp.vec3),
     radii: wp.array(dtype=float),
     friction: wp.array(dtype=wp.vec2),  # (mu_k, mu_s) per collider
+    pushes: wp.array(dtype=wp.vec3),  # empty, or each particle's pushes summed (collide_response.py)
 ):
     """``radii`` already include each sphere's thickness."""
     i = wp.tid()
@@ -34,7 +35,7 @@ def collide_spheres(
             n = x.dtype(wp.vec3(0.0, 1.0, 0.0))
             if distance > type(distance)(1.0e-12):
                 n = d / distance
-            xi = project_out(i, xi, n, depth, friction[s], x_inertial, delta)
+            xi = project_out(i, xi, n, depth, friction[s], x_inertial, delta, pushes)
     x[i] = xi
 
 

@@ -64,14 +64,25 @@ def copy_positions(x: wp.array(dtype=Any), copy: wp.array(dtype=Any)):
 
 
 @wp.kernel
+def zero_vectors(v: wp.array(dtype=wp.vec3)):
+    i = wp.tid()
+    v[i] = wp.vec3(0.0)
+
+
+@wp.kernel
 def contact_normals(
     x: wp.array(dtype=Any),
     x_before: wp.array(dtype=Any),
+    pushes: wp.array(dtype=wp.vec3),
     normal: wp.array(dtype=wp.vec3),
 ):
-    """The direction the colliders moved each particle (0 where none did): the contact normal of the step."""
+    """The direction the colliders pushed each particle (0 where none did): the contact normal of the step. Their
+    pushes summed where ``pushes`` has entries (a scene with friction, which tilts the move), else their move
+    (without friction, the push itself)."""
     i = wp.tid()
     d = x[i] - x_before[i]
+    if pushes.shape[0] > 0:
+        d = x.dtype(pushes[i])
     length = wp.length(d)
     if length > type(length)(0.0):
         normal[i] = to_vec3(d / length)

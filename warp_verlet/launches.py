@@ -84,16 +84,30 @@ def split(first: int, count: int, parts: int) -> list[tuple[int, int]]:
     return pieces
 
 
-def clamp_noting_normals(x, clamps: list, snapshot, normal) -> list[PhaseTask]:
+def noted_pushes(model, solver, owner: str):
+    """The vec3 per particle that ``owner``'s clamps add their pushes to (clamp_noting_normals), from the solver's
+    scratch; an empty array where no collider has friction, which the clamps do not write."""
+    import warp as wp
+
+    if not model.requirements.collider_friction:
+        return wp.empty(0, dtype=wp.vec3, device=model.device)
+    return solver.scratch(f"{owner}_pushes", model.particle_count, wp.vec3)
+
+
+def clamp_noting_normals(x, clamps: list, snapshot, normal, pushes) -> list[PhaseTask]:
     """The colliders' ``clamps`` of the positions ``x``, between a copy of ``x`` into ``snapshot`` and the direction
-    each particle was moved into ``normal`` (0 where none was): the contact normals of a stage that works on the
-    clamped prediction (the global correction, the line solves). Kernels only: a CPU frame capture replays kernels,
-    not copies."""
-    from warp_verlet.kernels.global_solve import contact_normals, copy_positions
+    each particle was pushed into ``normal`` (0 where none was): the contact normals of a stage that works on the
+    clamped prediction (the global correction, the line solves). Without friction a particle's move is its push.
+    Friction shortens a sliding particle's move along the surface, which tilts the move off the normal by up to
+    atan(mu) (into the collider, for a stage that lets the particle slide along the normal's plane), so where a
+    collider has friction the clamps are bound with ``pushes`` (a vec3 per particle, else an empty array) and add
+    each push to it, and the normal is theirs. Kernels only: a CPU frame capture replays kernels, not copies."""
+    from warp_verlet.kernels.global_solve import contact_normals, copy_positions, zero_vectors
 
     n = x.shape[0]
-    return [recorded(copy_positions, n, [x], [snapshot]), *clamps,
-            recorded(contact_normals, n, [x, snapshot], [normal])]
+    zero = [recorded(zero_vectors, n, [], [pushes])] if pushes.shape[0] else []
+    return [recorded(copy_positions, n, [x], [snapshot]), *zero, *clamps,
+            recorded(contact_normals, n, [x, snapshot, pushes], [normal])]
 
 
 def copy_back_phase(x, scratch, count: int, threads: int) -> list[PhaseTask | None]:

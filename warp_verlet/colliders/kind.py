@@ -97,7 +97,9 @@ class ColliderKind(Protocol):
       (names start with the kind's own prefix: they share one namespace).
     - ``state_arrays(colliders)``: what moves, created where the State is built: name -> array, or None where
       this scene needs none; every name the kind ever creates, always (the State keeps them as attributes).
-    - ``bind(model, state)``: its :class:`ColliderLaunches` against one State.
+    - ``bind(model, state, pushes=None)``: its :class:`ColliderLaunches` against one State; where ``pushes`` (a
+      vec3 per particle) is given, its clamps add to it each push out they give a particle (normal x depth), from
+      which launches.clamp_noting_normals takes the contact normals where friction tilts the particles' moves.
     - ``capturable(specs, device)``, optional: False when its launches do not replay from a frame capture (a
       deforming mesh's BVH refit is host work Warp's CPU capture does not record); the simulator then steps
       such a scene launch by launch. A kind without it is capturable.
@@ -141,7 +143,7 @@ class ColliderKind(Protocol):
 
     def state_arrays(self, colliders: Any) -> dict[str, Any]: ...
 
-    def bind(self, model: Any, state: Any) -> ColliderLaunches: ...
+    def bind(self, model: Any, state: Any, pushes: Any = None) -> ColliderLaunches: ...
 
     def cached(self, spec: Any, always_moving: bool = False) -> Any: ...
 
@@ -178,6 +180,18 @@ PURPOSE = Key("purpose", choice(COLLIDER_PURPOSES), "guide", type="string", allo
                   "Karma) and hidden in usdview until guides are shown (Display > Display Purposes > Guide); the "
                   "default, since a collider stands in for the user's own geometry. `\"default\"`: rendered with "
                   "the cloth.")
+
+
+def push_record(pushes: Any, device: Any) -> Any:
+    """The clamp kernels' ``pushes`` argument: the array a stage gave, or an empty one (not written)."""
+    import warp as wp
+
+    return pushes if pushes is not None else wp.empty(0, dtype=wp.vec3, device=device)
+
+
+def has_friction(specs: Any) -> bool:
+    """Whether any of the collider specs ``specs`` has friction (its static coefficient, the larger, above 0)."""
+    return any(coulomb(spec)[1] > 0.0 for spec in specs)
 
 
 def coulomb(spec: Any) -> tuple[float, float]:

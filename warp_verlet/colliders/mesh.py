@@ -372,7 +372,7 @@ class MeshKind:
                 "mesh_offsets_before": wp.clone(colliders.mesh_start) if moving else None,
                 "mesh_rotations_before": wp.clone(colliders.mesh_rotation_start) if moving else None}
 
-    def bind(self, model, state) -> ColliderLaunches:
+    def bind(self, model, state, pushes=None) -> ColliderLaunches:
         import warp as wp
 
         from ..kernels.collide_mesh import (collide_meshes, collide_moving_meshes, place_mesh_points,
@@ -380,11 +380,15 @@ class MeshKind:
         from ..kernels.collide_sphere import advance_clock
         from ..launches import recorded
 
+        from .kind import push_record
+
+        removed = push_record(pushes, model.device)
         c = model.colliders
         if not c.meshes_move:
             clamp = recorded(collide_meshes, model.particle_count,
                              [state.particle_q, state.particle_q_inertial, state.particle_dq, model.inv_mass,
-                              c.mesh_ids, state.mesh_offsets, c.mesh_reach, c.mesh_thickness, c.mesh_friction])
+                              c.mesh_ids, state.mesh_offsets, c.mesh_reach, c.mesh_thickness, c.mesh_friction,
+                              removed])
             return ColliderLaunches((), (clamp,))
         clock = state.mesh_clock
         place = recorded(place_moving_meshes, len(c.meshes),
@@ -405,7 +409,7 @@ class MeshKind:
                          [state.particle_q, state.particle_q_inertial, state.particle_dq, model.inv_mass,
                           c.mesh_ids, state.mesh_offsets, state.mesh_rotations, state.mesh_offsets_before,
                           state.mesh_rotations_before, c.mesh_deforms, c.mesh_reach, c.mesh_thickness,
-                          c.mesh_friction])
+                          c.mesh_friction, removed])
         return ColliderLaunches((advance,), (clamp,))
 
     def capturable(self, specs: tuple[MeshCollider, ...], device) -> bool:

@@ -109,14 +109,17 @@ class PlaneKind:
     def state_arrays(self, colliders) -> dict[str, Any]:
         return {}  # a plane never moves
 
-    def bind(self, model, state) -> ColliderLaunches:
+    def bind(self, model, state, pushes=None) -> ColliderLaunches:
         from ..kernels.collide_plane import collide_planes
         from ..launches import recorded
+
+        from .kind import push_record
 
         c = model.colliders
         clamp = recorded(collide_planes, model.particle_count,
                          [state.particle_q, state.particle_q_inertial, state.particle_dq, model.inv_mass,
-                          c.plane_points, c.plane_normals, c.plane_thickness, c.plane_friction])
+                          c.plane_points, c.plane_normals, c.plane_thickness, c.plane_friction,
+                          push_record(pushes, model.device)])
         return ColliderLaunches((), (clamp,))
 
     # ------------------------------------------------------------------ output

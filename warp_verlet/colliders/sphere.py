@@ -145,11 +145,13 @@ class SphereKind:
         return {"collider_clock": wp.zeros(1, dtype=wp.float64) if moving else None,
                 "sphere_centres": wp.clone(colliders.sphere_start) if spheres else None}
 
-    def bind(self, model, state) -> ColliderLaunches:
+    def bind(self, model, state, pushes=None) -> ColliderLaunches:
         import warp as wp
 
         from ..kernels.collide_sphere import advance_clock, collide_spheres, place_spheres
         from ..launches import recorded
+
+        from .kind import push_record
 
         c = model.colliders
         before = ()
@@ -165,7 +167,8 @@ class SphereKind:
             before = (advance,)
         clamp = recorded(collide_spheres, model.particle_count,
                          [state.particle_q, state.particle_q_inertial, state.particle_dq, model.inv_mass,
-                          state.sphere_centres, c.sphere_reach, c.sphere_friction])
+                          state.sphere_centres, c.sphere_reach, c.sphere_friction,
+                          push_record(pushes, model.device)])
         return ColliderLaunches(before, (clamp,))
 
     # ------------------------------------------------------------------ output

@@ -25,7 +25,7 @@ from __future__ import annotations
 import numpy as np
 
 from .kind import ConstraintSet
-from ..launches import FLOAT, INT, VEC3, BoundStage, clamp_noting_normals
+from ..launches import FLOAT, INT, VEC3, BoundStage, clamp_noting_normals, noted_pushes
 from ..scene_keys import Key, integer
 
 LINE_THREADS = 256
@@ -142,22 +142,25 @@ class LineSolves(ConstraintSet):
         return None
 
     def count(self, scene):
-        """(lines, rest lengths, whether the scene has colliders) of the cloths with line passes, or 0."""
+        """(lines, rest lengths, whether the scene has colliders: 2 where one has friction) of the cloths with
+        line passes, or 0."""
         cloths = _line_cloths(scene)
         if not cloths:
             return 0
+        from ..colliders.kind import has_friction
+
         lines = sum(r * (c > 1) + c * (r > 1) for r, c in (spec.resolution for spec in cloths))
         rest = sum(r - 1 + c - 1 for r, c in (spec.resolution for spec in cloths))
-        return lines, rest, int(bool(scene.colliders))
+        return lines, rest, int(bool(scene.colliders)) + int(has_friction(scene.colliders))
 
     def needed(self, req) -> bool:
         return bool(req.count(self.name))
 
     def device_bytes(self, req) -> int:
         # a vec4i per line, a rest length per row and column gap (Model); with colliders, a position snapshot and
-        # a contact normal per particle (solver)
+        # a contact normal per particle (solver), and with friction what the clamp's friction took off
         lines, rest, colliders = req.count(self.name)
-        contact = req.particles * (req.position_bytes + VEC3) if colliders else 0
+        contact = req.particles * (req.position_bytes + VEC3 * colliders) if colliders else 0
         return lines * 4 * INT + rest * FLOAT + contact
 
     def build(self, model, scene, device):
@@ -170,12 +173,13 @@ class LineSolves(ConstraintSet):
 
         data, x = model.constraints[self.name], state.particle_q
         n = model.particle_count
-        bound = [kind.bind(model, state) for kind, _ in model.colliders.kinds]
+        pushes = noted_pushes(model, solver, "line")
+        bound = [kind.bind(model, state, pushes) for kind, _ in model.colliders.kinds]
         clamps = [task for launches in bound for task in launches.clamps]
         if clamps:
             snapshot = solver.scratch("line_snapshot", n, model.position_dtype)
             normal = solver.scratch("line_normals", n, wp.vec3)
-            contact = clamp_noting_normals(x, clamps, snapshot, normal)
+            contact = clamp_noting_normals(x, clamps, snapshot, normal, pushes)
         else:
             normal = wp.empty(0, dtype=wp.vec3, device=model.device)  # not read
             contact = []

@@ -223,9 +223,10 @@ class GlobalCorrection:
         self.sums = [wp.zeros(size, dtype=wp.float64, device=device) for size in reduction_sizes(n)]
         self.scalars = wp.zeros(6 + LINE_SEARCH, dtype=wp.float64, device=device)
 
-    def bind(self, model, state, place: list, clamps: list, tension_scratch) -> BoundStage:
+    def bind(self, model, state, place: list, clamps: list, tension_scratch, pushes) -> BoundStage:
         """The correction against ``state``: ``place`` are the colliders' placements for the substep (run first),
-        ``clamps`` their clamp launches, ``tension_scratch(model)`` the soft sticks' XPBD tension it starts."""
+        ``clamps`` their clamp launches (bound with ``pushes``: launches.clamp_noting_normals),
+        ``tension_scratch(model)`` the soft sticks' XPBD tension it starts."""
         from warp_verlet.kernels import global_solve as k
 
         n = model.particle_count
@@ -324,7 +325,7 @@ class GlobalCorrection:
             tension = tension_scratch(model)
             hand_over = recorded(k.hand_over_tension, top.stick_count, [x, top.ends, top.rest, top.stiffness, 0.0],
                                  [tension])
-        clamp_prediction = clamp_noting_normals(x, clamps, self.x_before, self.contact)
+        clamp_prediction = clamp_noting_normals(x, clamps, self.x_before, self.contact, pushes)
         mean_mass = float(np.mean(1.0 / model.host_inv_mass[model.host_inv_mass > 0]))
 
         def run(state, dt: float) -> None:

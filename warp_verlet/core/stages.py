@@ -29,7 +29,7 @@ if TYPE_CHECKING:  # pragma: no cover
 
 from ..constraints import kinds as constraint_kinds
 from ..constraints.tethers import Tethers
-from ..launches import FLOAT, VEC2I, VEC3, VEC3D, BoundStage, recorded
+from ..launches import FLOAT, VEC2I, VEC3, VEC3D, BoundStage, noted_pushes, recorded
 
 
 @dataclass(frozen=True)
@@ -44,6 +44,7 @@ class Requirements:
     compliant: bool
     tears: bool
     colliders: tuple[tuple[str, tuple[int, ...]], ...]  # (kind's type, its counts) per kind present, clamp order
+    collider_friction: bool  # whether any collider has friction (a stage noting contact normals keeps its removal)
     tethered: int = 0  # free particles of tethered cloths
     tethers_per_particle: int = 0
     coarse_sticks: int = 0  # multilevel: coarse sticks over all levels
@@ -87,6 +88,7 @@ class Requirements:
         from .precision import resolve
 
         from ..colliders import counts as collider_counts
+        from ..colliders.kind import has_friction
         from .aerodynamics import air_counts
 
         free = any(c.pin_count < c.particle_count for c in scene.cloths)
@@ -96,6 +98,7 @@ class Requirements:
             particles=scene.particle_count, sticks=sum(stick_count(c) for c in scene.cloths),
             relaxation=scene.simulation.relaxation, iterations=scene.simulation.iterations, free_particles=free,
             compliant=scene.compliant, tears=scene.tears, colliders=collider_counts(scene.colliders),
+            collider_friction=has_friction(scene.colliders),
             tethered=scene.tethered_particles, tethers_per_particle=scene.tethers_per_particle,
             coarse_sticks=coarse[0], coarse_children=coarse[1], tension_tears=scene.tears_by_tension,
             elements=tuple((kind.name, n) for kind in constraint_kinds() if (n := kind.count(scene))),
@@ -361,17 +364,19 @@ class GlobalSolve:
         from .global_solve import device_bytes
 
         weights = 0 if req.tears else req.sticks * FLOAT  # a scene that tears lends the State's live weights
+        friction = req.particles * VEC3 if req.collider_friction else 0  # what the clamp's friction took off
         return (device_bytes(req.particles, req.sticks, req.global_levels) - req.sticks * FLOAT + weights
-                + req.particles * (req.position_bytes - 3 * 8))
+                + req.particles * (req.position_bytes - 3 * 8) + friction)
 
     def bind(self, model, state, solver) -> BoundStage:
         from .global_solve import GlobalCorrection
 
         correction = solver.cached("global", lambda: GlobalCorrection(model, solver.settings))
-        launches = [kind.bind(model, state) for kind, _ in model.colliders.kinds]
+        pushes = noted_pushes(model, solver, "global")
+        launches = [kind.bind(model, state, pushes) for kind, _ in model.colliders.kinds]
         place = [p for bound in launches for p in bound.before] if collider_placement(solver) == self.name else []
         return correction.bind(model, state, place, [task for bound in launches for task in bound.clamps],
-                               lambda m: solver.scratch("stick_tension", m.stick_count, float))
+                               lambda m: solver.scratch("stick_tension", m.stick_count, float), pushes)
 
 
 class Relax:
