@@ -11,7 +11,8 @@ to second order: a pass leaves the structural net nearly exact.
 
 Where the colliders touch the cloth, the lines must not push it into them nor lift it off: the stage clamps the
 Verlet prediction once (the colliders placed for the substep first), and each particle the clamp moved slides
-along the collider in the solve, its inverse mass taken as w (I - c c^T) along the clamp's direction c. (The
+along the collider in the solve, its inverse mass taken as w (I - c c^T) along the direction c the clamp pushed it
+(launches.clamp_noting_normals: friction tilts the particle's move, so with friction the pushes are noted). (The
 clamp after the sweeps still runs, as the substep's last word.)
 
 Only the structural sticks are solved, and they must be rigid: a row's exact lengths are what the solve is for.
