@@ -65,6 +65,7 @@ def copy_positions(x: wp.array(dtype=Any), copy: wp.array(dtype=Any)):
 
 @wp.kernel
 def zero_vectors(v: wp.array(dtype=wp.vec3)):
+    """A kernel, not ``array.zero_()``: a CPU frame capture replays kernels only."""
     i = wp.tid()
     v[i] = wp.vec3(0.0)
 

@@ -159,7 +159,7 @@ class LineSolves(ConstraintSet):
 
     def device_bytes(self, req) -> int:
         # a vec4i per line, a rest length per row and column gap (Model); with colliders, a position snapshot and
-        # a contact normal per particle (solver), and with friction what the clamp's friction took off
+        # a contact normal per particle (solver), and with friction each particle's pushes summed
         lines, rest, colliders = req.count(self.name)
         contact = req.particles * (req.position_bytes + VEC3 * colliders) if colliders else 0
         return lines * 4 * INT + rest * FLOAT + contact

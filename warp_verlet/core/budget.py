@@ -71,7 +71,7 @@ class Budget:
         elif self.substeps < self.min_substeps:  # started below its floor (a live session turning a target on)
             self._calm = 0
             self.substeps = min(self.substeps * 2, self.max_substeps)
-        elif rms < 0.25 * self.target and self.substeps // 2 >= max(self.min_substeps, 1):
+        elif rms < 0.25 * self.target and self.substeps // 2 >= self.min_substeps:
             self._calm += 1
             if self._calm >= self.calm_frames:
                 self.substeps //= 2

@@ -44,7 +44,7 @@ class Requirements:
     compliant: bool
     tears: bool
     colliders: tuple[tuple[str, tuple[int, ...]], ...]  # (kind's type, its counts) per kind present, clamp order
-    collider_friction: bool  # whether any collider has friction (a stage noting contact normals keeps its removal)
+    collider_friction: bool  # whether any collider has friction (a stage noting contact normals sums the pushes)
     tethered: int = 0  # free particles of tethered cloths
     tethers_per_particle: int = 0
     coarse_sticks: int = 0  # multilevel: coarse sticks over all levels
@@ -364,7 +364,7 @@ class GlobalSolve:
         from .global_solve import device_bytes
 
         weights = 0 if req.tears else req.sticks * FLOAT  # a scene that tears lends the State's live weights
-        friction = req.particles * VEC3 if req.collider_friction else 0  # what the clamp's friction took off
+        friction = req.particles * VEC3 if req.collider_friction else 0  # each particle's pushes summed
         return (device_bytes(req.particles, req.sticks, req.global_levels) - req.sticks * FLOAT + weights
                 + req.particles * (req.position_bytes - 3 * 8) + friction)
 
