@@ -34,9 +34,10 @@ tile to stage a particle moving it, bit for bit the same), they made each staged
 loads, and measured slower (bench/results/grid_tiles/tiles-take-step.md).
 
 The projection is ``stick_correction`` with the rest lengths and weights the implicit grid sticks use
-(kernels/grid_relax.py), so every stick sees exactly the arithmetic of the other forms; only the order of the
-projections differs. That order is a fixed sequence (tile colour, tile, stick colour, stick), which the CPU
-runs literally (one lane per block) and a GPU runs with the independent projections of one step at once.
+(kernels/grid_relax.py), so every stick sees the arithmetic of the other forms (on CUDA with fast math's root
+and division: SHARED_SWEEP_MATH); only the order of the projections differs. That order is a fixed sequence
+(tile colour, tile, stick colour, stick), which the CPU runs literally (one lane per block) and a GPU runs with
+the independent projections of one step at once.
 """
 
 import warp as wp
@@ -46,6 +47,15 @@ from .positions import scaled
 from .relax import compliant_correction, stick_correction
 
 _KERNELS: dict = {}
+
+SHARED_SWEEP_MATH = {"fast_math": True}
+"""Module options of the sweeps that hold their region in shared memory (these tiles and the clustered sweep,
+kernels/stick_clusters.py). Their data sits on chip, so on CUDA their time is in the projection's float32
+arithmetic, and fast math takes its square root and division from the hardware's approximations (within 2 ulp;
+denormals flush to zero) instead of the longer correctly rounded sequences: the same stretch in less time
+(bench/results/grid_tiles/fast-math.md). The CPU compiles the same code to the same bits either way. A launch
+per colour keeps correctly rounded arithmetic: its module holds the computed tether pass too, which must agree
+bit for bit with the tether table's, and its explicit and implicit forms with each other."""
 
 
 @wp.func_native("WP_TILE_SYNC();")
@@ -116,7 +126,9 @@ def _make_kernel(tile: int, colours: tuple, max_registers: int | None, vector):
     def put_row_step(t: wp.tile(dtype=wp.float64, shape=(REGION_ROWS,), storage="shared"), i: int,
                      value: wp.float64): ...
 
-    options = {} if max_registers is None else {"cuda_max_registers": max_registers}
+    options = {"module_options": SHARED_SWEEP_MATH}
+    if max_registers is not None:
+        options["cuda_max_registers"] = max_registers
 
     @wp.kernel(module="unique", **options)
     def relax_grid_tiles(
