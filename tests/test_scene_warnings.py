@@ -241,3 +241,37 @@ def test_the_unconverged_warning_offers_no_multilevel_pass_to_a_cloth_that_can_t
         summary = runner.run_scene(s, tmp_path / "c.usdc", device="cpu")
         (warning,) = [line for line in summary.format().splitlines() if line.startswith("warning")]
         assert "more substeps" in warning and "multilevel" not in warning
+
+
+def _hung(substeps: int, iterations: int, **cloth) -> "Scene":
+    """A small pinned cloth that converges and a 24 x 24 one hung by two corners without tethers, 15 frames."""
+    big = {"name": "big", "resolution": [24, 24], "size": [1.0, 1.0], "origin": [0.0, 1.0, 0.0],
+           "pins": ["top-left", "top-right"], "tethers": False, **cloth}
+    return parse_scene({"simulation": {"fps": 30, "frames": 15, "substeps": substeps, "iterations": iterations},
+                        "cloth": [{"name": "small", "resolution": [3, 3], "size": [0.2, 0.2],
+                                   "origin": [2.0, 1.0, 0.0], "pins": ["top-edge"]}, big]}, "<rubber>")
+
+
+def test_a_run_that_leaves_a_cloth_rubbery_notes_it_with_what_helps(tmp_path):
+    """Short of the warning (no stick at twice its length), a cloth left several percent long on average reads
+    as rubber: at 8 x 2 the big cloth ends about 4% long (RMS) with its longest stick about 28% long; the note
+    names it (not the small cloth, which converges) and what helps."""
+    summary = runner.run_scene(_hung(8, 2), tmp_path / "c.usdc", device="cpu")
+    assert summary.stretch_max < runner.UNCONVERGED_STRETCH and summary.stretch_rms > runner.RUBBERY_RMS
+    text = summary.format()
+    assert "warning" not in text
+    (note,) = [line for line in text.splitlines() if line.startswith("note")]
+    assert "cloth 'big' (a 24 x 24 grid) ends " in note and "longer than at rest (RMS over its structural" in note
+    assert "has not converged at 8 substeps x 2 iterations a frame" in note
+    for fix in ("more substeps", "tethers = true", "line_passes = 1"):
+        assert fix in note
+
+
+def test_a_converged_run_and_a_cloth_with_soft_structural_sticks_have_no_rubbery_note(tmp_path):
+    """At 16 x 8 the same cloth ends under 1% long (RMS): no note. A cloth whose structural sticks have a
+    compliance stretches by its own stiffness, so however long it ends, the note does not count it."""
+    converged = runner.run_scene(_hung(16, 8), tmp_path / "a.usdc", device="cpu")
+    assert converged.stretch_rms < runner.RUBBERY_RMS and converged.rubbery is None
+    soft = runner.run_scene(_hung(8, 2, compliance={"structural": 1.0e-3}), tmp_path / "b.usdc", device="cpu")
+    assert runner.RUBBERY_RMS < soft.stretch_rms and soft.stretch_max < runner.UNCONVERGED_STRETCH
+    assert soft.rubbery is None and "note" not in soft.format()

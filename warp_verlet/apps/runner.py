@@ -31,6 +31,10 @@ from ..writer_registry import CacheRequest, format_for
 # A structural stick stretched to twice its rest length: far outside anything cloth does, so the solver has
 # not converged (the summary says so rather than presenting the result as a cloth).
 UNCONVERGED_STRETCH = 1.0
+# A cloth whose rigid structural sticks end this much longer than at rest on average (RMS): woven fabric stretches
+# well under 1% under its own weight, so what shows is the relaxation's residual, a cloth that reads as rubber.
+# Short of the warning above, the summary notes it, with the same advice.
+RUBBERY_RMS = 0.01
 
 
 @dataclass(frozen=True)
@@ -53,6 +57,7 @@ class RunSummary:
     notes: tuple[str, ...] = ()  # what the run noticed about its output (leftovers of an earlier run removed)
     startup_seconds: float = 0.0  # before the first frame: the model built and the kernels loaded (not in wall)
     unconverged: str | None = None  # where the stretch check failed, and what to change (unconverged_advice)
+    rubbery: str | None = None  # the cloth left over RUBBERY_RMS long, and what to change (rubbery_note)
     kernel_seconds: float = 0.0  # of which Warp's kernel modules, compiled or loaded from its kernel cache
     sweep: str = ""  # how the relaxation swept the sticks (sweep_description)
 
@@ -83,6 +88,8 @@ class RunSummary:
                 f"warning          the sticks are far from satisfied (a structural stick at {1 + self.stretch_max:.3g} x "
                 "its rest length): the relaxation has not converged"
                 + (f" {self.unconverged}" if self.unconverged else ""))
+        elif self.rubbery:
+            lines.append(f"note             {self.rubbery}")
         return "\n".join(lines)
 
 
@@ -146,6 +153,7 @@ def _simulate(scene: Scene, output: Path, target: CacheOutput, device: str | Non
     points = sim.positions()
     stretch = sim.stretch(points)
     unconverged = unconverged_advice(scene, sim, points) if stretch.max > UNCONVERGED_STRETCH else None
+    rubbery = rubbery_note(scene, sim, points) if unconverged is None else None
     colouring = model.colouring
     return RunSummary(
         scene=scene.source, output=output, device=str(sim.device), frames=settings.frames,
@@ -154,7 +162,7 @@ def _simulate(scene: Scene, output: Path, target: CacheOutput, device: str | Non
         stretch_max=stretch.max, stretch_rms=stretch.rms, torn=sim.torn_count() if model.tears else None,
         threads=sim.threads, budget=sim.budget.report() if sim.budget is not None else None,
         notes=tuple(target.notes), startup_seconds=startup, kernel_seconds=kernel_seconds, unconverged=unconverged,
-        sweep=sweep_description(model),
+        rubbery=rubbery, sweep=sweep_description(model),
     )
 
 
@@ -177,16 +185,47 @@ def sweep_description(model) -> str:
     return form if model.clusters_refused is None else f"{form} (clustered refused: {model.clusters_refused})"
 
 
+def _structural_by_cloth(sim, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The stretch |D - L| / L of every intact structural stick, and the index of the cloth each belongs to."""
+    model = sim.model
+    torn = sim.torn_sticks() if model.tears else None
+    keep = np.flatnonzero(model.structural if torn is None else model.structural & ~torn)
+    firsts = np.array([slot.first for slot in model.cloths])
+    cloth = np.searchsorted(firsts, model.host_sticks[keep, 0], side="right") - 1
+    return model.structural_stretch(points, torn), cloth
+
+
 def unconverged_advice(scene: Scene, sim, points: np.ndarray) -> str:
     """Where the stretch check failed (the cloth of the longest structural stick) and what would help that
     cloth, from what the scene already has. Whether a budget converges depends on the run (how far the sweeps
     of a frame carry a correction against the load), so this is said after it, not predicted."""
-    model = sim.model
-    torn = sim.torn_sticks() if model.tears else None
-    keep = np.flatnonzero(model.structural if torn is None else model.structural & ~torn)
-    worst = keep[int(np.argmax(model.structural_stretch(points, torn)))]
-    particle = int(model.host_sticks[worst, 0])
-    index = next(i for i, s in enumerate(model.cloths) if s.first <= particle < s.first + s.count)
+    stretch, cloth = _structural_by_cloth(sim, points)
+    where, advice = _advice(scene, sim, int(cloth[int(np.argmax(stretch))]))
+    return f"in {where} {advice}"
+
+
+def rubbery_note(scene: Scene, sim, points: np.ndarray) -> str | None:
+    """The cloth whose rigid structural sticks end longest on average (RMS), where that is over RUBBERY_RMS, and
+    what would help it; None where every such cloth is within it. A cloth with soft structural sticks
+    (``compliance``) stretches by its own stiffness, and is not counted."""
+    stretch, cloth = _structural_by_cloth(sim, points)
+    worst, worst_rms = None, RUBBERY_RMS
+    for index, spec in enumerate(scene.cloths):
+        mine = stretch[cloth == index]
+        if not len(mine) or "structural" in spec.compliance:
+            continue
+        rms = float(np.sqrt(np.mean(mine ** 2)))
+        if rms > worst_rms:
+            worst, worst_rms = index, rms
+    if worst is None:
+        return None
+    where, advice = _advice(scene, sim, worst)
+    return (f"{where} ends {worst_rms:.1%} longer than at rest (RMS over its structural sticks; woven cloth stretches "
+            f"under 1%): the relaxation has not converged {advice}")
+
+
+def _advice(scene: Scene, sim, index: int) -> tuple[str, str]:
+    """Cloth ``index`` named, and the run's budget with what would help that cloth converge."""
     spec, settings = scene.cloths[index], sim.settings
     shape = f"a {spec.resolution[0]} x {spec.resolution[1]} grid" if spec.mesh is None else \
         f"a mesh of {spec.particle_count} particles"
@@ -209,8 +248,8 @@ def unconverged_advice(scene: Scene, sim, points: np.ndarray) -> str:
     if spec.mesh is None and spec.pin_count and not spec.tears and not settings.multilevel:
         fixes.append("multilevel = true")
     fixes.append(f"or a lighter load (gravity + wind: {load:.3g} m/s^2)")
-    return (f"in cloth '{spec.name}' ({shape}) at {sim.substeps} substeps x {settings.iterations} iterations a "
-            f"frame; what helps: {'; '.join(fixes)}")
+    return (f"cloth '{spec.name}' ({shape})",
+            f"at {sim.substeps} substeps x {settings.iterations} iterations a frame; what helps: {'; '.join(fixes)}")
 
 
 def line_pass_advice(spec) -> str:
