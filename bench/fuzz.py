@@ -20,7 +20,10 @@ gives the same scenes on every machine):
   float64; the air at up to 30 m/s and gravity up to 1000 m/s^2; 1 to 64 substeps; 15 frames;
 - **solvers**: grids (some tearing) and the tablecloth mesh under random solver settings: coloured or Jacobi
   relaxation, the contact projection, damping, precision, a ``target_stretch`` budget, the global correction, the
-  multilevel pass, wind; a ball, the ground and the table mesh; 12 frames.
+  multilevel pass, wind; a ball, the ground and the table mesh; 12 frames;
+- **input**: a shipped scene (``INPUT_SCENES``) with one to three of its values made wrong (another type, out of
+  range, not finite), a key removed or an unknown key added: the loader must refuse it with one clear error that
+  names the scene, or the scene must run; its frames (use ``--frames`` to cut long ones short).
 
 With ``--cache`` each scene runs as ``warp-verlet run`` runs it (``warp_verlet.apps.runner.run_scene``), writing its
 USD point cache, which must then pass ``validate_cache``; a cache that does not is a finding too.
@@ -34,6 +37,7 @@ tables, so that it can be run again by itself. Exits 1 when there is a finding.
 
 from __future__ import annotations
 
+import copy
 import sys
 import tempfile
 from pathlib import Path
@@ -253,9 +257,73 @@ def solvers_scene(rng: np.random.Generator) -> dict:
     return data
 
 
+SCENES = Path(__file__).resolve().parent.parent / "scenes"
+INPUT_SCENES = ("ball_through_net", "banner_batten", "cloth_on_sphere", "cloth_on_table", "curtain_frame",
+                "curtain_override", "drape", "flag_air", "flag_tear", "hanging_cloth", "rope", "rope_bend_limit",
+                "sphere_sweep", "swinging_cloth", "tablecloth", "two_cloths", "wind_sheet")
+"""The shipped scenes the ``input`` kind mutates: those a CPU runs in seconds (not the 1024² ones)."""
+NUMBER_MUTANTS = (float("nan"), float("inf"), float("-inf"), -1, 0, 0.0, 1e30, -1e-30, 1e-300, 2 ** 63, True,
+                  "1.0", [1.0], {})
+STRING_MUTANTS = ("", "nonsense", "../no/such/file.obj", 3, 1.5, False, ["x"], {})
+LIST_MUTANTS = ([], [[]], [1], [1, 2, 3], ["a", "b"], [float("nan"), 1.0], 5, "list", [1e30, 1e30], [-1, -1],
+                [0, 0], [2 ** 40, 2], [True, False], [{}], [[1, 2], [3, 4]])
+TABLE_MUTANTS = ({}, [], 1, "table")
+
+
+def _paths(value, path=()):
+    """Every (path, value) under a scene's tables, tables and arrays included, the document itself left out."""
+    if path:
+        yield path, value
+    if isinstance(value, dict):
+        for key, item in value.items():
+            yield from _paths(item, (*path, key))
+    elif isinstance(value, list):
+        for index, item in enumerate(value):
+            yield from _paths(item, (*path, index))
+
+
+def _mutant(rng: np.random.Generator, value):
+    """A wrong value for a place that holds ``value``: of another type, out of range, or not finite."""
+    if isinstance(value, bool) or isinstance(value, (int, float)):
+        pool = NUMBER_MUTANTS
+    elif isinstance(value, str):
+        pool = STRING_MUTANTS
+    elif isinstance(value, list):
+        pool = LIST_MUTANTS
+    else:
+        pool = TABLE_MUTANTS
+    return copy.deepcopy(pool[int(rng.integers(0, len(pool)))])
+
+
+def input_scene(rng: np.random.Generator) -> dict:
+    """A shipped scene's tables (``INPUT_SCENES``; its mesh files made absolute, so that they load from anywhere)
+    with one to three of its values made wrong, or a key removed, or a key added that no table knows."""
+    import tomllib
+
+    name = INPUT_SCENES[int(rng.integers(0, len(INPUT_SCENES)))]
+    data = tomllib.loads((SCENES / f"{name}.toml").read_text())
+    for table in [*data.get("cloth", []), *data.get("collider", [])]:
+        if isinstance(table.get("mesh"), str):
+            table["mesh"] = str(SCENES / table["mesh"])
+    for _ in range(int(rng.integers(1, 4))):
+        places = list(_paths(data))
+        path, value = places[int(rng.integers(0, len(places)))]
+        parent = data
+        for step in path[:-1]:
+            parent = parent[step]
+        action = int(rng.integers(0, 6))
+        if action == 0 and isinstance(parent, dict):
+            del parent[path[-1]]
+        elif action == 1 and isinstance(value, dict):
+            value["no_such_key"] = 1.0
+        else:
+            parent[path[-1]] = _mutant(rng, value)
+    return data
+
+
 KINDS = {"lines": lines_scene, "features": features_scene,
          "extreme": lambda rng: features_scene(rng, extreme=True), "assorted": assorted_scene,
-         "solvers": solvers_scene}
+         "solvers": solvers_scene, "input": input_scene}
 """Kind -> generator of one scene's tables from the random generator."""
 
 

@@ -82,3 +82,13 @@ def test_a_seed_gives_the_same_scenes(kind):
 def test_the_scenes_it_found_going_to_nan_stay_finite(kind, seed, index):
     data = scene_of(kind, seed, index)
     assert fuzz.run_scene(data, data["simulation"]["frames"]) == "finite"
+
+
+def test_the_input_kind_makes_shipped_scenes_wrong_and_the_loader_names_what_it_refuses():
+    """Each input scene is a shipped scene with one to three values wrong, a key removed or an unknown one added:
+    most are refused, each with one message naming the scene and the key; the rest load."""
+    rng = np.random.default_rng(7)
+    outcomes = [fuzz.run_scene(fuzz.input_scene(rng), 1) for _ in range(12)]
+    refused = [o for o in outcomes if o.startswith("refused: ")]
+    assert len(refused) >= 6 and all(o.startswith("refused: <fuzz>: ") for o in refused)
+    assert not any(fuzz.is_finding(o) for o in outcomes)
