@@ -124,7 +124,7 @@ def run_scene(
 
 def _simulate(scene: Scene, output: Path, target: CacheOutput, device: str | None,
               progress: Callable[[int], None] | None, overlap: bool, threads: int | None) -> RunSummary:
-    from ..core.simulator import Simulator  # imports warp
+    from ..core.simulator import Simulator, StretchStats  # imports warp
 
     settings = scene.simulation
     began = time.perf_counter()
@@ -151,9 +151,10 @@ def _simulate(scene: Scene, output: Path, target: CacheOutput, device: str | Non
     wall = time.perf_counter() - start
     sim.settle_budget()  # on CUDA the last frame's stretch is read a frame late: count it before reporting
     points = sim.positions()
-    stretch = sim.stretch(points)
-    unconverged = unconverged_advice(scene, sim, points) if stretch.max > UNCONVERGED_STRETCH else None
-    rubbery = rubbery_note(scene, sim, points) if unconverged is None else None
+    per_stick, cloth = structural_by_cloth(sim, points)  # once: the stats and both checks below read it
+    stretch = StretchStats.of(per_stick)
+    unconverged = unconverged_advice(scene, sim, per_stick, cloth) if stretch.max > UNCONVERGED_STRETCH else None
+    rubbery = rubbery_note(scene, sim, per_stick, cloth) if unconverged is None else None
     colouring = model.colouring
     return RunSummary(
         scene=scene.source, output=output, device=str(sim.device), frames=settings.frames,
@@ -185,8 +186,9 @@ def sweep_description(model) -> str:
     return form if model.clusters_refused is None else f"{form} (clustered refused: {model.clusters_refused})"
 
 
-def _structural_by_cloth(sim, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The stretch |D - L| / L of every intact structural stick, and the index of the cloth each belongs to."""
+def structural_by_cloth(sim, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The stretch |D - L| / L of every intact structural stick (what ``sim.stretch`` summarises), and the index of
+    the cloth each belongs to."""
     model = sim.model
     torn = sim.torn_sticks() if model.tears else None
     keep = np.flatnonzero(model.structural if torn is None else model.structural & ~torn)
@@ -195,20 +197,20 @@ def _structural_by_cloth(sim, points: np.ndarray) -> tuple[np.ndarray, np.ndarra
     return model.structural_stretch(points, torn), cloth
 
 
-def unconverged_advice(scene: Scene, sim, points: np.ndarray) -> str:
-    """Where the stretch check failed (the cloth of the longest structural stick) and what would help that
-    cloth, from what the scene already has. Whether a budget converges depends on the run (how far the sweeps
-    of a frame carry a correction against the load), so this is said after it, not predicted."""
-    stretch, cloth = _structural_by_cloth(sim, points)
+def unconverged_advice(scene: Scene, sim, stretch: np.ndarray, cloth: np.ndarray) -> str:
+    """Where the stretch check failed (the cloth of the longest structural stick; ``stretch`` and ``cloth`` from
+    structural_by_cloth) and what would help that cloth, from what the scene already has. Whether a budget
+    converges depends on the run (how far the sweeps of a frame carry a correction against the load), so this is
+    said after it, not predicted."""
     where, advice = _advice(scene, sim, int(cloth[int(np.argmax(stretch))]))
     return f"in {where} {advice}"
 
 
-def rubbery_note(scene: Scene, sim, points: np.ndarray) -> str | None:
-    """The cloth whose rigid structural sticks end longest on average (RMS), where that is over RUBBERY_RMS, and
-    what would help it; None where every such cloth is within it. A cloth with soft structural sticks
-    (``compliance``) stretches by its own stiffness, and is not counted."""
-    stretch, cloth = _structural_by_cloth(sim, points)
+def rubbery_note(scene: Scene, sim, stretch: np.ndarray, cloth: np.ndarray) -> str | None:
+    """The cloth whose rigid structural sticks end longest on average (RMS; ``stretch`` and ``cloth`` from
+    structural_by_cloth), where that is over RUBBERY_RMS, and what would help it; None where every such cloth is
+    within it. A cloth with soft structural sticks (``compliance``) stretches by its own stiffness, and is not
+    counted."""
     worst, worst_rms = None, RUBBERY_RMS
     for index, spec in enumerate(scene.cloths):
         mine = stretch[cloth == index]

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..scene_keys import ARRAY, Key, accepts, any_real, scale_factors, text, vector
-from .kind import FLOAT, FLOAT64, INT, VEC3, ColliderLaunches, InsideReport, LiveDrawing, coulomb
+from .kind import FLOAT, FLOAT64, INT, VEC3, ColliderLaunches, InsideReport, LiveDrawing, coulomb, push_record
 
 MESH_ID = 8  # bytes of a wp.Mesh id (uint64) on the device
 QUAT = 16  # bytes of a wp.quat
@@ -379,8 +379,6 @@ class MeshKind:
                                             place_moving_meshes)
         from ..kernels.collide_sphere import advance_clock
         from ..launches import recorded
-
-        from .kind import push_record
 
         removed = push_record(pushes, model.device)
         c = model.colliders

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..scene_keys import Key, any_real, real, vector
-from .kind import FLOAT, VEC3, ColliderLaunches, InsideReport, LiveDrawing, coulomb
+from .kind import FLOAT, VEC3, ColliderLaunches, InsideReport, LiveDrawing, coulomb, push_record
 
 
 @dataclass(frozen=True)
@@ -112,8 +112,6 @@ class PlaneKind:
     def bind(self, model, state, pushes=None) -> ColliderLaunches:
         from ..kernels.collide_plane import collide_planes
         from ..launches import recorded
-
-        from .kind import push_record
 
         c = model.colliders
         clamp = recorded(collide_planes, model.particle_count,

@@ -6,7 +6,8 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..scene_keys import ARRAY, Invalid, Key, accepts, any_real, describe, per_element, real, vector
-from .kind import FLOAT, FLOAT64, INT, VEC3, ColliderLaunches, InsideReport, LiveDrawing, coulomb, keyframe_arrays
+from .kind import (FLOAT, FLOAT64, INT, VEC3, ColliderLaunches, InsideReport, LiveDrawing, coulomb, keyframe_arrays,
+                   push_record)
 
 
 @dataclass(frozen=True)
@@ -150,8 +151,6 @@ class SphereKind:
 
         from ..kernels.collide_sphere import advance_clock, collide_spheres, place_spheres
         from ..launches import recorded
-
-        from .kind import push_record
 
         c = model.colliders
         before = ()
