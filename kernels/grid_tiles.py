@@ -58,6 +58,15 @@ per colour keeps correctly rounded arithmetic: its module holds the computed tet
 bit for bit with the tether table's, and its explicit and implicit forms with each other."""
 
 
+def shared_sweep_options(max_registers: int | None) -> dict:
+    """``wp.kernel``'s options for a shared-memory sweep: SHARED_SWEEP_MATH, and ``max_registers`` a CUDA thread at
+    most (None: the compiler's choice)."""
+    options = {"module_options": SHARED_SWEEP_MATH}
+    if max_registers is not None:
+        options["cuda_max_registers"] = max_registers
+    return options
+
+
 @wp.func_native("WP_TILE_SYNC();")
 def block_barrier():
     """Every thread of the block waits here until all have arrived, and sees the others' shared-memory writes."""
@@ -126,11 +135,7 @@ def _make_kernel(tile: int, colours: tuple, max_registers: int | None, vector):
     def put_row_step(t: wp.tile(dtype=wp.float64, shape=(REGION_ROWS,), storage="shared"), i: int,
                      value: wp.float64): ...
 
-    options = {"module_options": SHARED_SWEEP_MATH}
-    if max_registers is not None:
-        options["cuda_max_registers"] = max_registers
-
-    @wp.kernel(module="unique", **options)
+    @wp.kernel(module="unique", **shared_sweep_options(max_registers))
     def relax_grid_tiles(
         x: wp.array(dtype=VEC),
         inv_mass: wp.array(dtype=float),

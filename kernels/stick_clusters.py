@@ -27,7 +27,7 @@ lane per block).
 
 import warp as wp
 
-from .grid_tiles import SHARED_SWEEP_MATH, block_barrier
+from .grid_tiles import block_barrier, shared_sweep_options
 from .positions import scaled
 from .relax import compliant_correction, stick_correction
 
@@ -76,11 +76,7 @@ def _make_kernel(region_capacity: int, stick_capacity: int, colours: int, compli
     @wp.func_native("t.data(wp::tile_coord(i)) = value;")
     def put_start(t: wp.tile(dtype=int, shape=(STARTS,), storage="shared"), i: int, value: int): ...
 
-    options = {"module_options": SHARED_SWEEP_MATH}
-    if max_registers is not None:
-        options["cuda_max_registers"] = max_registers
-
-    @wp.kernel(module="unique", **options)
+    @wp.kernel(module="unique", **shared_sweep_options(max_registers))
     def relax_stick_clusters(
         x: wp.array(dtype=wp.vec3),
         inv_mass: wp.array(dtype=float),
