@@ -143,16 +143,13 @@ class LineSolves(ConstraintSet):
         return None
 
     def count(self, scene):
-        """(lines, rest lengths, whether the scene has colliders: 2 where one has friction) of the cloths with
-        line passes, or 0."""
+        """(lines, rest lengths, whether the scene has colliders) of the cloths with line passes, or 0."""
         cloths = _line_cloths(scene)
         if not cloths:
             return 0
-        from ..colliders.kind import has_friction
-
         lines = sum(r * (c > 1) + c * (r > 1) for r, c in (spec.resolution for spec in cloths))
         rest = sum(r - 1 + c - 1 for r, c in (spec.resolution for spec in cloths))
-        return lines, rest, int(bool(scene.colliders)) + int(has_friction(scene.colliders))
+        return lines, rest, int(bool(scene.colliders))
 
     def needed(self, req) -> bool:
         return bool(req.count(self.name))
@@ -161,7 +158,8 @@ class LineSolves(ConstraintSet):
         # a vec4i per line, a rest length per row and column gap (Model); with colliders, a position snapshot and
         # a contact normal per particle (solver), and with friction each particle's pushes summed
         lines, rest, colliders = req.count(self.name)
-        contact = req.particles * (req.position_bytes + VEC3 * colliders) if colliders else 0
+        pushes = VEC3 if req.collider_friction else 0
+        contact = req.particles * (req.position_bytes + VEC3 + pushes) if colliders else 0
         return lines * 4 * INT + rest * FLOAT + contact
 
     def build(self, model, scene, device):
