@@ -26,7 +26,7 @@ import warp as wp
 
 from .aerodynamics import air_acceleration
 from .positions import for_positions
-from .tether import tethered
+from .tether import PINNED_ROW, tethered
 
 
 @wp.kernel
@@ -88,22 +88,22 @@ def verlet_step_tethered(
     delta: wp.array(dtype=Any),
     velocity_scale: Any,
     accel_offset: Any,
-    particle: wp.array(dtype=int),
     pin: wp.array2d(dtype=int),
     length: wp.array2d(dtype=float),
 ):
-    """verlet_step for tether row t's particle, then the first sweep's tether pass on it (kernels/tether.py),
-    launched over the tether table's rows where they hold every free particle. A row's particle is free (the
-    table is built from the particles with w > 0, which the model never changes), so no weight is read. The pass
-    reads only pins, which no thread here moves (w = 0), so the pair is bit for bit the two launches one after
-    the other, and the position makes one trip through memory instead of two."""
-    t = wp.tid()
-    i = particle[t]
+    """verlet_step, then the first sweep's tether pass (kernels/tether.py), launched over a tether table whose
+    row i is particle i for every particle: a pin's row says so in its first slot (PINNED_ROW), so no weight is
+    read, and the row index is the particle, so no index is either (a load every other one waits on). The pass
+    reads only pins, which no thread here moves, so the pair is bit for bit the two launches one after the
+    other, and the position makes one trip through memory instead of two."""
+    i = wp.tid()
+    if pin[i, 0] == PINNED_ROW:
+        return  # pins never move
     step = implicit_move(i, x, x_inertial, delta) * velocity_scale + accel_offset
     xi = x[i] + step
     x_inertial[i] = xi
     delta[i] = step
-    x[i] = tethered(xi, x, pin, length, t)
+    x[i] = tethered(xi, x, pin, length, i)
 
 
 @wp.kernel

@@ -154,7 +154,7 @@ def test_implicit_sticks_allocate_no_stick_arrays_and_issue_one_launch_per_colou
                        pins=["top-left", "top-right"], compliance={"bend": 1e-3})
     sim = Simulator(scene, "cpu", use_graph=False, sticks="implicit")
     model = sim.model
-    for name in ("stick_ends", "stick_rest", "stick_weight", "tether_particle", "tether_pin", "tether_length"):
+    for name in ("stick_ends", "stick_rest", "stick_weight", "tether_pin", "tether_length"):
         assert not hasattr(model, name), name
     assert model.stick_compliance is None
     soft = [c.count for c in model.grid.colours if c.compliance > 0]

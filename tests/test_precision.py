@@ -195,6 +195,11 @@ def kernel_cases():
     pinned = np.flatnonzero(w == 0)[:2].astype(np.int32)
     free = np.flatnonzero(w > 0).astype(np.int32)
     reach = np.linalg.norm(x[free][:, None] - x[pinned][None], axis=2) * rng.uniform(0.5, 1.5, (len(free), 2))
+    tether_pin = np.full((n, 2), -1, np.int32)  # a row per particle (constraints/tethers.TetherTable)
+    tether_pin[w == 0, 0] = -2
+    tether_pin[free] = pinned
+    tether_length = np.full((n, 2), np.inf, np.float32)
+    tether_length[free] = reach
 
     def f(a, dtype=float):
         return wp.array(a, dtype=dtype)
@@ -215,9 +220,8 @@ def kernel_cases():
         ("relax_jacobi", relax.relax_jacobi, n,
          lambda vec, real: [q(vec), f(w), f(start, int), f(nbr, int), f(nbr_rest), f(np.ones(2 * n, np.float32)), 0,
                             1, q(vec, np.zeros_like(x))]),
-        ("pull_tethers", tether.pull_tethers, len(free),
-         lambda vec, real: [q(vec), f(free, int), wp.array2d(np.tile(pinned, (len(free), 1)), dtype=int),
-                            wp.array2d(reach.astype(np.float32), dtype=float), 1]),
+        ("pull_tethers", tether.pull_tethers, n,
+         lambda vec, real: [q(vec), 0, wp.array2d(tether_pin, dtype=int), wp.array2d(tether_length, dtype=float), 1]),
         ("collide_planes", collide_plane.collide_planes, n,
          lambda vec, real: [q(vec), q(vec, x_in), q(vec, dq), f(w), f(np.array([[0.0, -0.5, 0.0], [1.0, 0.0, 0.0]],
                             np.float32), wp.vec3), f(np.array([[0.0, 1.0, 0.0], [-0.6, 0.0, 0.8]], np.float32), wp.vec3),
@@ -285,7 +289,7 @@ def f64_case(name: str):
                                                                   9: [D / 3]}),
         "relax_jacobi": (relax.relax_jacobi, 2, [stick(), f(1.0, 1.0), f(0, 1, 2, dtype=int), f(1, 0, dtype=int),
                          f(0.125, 0.125), f(1.0, 1.0), 0, 1, q([0, 0, 0], [0, 0, 0])], {8: moved}),
-        "pull_tethers": (tether.pull_tethers, 1, [q([X, X, X], [X + 0.5 + D, X, X]), f(1, dtype=int),
+        "pull_tethers": (tether.pull_tethers, 1, [q([X, X, X], [X + 0.5 + D, X, X]), 1,
                          wp.array2d(np.array([[0]]), dtype=int), wp.array2d(np.array([[0.5]]), dtype=float), 1],
                          {0: [[X, X, X], [X + 0.5, X, X]]}),
         "collide_planes": (collide_plane.collide_planes, 1, [q([0.7, X - D, 0.2]), q([0.7, X - D, 0.2]), q([0, 0, 0]),

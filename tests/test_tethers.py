@@ -20,16 +20,20 @@ def hanging(tethers: bool, n: int = 16):
 
 
 def excess_over_tether(sim: Simulator, table) -> np.ndarray:
-    """(distance to pin - tether length) / tether length, per tether."""
+    """(distance to pin - tether length) / tether length, per tether (the table's slots that hold one)."""
     p = sim.positions().astype(np.float64)
-    distance = np.linalg.norm(p[table.particle][:, None, :] - p[table.pin], axis=2)
-    return (distance - table.length) / table.length
+    rows, slots = np.nonzero(table.tethered)
+    pins = table.pin[rows, slots]
+    distance = np.linalg.norm(p[table.particle[rows]] - p[pins], axis=1)
+    return (distance - table.length[rows, slots]) / table.length[rows, slots]
 
 
 def test_a_tethered_cloth_stays_within_its_tether_lengths(device):
     sim = Simulator(hanging(True), device)
     table = sim.model.tether_table
-    assert table.pin.shape == (16 * 16 - 2, 2)  # every free particle, tied to both pins
+    assert table.first == 0 and table.pin.shape == (16 * 16, 2)  # a row per particle
+    assert table.tethered.sum() == 2 * (16 * 16 - 2)  # every free particle, tied to both pins
+    assert (table.pin[:, 0] == -2).sum() == 2  # the pins' rows say so
     for _ in range(60):
         sim.step_frame()
     # The tether pass runs before the sticks in each sweep, so the last sweep's stick corrections (the residual
@@ -166,7 +170,7 @@ def test_the_tether_pass_stays_out_of_the_verlet_step_where_something_runs_betwe
     assert not stages.tethers_in_integrate(sim.solver)
 
 
-def test_the_tether_pass_stays_out_of_the_verlet_step_unless_the_table_holds_every_free_particle(monkeypatch):
+def test_the_tether_pass_stays_out_of_the_verlet_step_unless_the_table_holds_every_particle(monkeypatch):
     from warp_verlet.core import stages
 
     monkeypatch.setattr(stages, "FOLD_TETHERS_INTO_INTEGRATE", EVERYWHERE)
@@ -175,12 +179,56 @@ def test_the_tether_pass_stays_out_of_the_verlet_step_unless_the_table_holds_eve
     assert not stages.tethers_in_integrate(Simulator(grid, "cpu", sticks="implicit").solver)  # computed tethers
     untethered = make_scene({}, resolution=[12, 10], pins=["top-left"], tethers=False)
     assert not stages.tethers_in_integrate(Simulator(untethered, "cpu").solver)
-    from warp_verlet.input.scene import parse_scene
-
-    one_tethered = parse_scene({"simulation": {}, "cloth": [
-        {"name": "a", "resolution": [4, 4], "size": [1.0, 1.0], "pins": ["top-left"]},
-        {"name": "b", "resolution": [4, 4], "size": [1.0, 1.0], "origin": [2.0, 0.0, 0.0], "tethers": False}]},
-        file="<test>")
-    assert not stages.tethers_in_integrate(Simulator(one_tethered, "cpu").solver)  # b's particles have no row
+    assert not stages.tethers_in_integrate(Simulator(three_cloths("ab"), "cpu").solver)  # b's particles have no row
+    assert stages.tethers_in_integrate(Simulator(three_cloths("abc"), "cpu").solver)  # b lies inside the span
     monkeypatch.setattr(stages, "FOLD_TETHERS_INTO_INTEGRATE", {"cpu": False, "cuda": True})
     assert not stages.tethers_in_integrate(Simulator(grid, "cpu").solver)  # the CPU runs the pass apart
+
+
+def three_cloths(names: str):
+    """Cloths a and c hang tethered from their top corners; b, pinned at one corner, has no tethers."""
+    from warp_verlet.input.scene import parse_scene
+
+    cloths = {
+        "a": {"name": "a", "resolution": [6, 5], "size": [1.0, 1.0], "pins": ["top-left", "top-right"]},
+        "b": {"name": "b", "resolution": [4, 4], "size": [1.0, 1.0], "origin": [2.0, 0.0, 0.0], "pins": ["top-left"],
+              "tethers": False},
+        "c": {"name": "c", "resolution": [5, 6], "size": [1.0, 1.0], "origin": [4.0, 0.0, 0.0],
+              "pins": ["top-left", "top-right"]},
+    }
+    return parse_scene({"simulation": {"substeps": 4, "iterations": 4}, "cloth": [cloths[n] for n in names]},
+                       file="<test>")
+
+
+@pytest.mark.parametrize("names", ["abc", "ba"])
+def test_a_table_spanning_an_untethered_cloth_holds_its_pin_and_moves_its_free_particles(names, device, monkeypatch):
+    """The tether table has a row per particle of the tethered cloths' span: an untethered cloth inside it (abc)
+    keeps its pin's row marked pinned and its free particles' rows empty, and one before it (ba) starts the
+    table further on. Its pin stays put and its free particles swing down, with the tether pass inside the Verlet
+    step or apart, bit for bit the same, and the tethered cloths stay within their tethers."""
+    from warp_verlet.core import stages
+
+    scene = three_cloths(names)
+    runs = []
+    for fold in (EVERYWHERE, NOWHERE):
+        monkeypatch.setattr(stages, "FOLD_TETHERS_INTO_INTEGRATE", fold)
+        sim = Simulator(scene, device)
+        assert stages.tethers_in_integrate(sim.solver) == (fold["cpu"] and names == "abc")
+        for _ in range(20):
+            sim.step_frame()
+        runs.append(sim.positions())
+    np.testing.assert_array_equal(runs[0], runs[1])
+    table, first = sim.model.tether_table, names.index("b") * (6 * 5 if names == "abc" else 0)
+    b = slice(first, first + 16)
+    assert table.first == (16 if names == "ba" else 0) and table.count == sim.model.particle_count - table.first
+    if names == "abc":
+        rows = table.pin[b]
+        assert (rows[0] == [-2, -1]).all() and (rows[1:] == -1).all()  # b's pin, then its untethered particles
+    rest, end = sim.model.rest_positions[b], runs[0][b]
+    np.testing.assert_array_equal(end[0], rest[0])  # b's pin
+    assert np.linalg.norm(end[1:] - rest[1:], axis=1).min() > 0.05  # b's free particles swung down
+    assert excess_over_tether(sim, table).max() < 1e-4
+    from test_memory import simulator_bytes
+    from warp_verlet.core.memory import estimate
+
+    assert simulator_bytes(sim) == estimate(scene, sim.model.sticks_form).device_bytes  # the table's rows counted

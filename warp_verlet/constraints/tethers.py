@@ -21,17 +21,37 @@ from ..launches import FLOAT, FLOAT64, INT, BoundStage, elements_per_thread, rec
 PAIRS_PER_CHUNK = 1 << 22
 
 
+NO_TETHER = -1
+"""A pin slot that holds no tether (kernels/tether.NO_TETHER)."""
+PINNED_ROW = -2
+"""The first pin slot of a pinned particle's row (kernels/tether.PINNED_ROW)."""
+
+
 @dataclass(frozen=True)
 class TetherTable:
-    """T tethered particles, each tied to K pins (global particle indices; -1 where a particle has fewer)."""
+    """A row per particle of the span first .. first + T - 1 (from the first tethered cloth's first particle to
+    the last one's last), each tied to K pins (global particle indices): NO_TETHER where a particle has fewer
+    (every slot of an untethered cloth's particle), PINNED_ROW in the first slot of a pinned particle's row. Row
+    r's particle is first + r, so a kernel reads no particle index; a pinned row lets the Verlet step that runs
+    the tether pass (kernels/integrate.verlet_step_tethered) skip pins without reading their weights."""
 
-    particle: np.ndarray  # (T,) int32
+    first: int
     pin: np.ndarray  # (T, K) int32
-    length: np.ndarray  # (T, K) float32, m
+    length: np.ndarray  # (T, K) float32, m (+inf where a slot holds no tether)
 
     @property
     def count(self) -> int:
-        return len(self.particle)
+        return len(self.pin)
+
+    @property
+    def particle(self) -> np.ndarray:
+        """(T,) int64: each row's particle."""
+        return np.arange(self.first, self.first + self.count)
+
+    @property
+    def tethered(self) -> np.ndarray:
+        """(T, K) bool: the slots that hold a tether."""
+        return self.pin >= 0
 
 
 def nearest_pins(points: np.ndarray, pins: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
@@ -52,34 +72,36 @@ def nearest_pins(points: np.ndarray, pins: np.ndarray, k: int) -> tuple[np.ndarr
 
 def build_tethers(cloths, specs, k: int) -> TetherTable | None:
     """Tethers of every cloth that uses them (``cloths``: the model's ClothSlots, ``specs`` their ClothSpecs),
-    ``k`` per particle (the model-wide count; a cloth with one pin leaves its second column at -1)."""
-    particles, pins, lengths = [], [], []
-    for slot, spec in zip(cloths, specs):
+    ``k`` per particle (the model-wide count; a cloth with one pin leaves its second slot empty), in a row per
+    particle of their span (TetherTable)."""
+    tethered = [i for i, spec in enumerate(specs) if spec.uses_tethers]
+    if not any((cloths[i].device_topology.inv_mass > 0).any() for i in tethered):
+        return None  # no cloth that uses tethers has a free particle
+    span = cloths[tethered[0]:tethered[-1] + 1]
+    first = span[0].first
+    rows = sum(slot.device_topology.particle_count for slot in span)
+    pin = np.full((rows, k), NO_TETHER, np.int64)
+    length = np.full((rows, k), np.inf, np.float64)
+    for slot, spec in zip(span, specs[tethered[0]:tethered[-1] + 1]):
+        top = slot.device_topology  # device indices, as the Model holds the particles
+        row = slot.first - first
+        pin[row + np.flatnonzero(top.inv_mass == 0), 0] = PINNED_ROW
         if not spec.uses_tethers:
             continue
-        top = slot.device_topology  # device indices, as the Model holds the particles
         pinned = np.asarray(top.pinned, np.int64)
         free = np.flatnonzero(top.inv_mass > 0)
         mine = min(k, len(pinned))
         index, distance = nearest_pins(top.positions[free], top.positions[pinned], mine)
-        pin = np.full((len(free), k), -1, np.int64)
-        length = np.full((len(free), k), np.inf, np.float64)
-        pin[:, :mine] = pinned[index] + slot.first
-        length[:, :mine] = distance * spec.tether_scale
-        particles.append(free + slot.first)
-        pins.append(pin)
-        lengths.append(length)
-    if not particles:
-        return None
-    return TetherTable(np.concatenate(particles).astype(np.int32), np.concatenate(pins).astype(np.int32),
-                       np.concatenate(lengths).astype(np.float32))
+        pin[row + free, :mine] = pinned[index] + slot.first
+        length[row + free, :mine] = distance * spec.tether_scale
+    return TetherTable(first, pin.astype(np.int32), length.astype(np.float32))
 
 
 def cut_tethers(table: TetherTable, particle_count: int, intact_sticks: np.ndarray) -> np.ndarray:
     """The tether lengths with every tether whose particle is cut off from its pin set to +inf (off)."""
     labels = connected_labels(particle_count, intact_sticks)
     length = table.length.copy()
-    has_pin = table.pin >= 0
+    has_pin = table.tethered
     same = np.zeros_like(has_pin)
     same[has_pin] = labels[table.particle[:, None].repeat(table.pin.shape[1], 1)[has_pin]] == labels[table.pin[has_pin]]
     length[~same] = np.inf
@@ -97,20 +119,20 @@ class Tethers(ConstraintSet):
         return req.tethered > 0 and req.grid_pins == 0
 
     def device_bytes(self, req) -> int:
-        per_particle = INT + req.tethers_per_particle * (INT + FLOAT)  # particle; pin and length per tether
+        per_row = req.tethers_per_particle * (INT + FLOAT)  # a pin and a length per tether
         live = req.tethers_per_particle * FLOAT if req.tears else 0  # the State's lengths, cut by tears
-        return req.tethered * (per_particle + live)
+        return req.tether_rows * (per_row + live)
 
     def bind(self, model, state, solver) -> BoundStage:
         from warp_verlet.kernels.tether import pull_tethers
 
         length = state.tether_length if state.tether_length is not None else model.tether_length
-        x, n = state.particle_q, model.tether_particle.shape[0]
+        x, first, n = state.particle_q, model.tether_table.first, model.tether_table.count
 
         def make(f, count):
             k = elements_per_thread(count, model.device)
-            return recorded(pull_tethers, count // k, [x, model.tether_particle[f:f + count],
-                                                       model.tether_pin[f:f + count], length[f:f + count], k])
+            return recorded(pull_tethers, count // k, [x, first + f, model.tether_pin[f:f + count],
+                                                       length[f:f + count], k])
         return BoundStage(None, [split_tasks(make, 0, n, solver.threads)])
 
     def on_tear(self, model, state, torn: np.ndarray) -> None:

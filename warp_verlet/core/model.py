@@ -247,9 +247,10 @@ class Model:
     ``neighbour``, ``neighbour_rest`` and ``neighbour_weight`` (2M,) instead. Tearing (only when a cloth can
     tear): ``tear_ends`` and ``tear_length`` (E,), one entry per stick (coloured) or per stick end (Jacobi);
     where a cloth tears by tension (coloured only), ``tear_force`` (M,) float32 N (+inf: never by tension).
-    Tethers (only when a cloth uses them; T tethered particles, K pins each): ``tether_particle`` (T,) int32,
-    ``tether_pin`` (T, K) int32 (-1: none) and ``tether_length`` (T, K) float32 m, the rest-pose lengths a
-    State's copy starts from when a cloth can tear. Air (only where ``[simulation.air]`` pushes on a face):
+    Tethers (only when a cloth uses them; a row per particle of the tethered cloths' span, T rows from
+    ``tether_table.first``, K pins each, constraints/tethers.TetherTable): ``tether_pin`` (T, K) int32 (-1: none;
+    -2 in the first slot: the row's particle is pinned) and ``tether_length`` (T, K) float32 m, the rest-pose
+    lengths a State's copy starts from when a cloth can tear. Air (only where ``[simulation.air]`` pushes on a face):
     ``air``, the faces, the particles' face lists, the keyframes and gusts (core/aerodynamics.AirModel), else
     None. Other constraint kinds (warp_verlet/constraints/): ``constraints``,
     kind name -> the device data its ``build`` made, documented in its module.
@@ -379,7 +380,6 @@ class Model:
             self._hold(self.grid_tethers, "grid_tethers")
         elif self.tether_table is not None:
             table = self.tether_table
-            self.tether_particle = wp.array(table.particle, dtype=int, device=device)
             self.tether_pin = wp.array2d(table.pin, dtype=int, device=device)
             self.tether_length = wp.array2d(table.length, dtype=float, device=device)
         self.air = None  # [simulation.air]'s device data (core/aerodynamics.AirModel), where a face feels air

@@ -46,6 +46,7 @@ class Requirements:
     colliders: tuple[tuple[str, tuple[int, ...]], ...]  # (kind's type, its counts) per kind present, clamp order
     collider_friction: bool  # whether any collider has friction (a stage noting contact normals sums the pushes)
     tethered: int = 0  # free particles of tethered cloths
+    tether_rows: int = 0  # the tether table's rows: the particles of the tethered cloths' span
     tethers_per_particle: int = 0
     coarse_sticks: int = 0  # multilevel: coarse sticks over all levels
     coarse_children: int = 0  # multilevel: particles moved by interpolation, over all levels
@@ -99,7 +100,8 @@ class Requirements:
             relaxation=scene.simulation.relaxation, iterations=scene.simulation.iterations, free_particles=free,
             compliant=scene.compliant, tears=scene.tears, colliders=collider_counts(scene.colliders),
             collider_friction=has_friction(scene.colliders),
-            tethered=scene.tethered_particles, tethers_per_particle=scene.tethers_per_particle,
+            tethered=scene.tethered_particles, tether_rows=scene.tether_rows,
+            tethers_per_particle=scene.tethers_per_particle,
             coarse_sticks=coarse[0], coarse_children=coarse[1], tension_tears=scene.tears_by_tension,
             elements=tuple((kind.name, n) for kind in constraint_kinds() if (n := kind.count(scene))),
             global_iterations=scene.simulation.global_iterations,
@@ -292,8 +294,8 @@ class Integrate:
         if tethers_in_integrate(solver):
             kernel = instance(verlet_step_tethered, model.position_dtype)
             length = state.tether_length if state.tether_length is not None else model.tether_length
-            tethers, n = [model.tether_particle, model.tether_pin, length], model.tether_particle.shape[0]
-            weights = []  # every row's particle is free
+            tethers = [model.tether_pin, length]
+            weights = []  # a pin's row says it is one
         else:
             kernel, tethers, weights = instance(verlet_step, model.position_dtype), [], [inv_mass]
 
@@ -338,17 +340,17 @@ CPU the pass apart, which runs a thread's whole piece in one loop, measured fast
 def tethers_in_integrate(solver) -> bool:
     """Whether the Verlet step also runs the first sweep's tether pass (kernels/integrate.verlet_step_tethered,
     launched over the tether table's rows): on a device kind where FOLD_TETHERS_INTO_INTEGRATE says so, where the
-    tether table's kind runs and its rows hold every free particle, and where nothing runs between the step and
-    the first sweep's tethers that reads or moves the positions (the air's forces, the global correction, a
-    constraint kind's per-substep set-up such as the multilevel pass or the self-contact search)."""
+    tether table's kind runs and its rows hold every particle (row i is then particle i), and where nothing runs
+    between the step and the first sweep's tethers that reads or moves the positions (the air's forces, the global
+    correction, a constraint kind's per-substep set-up such as the multilevel pass or the self-contact search)."""
     req, model = solver.req, solver.model
     if not (FOLD_TETHERS_INTO_INTEGRATE["cuda" if model.device.is_cuda else "cpu"] and req.free_particles
             and RELAX.needed(req) and not AERODYNAMICS.needed(req) and not GLOBAL.needed(req)
             and any(isinstance(c, Tethers) and c.needed(req) for c in constraint_kinds())
             and not any(c.reads_positions_before_sweeps and c.needed(req) for c in constraint_kinds())):
         return False
-    free = sum(int((slot.device_topology.inv_mass > 0).sum()) for slot in model.cloths)
-    return model.tether_table.count == free
+    table = model.tether_table
+    return table.first == 0 and table.count == model.particle_count
 
 
 class GlobalSolve:

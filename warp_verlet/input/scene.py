@@ -234,6 +234,15 @@ class Scene:
         return sum(c.particle_count - c.pin_count for c in self.cloths if c.uses_tethers)
 
     @property
+    def tether_rows(self) -> int:
+        """Rows of the tether table: the particles from the first tethered cloth's first to the last one's last
+        (constraints/tethers.TetherTable)."""
+        if not self.tethered_particles:
+            return 0  # no table
+        tethered = [i for i, c in enumerate(self.cloths) if c.uses_tethers]
+        return sum(c.particle_count for c in self.cloths[tethered[0]:tethered[-1] + 1])
+
+    @property
     def tethers_per_particle(self) -> int:
         return max((c.tethers_per_particle for c in self.cloths), default=0)
 
