@@ -32,6 +32,25 @@ def falling_cloth(precision: str, substeps: int, iterations: int = 4):
                       resolution=[9, 9], size=[1.0, 1.0], origin=[0.25, 2.0, -0.5], sticks=["structural", "bend"])
 
 
+@pytest.mark.parametrize("precision, gravity", [("float64", 1e-30), ("auto", 1e-12), ("float32", 1e-6)])
+def test_an_acceleration_too_weak_for_any_substep_is_named_with_what_fixes_it(precision, gravity):
+    # Below 4 float spacings per frame squared, no substep count resolves the acceleration: the error must name
+    # gravity and wind and the weakest |a| this frame rate and precision resolve, not suggest fewer substeps.
+    scene = make_scene({"fps": 60, "substeps": 1, "precision": precision, "gravity": [0.0, -gravity, 0.0]},
+                       resolution=[4, 4], size=[1.0, 1.0], pins=["top-left"])
+    with pytest.raises(WarpVerletError, match="even one substep a frame is too short") as refused:
+        Simulator(scene, "cpu")
+    message = str(refused.value)
+    p = "float32" if precision == "float32" else "float64"
+    weakest = 4 * float(np.spacing(np.float32(1.0) if p == "float32" else 1.0)) * 60.0 ** 2  # scale 1 m: the cloth's
+    assert f"must be 0 or at least {weakest:.2g} m/s^2" in message and "simulation.gravity" in message
+    assert "fewer simulation.substeps" not in message
+    # At that bound one substep a frame is accepted.
+    ok = make_scene({"fps": 60, "substeps": 1, "precision": p, "gravity": [0.0, -1.01 * weakest, 0.0]},
+                    resolution=[4, 4], size=[1.0, 1.0], pins=["top-left"])
+    Simulator(ok, "cpu").step_frame()
+
+
 def fall_error(sim: Simulator, x0: np.ndarray, t: float) -> float:
     """max |x - (x0 + g t^2 / 2)| over particles, relative to the fall g t^2 / 2."""
     exact = x0 + 0.5 * G * t * t

@@ -35,13 +35,19 @@ def acceleration(settings: "SimulationSettings") -> float:
     return float(np.linalg.norm(np.add(settings.gravity, settings.wind)))
 
 
+def spacing_at(precision: str, scale: float) -> float:
+    """One spacing of ``precision`` ("float32" or "float64") at coordinates as large as ``scale`` m (a scale under
+    1 mm counts as 1 mm), m."""
+    dtype = np.float32 if precision == "float32" else np.float64
+    return float(np.spacing(dtype(max(scale, 1e-3))))
+
+
 def smallest_dt(precision: str, accel: float, scale: float) -> float:
     """The smallest dt whose step |a| dt^2 is at least 4 spacings, in ``precision`` ("float32" or "float64"),
     of coordinates as large as ``scale`` m (a scale under 1 mm counts as 1 mm). 0 without acceleration."""
     if accel == 0.0:
         return 0.0
-    dtype = np.float32 if precision == "float32" else np.float64
-    return float(np.sqrt(RESOLVED_SPACINGS * np.spacing(dtype(max(scale, 1e-3))) / accel))
+    return float(np.sqrt(RESOLVED_SPACINGS * spacing_at(precision, scale) / accel))
 
 
 def coordinate_scale(scene: "Scene") -> float:

@@ -19,7 +19,7 @@ from warp_verlet.kernels.integrate import verlet_start
 from .cpu_team import COLOURED_SECONDS_PER_STICK, JACOBI_SECONDS_PER_ENTRY, MAX_THREADS, PhaseTeam, auto_threads
 from ..errors import ArgumentError, WarpVerletError
 from .model import Model
-from .precision import acceleration, smallest_dt
+from .precision import RESOLVED_SPACINGS, acceleration, smallest_dt, spacing_at
 from ..input.scene import SimulationSettings
 from ..launches import PhaseTask
 from .stages import STAGES, Requirements
@@ -125,6 +125,12 @@ class VerletSolver:
         scale = float(np.abs(m.rest_positions).max()) if m.particle_count else 1.0
         return smallest_dt(self.precision, self.accel_magnitude, scale)
 
+    def _coordinate_spacing(self) -> float:
+        """One spacing of the positions' float type at the scene's largest coordinate (at least 1 mm), m."""
+        m = self.model
+        scale = float(np.abs(m.rest_positions).max()) if m.particle_count else 1.0
+        return spacing_at(self.precision, scale)
+
     def check_step(self, state: State, dt: float) -> None:
         """Raise one clear error for a dt this solver cannot take from ``state``."""
         if not (dt > 0.0 and np.isfinite(dt)):
@@ -144,7 +150,16 @@ class VerletSolver:
     def too_small(self, dt: float, scene_dt: bool = False) -> str:
         """The error for a dt below ``min_dt``, with what lifts it (``scene_dt``: the scene's own fixed dt)."""
         p = self.precision
-        remedies = ["raise it with fewer simulation.substeps"] if scene_dt else []
+        frame_dt = 1.0 / self.settings.fps
+        if frame_dt < self.min_dt:
+            # No substep count lifts it: the acceleration itself is too weak to resolve at this frame rate.
+            weakest = RESOLVED_SPACINGS * self._coordinate_spacing() / frame_dt ** 2
+            remedies = [f"even one substep a frame is too short: gravity and wind add up to |a| = "
+                        f"{self.accel_magnitude:.3g} m/s^2, which at {self.settings.fps:g} fps and {p} positions "
+                        f"must be 0 or at least {weakest:.2g} m/s^2; set simulation.gravity and simulation.wind to "
+                        "0 if the cloth should not accelerate"]
+        else:
+            remedies = ["raise it with fewer simulation.substeps"] if scene_dt else []
         if p == "float32":
             remedies.append('set simulation.precision = "float64", which lowers this limit to about 1e-8 s for a '
                             "1 m scene")
