@@ -22,7 +22,7 @@ PAIRS_PER_CHUNK = 1 << 22
 
 
 NO_TETHER = -1
-"""A pin slot that holds no tether (kernels/tether.NO_TETHER)."""
+"""A pin slot that holds no tether (kernels/tether.tethered skips any negative slot)."""
 PINNED_ROW = -2
 """The first pin slot of a pinned particle's row (kernels/tether.PINNED_ROW)."""
 
