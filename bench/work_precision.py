@@ -3,7 +3,7 @@
     python -m bench.work_precision [SCENE] [--iterations 1 2 4 ...] [--substeps 1 2 4 8 16]
         [--solvers coloured jacobi] [--seconds 0.5] [--repeats 3] [--resolution N] [--out DIR] [--device cpu]
 
-For every (K, S, solver) point the scene (default scenes/hanging_cloth.toml) is simulated for ``--seconds``
+For every (K, S, solver) point the scene (default scenes/swinging_cloth.toml) is simulated for ``--seconds``
 of simulated time (a whole number of frames at the scene's fps) from its initial state:
 
 - wall time per simulated second: one untimed warm-up run (Warp compiles its kernels in its first frame; it
@@ -67,7 +67,7 @@ from . import newton_peer
 from .common import arg_parser, cloth_size, machine, markdown_table, quiet_warp, time_frames, write_csv
 
 HERE = Path(__file__).resolve().parent
-DEFAULT_SCENE = HERE.parent / "scenes" / "hanging_cloth.toml"
+DEFAULT_SCENE = HERE.parent / "scenes" / "swinging_cloth.toml"
 COLUMNS = ["solver", "substeps", "iterations", "frames", "sticks", "wall_per_sim_s", "wall_min", "wall_max",
            "Mproj_per_s", "stretch_rms", "stretch_max", "pos_error_traj", "pos_error", "pareto"]
 

@@ -30,6 +30,7 @@ import warp as wp
 
 from .positions import for_positions, scaled
 from .relax import compliant_correction, stick_correction
+from .tether import into_ball, into_two_balls
 
 
 @wp.func
@@ -278,10 +279,13 @@ def pull_grid_tethers(
     p = first_particle + r * grid_cols + c
     if inv_mass[p] == 0.0:
         return
-    xp = x[p]
     last_distance = wp.float64(-1.0)
     last_pin = int(-1)
-    for _k in range(tethers):
+    first_pin = int(-1)
+    first_limit = wp.float64(0.0)
+    second_pin = int(-1)
+    second_limit = wp.float64(0.0)
+    for k in range(tethers):
         # The next pin in (distance, index) order after the last one taken. The distances are recomputed in
         # each round: a local array of them measured slower (it lives in local memory).
         best = int(-1)
@@ -294,13 +298,20 @@ def pull_grid_tethers(
                 best_distance = rest_distance
         last_distance = best_distance
         last_pin = best
-        a = pins[best]
-        d = xp - x[a]
-        length = wp.length(d)
-        limit = type(length)(wp.float32(best_distance * scale))
-        if length > limit:
-            xp = x[a] + d * (limit / length)
-    x[p] = xp
+        limit = wp.float64(wp.float32(best_distance * scale))  # rounded to float32, as the tether table is
+        if k == 0:
+            first_pin = pins[best]
+            first_limit = limit
+        else:
+            second_pin = pins[best]
+            second_limit = limit
+    xp = x[p]
+    q = wp.vec3d(xp)
+    if second_pin < 0:
+        q = into_ball(q, wp.vec3d(x[first_pin]), first_limit)
+    else:
+        q = into_two_balls(q, wp.vec3d(x[first_pin]), first_limit, wp.vec3d(x[second_pin]), second_limit)
+    x[p] = type(xp)(q)
 
 
 for_positions(relax_grid_colour, arrays=("x",))

@@ -20,20 +20,61 @@ PINNED_ROW = wp.constant(-2)
 
 
 @wp.func
+def into_ball(p: wp.vec3d, centre: wp.vec3d, radius: wp.float64):
+    """``p`` moved to the nearest point of the ball of ``radius`` about ``centre`` (itself when inside)."""
+    d = p - centre
+    distance = wp.length(d)
+    if distance > radius:
+        return centre + d * (radius / distance)
+    return p
+
+
+@wp.func
+def into_two_balls(p: wp.vec3d, a: wp.vec3d, la: wp.float64, b: wp.vec3d, lb: wp.float64):
+    """The nearest point to ``p`` of the intersection of the balls (a, la) and (b, lb): the nearest point of one
+    ball where it lies in the other, else the nearest point of the circle where their spheres meet (float64: that
+    circle's radius is a small difference of large squares near the line between the pins)."""
+    qa = into_ball(p, a, la)
+    if wp.length(qa - b) <= lb:
+        return qa
+    qb = into_ball(p, b, lb)
+    if wp.length(qb - a) <= la:
+        return qb
+    axis = b - a
+    gap = wp.length(axis)
+    if gap == wp.float64(0.0):
+        return qb
+    u = axis / gap
+    along = (gap * gap + la * la - lb * lb) / (wp.float64(2.0) * gap)  # the circle's centre, from a along u
+    rho2 = la * la - along * along
+    w = (p - a) - u * wp.dot(p - a, u)  # p's offset from the axis
+    across = wp.length(w)
+    if rho2 <= wp.float64(0.0) or across == wp.float64(0.0):
+        # The spheres touch at one point of the axis (a cloth's edge running straight between its two pins, the
+        # lengths' rounding deciding whether they overlap), or p lies on the axis: that point.
+        return a + u * wp.clamp(along, wp.float64(0.0), gap)
+    return a + u * along + w * (wp.sqrt(rho2) / across)
+
+
+@wp.func
 def tethered(xp: Any, x: wp.array(dtype=Any), pin: wp.array2d(dtype=int), length: wp.array2d(dtype=float), t: int):
-    """Position ``xp`` of tether row t's particle moved back within length[t, k] of each pin[t, k] (a negative
-    slot: no tether there), pins read from ``x``."""
-    k = int(0)
-    while k < pin.shape[1]:  # not range(), whose loop handles either sign of step: slower on the CPU
-        a = pin[t, k]
-        if a >= 0:
-            d = xp - x[a]
-            distance = wp.length(d)
-            limit = type(distance)(length[t, k])
-            if distance > limit:
-                xp = x[a] + d * (limit / distance)
-        k += 1
-    return xp
+    """Position ``xp`` of tether row t's particle moved to the nearest point within length[t, k] of each pin[t, k]
+    (a negative slot: no tether there), pins read from ``x``. With two tethers this is the nearest point of both
+    balls at once (``into_two_balls``): projected onto one after the other, a particle near the line between two
+    pins (the top edge of a cloth hung by two corners) is moved mostly sideways, towards whichever pin comes last,
+    and the order flips where the nearer pin does, which the sticks are left to undo."""
+    a = pin[t, 0]
+    if a < 0:
+        return xp
+    p = wp.vec3d(xp)
+    b = int(-1)
+    if pin.shape[1] > 1:
+        b = pin[t, 1]
+    if b < 0:
+        p = into_ball(p, wp.vec3d(x[a]), wp.float64(length[t, 0]))
+    else:
+        p = into_two_balls(p, wp.vec3d(x[a]), wp.float64(length[t, 0]), wp.vec3d(x[b]), wp.float64(length[t, 1]))
+    return type(xp)(p)
 
 
 @wp.kernel

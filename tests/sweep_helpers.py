@@ -22,6 +22,7 @@ name = "sheet"
 resolution = [4, 4]
 size = [1.0, 1.0]
 origin = [-0.5, 1.0, 0.0]
+orientation = "horizontal"  # level, so that it swings down: hung where it hangs, its tethers hold it still
 pins = ["top-left", "top-right"]
 """
 

@@ -12,14 +12,16 @@ from warp_verlet.geometry import topology
 
 def test_the_orders_run_on_a_bench_scene_and_a_shipped_one_and_the_sweep_order_is_put_back(tmp_path):
     before = topology.SWEEP_ORDER
-    assert colour_order.main(["--device", "cpu", "--scenes", "hanging", "--sizes", "12", "--budgets", "4x2",
+    # The drape, not the hanging sheet: hung by two corners where it would hang, the sheet stays still under its
+    # tethers at this size, and every order leaves it unstretched.
+    assert colour_order.main(["--device", "cpu", "--scenes", "drape", "--sizes", "12", "--budgets", "4x2",
                               "--shipped", "rope", "--orders", "all", "--repeats", "1", "--out", str(tmp_path)]) == 0
     assert topology.SWEEP_ORDER is before
     rows = list(csv.DictReader(open(tmp_path / "colour-order.csv")))
     assert [r["order"] for r in rows] == list(colour_order.ORDERS) * 2
-    assert [r["scene"] for r in rows] == ["hanging"] * 6 + ["rope"] * 6
-    hanging = {r["order"]: float(r["structural rms"].rstrip("%")) for r in rows[:6]}
-    assert len(set(hanging.values())) > 1  # the order changes the result
+    assert [r["scene"] for r in rows] == ["drape"] * 6 + ["rope"] * 6
+    drape = {r["order"]: float(r["structural rms"].rstrip("%")) for r in rows[:6]}
+    assert len(set(drape.values())) > 1  # the order changes the result
     assert "command: `python -m bench.colour_order" in (tmp_path / "colour-order.md").read_text()
 
 

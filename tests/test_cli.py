@@ -28,6 +28,7 @@ name = "sheet"
 resolution = [6, 7]
 size = [0.5, 0.6]
 origin = [0.0, 1.0, 0.0]
+orientation = "horizontal"
 sticks = ["structural", "shear"]
 pins = ["top-left", "top-right"]
 

@@ -3,7 +3,7 @@ back from the cache): it must show cloth moving, not a still plate, and end as a
 
 The cloth starts level, pinned at the two corners of its near edge, and swings down about that edge. Were it a
 rigid plate of length L turned by 90 degrees about the pinned edge, its far edge would move by sqrt(2) L; a cloth
-that did not swing (scenes/hanging_cloth.toml, whose cloth starts where it hangs, moves 0.24 mm) fails at once.
+that did not swing (scenes/hanging_cloth.toml, whose cloth starts where it hangs and stays there) fails at once.
 """
 
 from __future__ import annotations

@@ -326,8 +326,10 @@ def test_auto_sweeps_a_large_mesh_cluster_by_cluster_on_cuda(tmp_path, monkeypat
 @pytest.mark.slow
 def test_every_shipped_scene_a_clustered_sweep_can_take_runs_with_it_as_stretched_as_with_a_launch_per_colour():
     """The clustered sweep composes with every stage the shipped scenes use (mesh colliders, self-collision, air,
-    soft sticks, angle limits, tethers): 30 frames end finite and within 1.5x the stretch of a launch per colour,
-    the same projections in another order. The scenes of a million particles are left to the benchmarks."""
+    soft sticks, angle limits, tethers): 30 frames end finite, and over the last 10 of them the mean RMS and max
+    stretch are within 1.5x a launch per colour's, the same projections in another order (a mean, because a flag
+    fluttering in the air changes its stretch 2x from frame to frame, in either order). The scenes of a million
+    particles are left to the benchmarks."""
     from warp_verlet.core.stages import Requirements, cluster_obstacle
     from warp_verlet.input.scene import load_scene
 
@@ -339,13 +341,15 @@ def test_every_shipped_scene_a_clustered_sweep_can_take_runs_with_it_as_stretche
         stretch = {}
         for form in ("explicit", "clustered"):
             sim = Simulator(scene, "cpu", sticks=form)
-            for _ in range(30):
+            late = []
+            for frame in range(30):
                 sim.step_frame()
-            x = sim.state.positions()
-            assert np.isfinite(x).all(), (path.name, form)
-            stretch[form] = sim.stretch(x)
+                if frame >= 20:
+                    late.append(sim.stretch())
+            assert np.isfinite(sim.state.positions()).all(), (path.name, form)
+            stretch[form] = {measure: float(np.mean([getattr(s, measure) for s in late])) for measure in ("rms", "max")}
         for measure in ("rms", "max"):
-            ours, theirs = getattr(stretch["clustered"], measure), getattr(stretch["explicit"], measure)
+            ours, theirs = stretch["clustered"][measure], stretch["explicit"][measure]
             assert ours < 1.5 * theirs + 1e-4 and theirs < 1.5 * ours + 1e-4, (path.name, measure, ours, theirs)
         taken += 1
     assert taken >= 12  # the shipped scenes that cannot tear

@@ -45,8 +45,9 @@ def check_rows_match_caches(out: Path, expect: int) -> list[dict]:
         assert (data["start"], data["end"]) == (0, int(r["frames"]))
         assert data["points"].shape == (int(r["frames"]) + 1, rows_ * cols, 3)
         rms, mx = structural_stretch(data["points"], rows_, cols)
-        assert float(r["stretch_rms"]) == pytest.approx(rms, rel=1e-4, abs=1e-9), r["name"]
-        assert float(r["stretch_max"]) == pytest.approx(mx, rel=1e-4, abs=1e-9), r["name"]
+        # abs: the float32 rounding of a stick's length (a converged pinned 4 x 4 cloth's stretch is about that)
+        assert float(r["stretch_rms"]) == pytest.approx(rms, rel=1e-4, abs=2e-7), r["name"]
+        assert float(r["stretch_max"]) == pytest.approx(mx, rel=1e-4, abs=2e-7), r["name"]
         sidecar = json.loads((out / f"{r['name']}.json").read_text())
         assert sidecar["hash"] == r["hash"] and sidecar["status"] == "ok"
     return rows

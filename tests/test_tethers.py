@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import warp as wp
 
 from conftest import make_scene
 from warp_verlet.core.simulator import Simulator
@@ -232,3 +233,63 @@ def test_a_table_spanning_an_untethered_cloth_holds_its_pin_and_moves_its_free_p
     from warp_verlet.core.memory import estimate
 
     assert simulator_bytes(sim) == estimate(scene, sim.model.sticks_form).device_bytes  # the table's rows counted
+
+
+def nearest_in_two_balls(p, a, la, b, lb, turns: int = 3000):
+    """The nearest point to p of the intersection of two balls by Dykstra's alternating projections (float64), an
+    independent route to what kernels/tether.into_two_balls computes in closed form."""
+    def into(q, c, r):
+        d = q - c
+        n = np.linalg.norm(d)
+        return q if n <= r else c + d * (r / n)
+    x, pa, pb = p.copy(), np.zeros(3), np.zeros(3)
+    for _ in range(turns):
+        y = into(x + pa, a, la)
+        pa = x + pa - y
+        x = into(y + pb, b, lb)
+        pb = y + pb - x
+    return x
+
+
+def test_two_tethers_move_a_particle_to_the_nearest_point_inside_both():
+    from warp_verlet.kernels.tether import into_two_balls
+
+    @wp.kernel
+    def nearest(p: wp.array(dtype=wp.vec3d), a: wp.array(dtype=wp.vec3d), la: wp.array(dtype=wp.float64),
+                b: wp.array(dtype=wp.vec3d), lb: wp.array(dtype=wp.float64), out: wp.array(dtype=wp.vec3d)):
+        i = wp.tid()
+        out[i] = into_two_balls(p[i], a[i], la[i], b[i], lb[i])
+
+    rng = np.random.default_rng(4)
+    n = 150
+    a = rng.normal(0, 1, (n, 3))
+    b = a + rng.normal(0, 1, (n, 3))
+    gap = np.linalg.norm(b - a, axis=1)
+    la = gap * rng.uniform(0.3, 1.2, n)
+    lb = np.maximum(gap - la, 0) + gap * rng.uniform(0.05, 1.0, n)  # the balls overlap
+    p = a + rng.normal(0, 1.5, (n, 3))  # inside both, one, or neither
+    cases = [wp.array(v, dtype=wp.vec3d if v.ndim == 2 else wp.float64, device="cpu") for v in (p, a, la, b, lb)]
+    out = wp.zeros(n, dtype=wp.vec3d, device="cpu")
+    wp.launch(nearest, n, inputs=cases, outputs=[out], device="cpu")
+    got = out.numpy()
+    kinds = set()
+    for i in range(n):
+        expected = nearest_in_two_balls(p[i], a[i], la[i], b[i], lb[i])
+        np.testing.assert_allclose(got[i], expected, atol=1e-7 * (1 + gap[i]), err_msg=str(i))
+        inside = (np.linalg.norm(p[i] - a[i]) <= la[i], np.linalg.norm(p[i] - b[i]) <= lb[i])
+        on_circle = (abs(np.linalg.norm(got[i] - a[i]) - la[i]) < 1e-9
+                     and abs(np.linalg.norm(got[i] - b[i]) - lb[i]) < 1e-9)
+        kinds.add("inside" if all(inside) else "circle" if on_circle else "one ball")
+    assert kinds == {"inside", "circle", "one ball"}  # every branch was taken
+
+
+def test_a_cloth_hung_in_its_rest_pose_by_two_corners_stays_still():
+    # Vertical, flat and pinned at its two top corners, the rigid cloth is at rest where it starts: every free
+    # particle hangs at the lowest point within its two tethers (the circle about the line between the pins that
+    # passes through its rest position), and the sticks are at their lengths. It moves 6e-8 m (one float32 spacing);
+    # projected onto one tether and then the other, the particles were pushed sideways and it moved 2.0e-5 m.
+    sim = Simulator(hanging(True, 24), "cpu")
+    x0 = sim.positions().astype(np.float64)
+    for _ in range(30):
+        sim.step_frame()
+    assert np.abs(sim.positions() - x0).max() < 2e-6
