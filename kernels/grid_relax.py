@@ -30,7 +30,7 @@ import warp as wp
 
 from .positions import for_positions, scaled
 from .relax import compliant_correction, stick_correction
-from .tether import into_ball, into_two_balls
+from .tether import within_pins
 
 
 @wp.func
@@ -306,12 +306,7 @@ def pull_grid_tethers(
             second_pin = pins[best]
             second_limit = limit
     xp = x[p]
-    q = wp.vec3d(xp)
-    if second_pin < 0:
-        q = into_ball(q, wp.vec3d(x[first_pin]), first_limit)
-    else:
-        q = into_two_balls(q, wp.vec3d(x[first_pin]), first_limit, wp.vec3d(x[second_pin]), second_limit)
-    x[p] = type(xp)(q)
+    x[p] = type(xp)(within_pins(wp.vec3d(xp), x, first_pin, first_limit, second_pin, second_limit))
 
 
 for_positions(relax_grid_colour, arrays=("x",))

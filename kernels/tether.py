@@ -57,6 +57,15 @@ def into_two_balls(p: wp.vec3d, a: wp.vec3d, la: wp.float64, b: wp.vec3d, lb: wp
 
 
 @wp.func
+def within_pins(p: wp.vec3d, x: wp.array(dtype=Any), a: int, la: wp.float64, b: int, lb: wp.float64):
+    """``p`` moved to the nearest point within ``la`` of pin a and, where b >= 0, within ``lb`` of pin b (both at
+    once: ``into_two_balls``), the pins read from ``x``."""
+    if b < 0:
+        return into_ball(p, wp.vec3d(x[a]), la)
+    return into_two_balls(p, wp.vec3d(x[a]), la, wp.vec3d(x[b]), lb)
+
+
+@wp.func
 def tethered(xp: Any, x: wp.array(dtype=Any), pin: wp.array2d(dtype=int), length: wp.array2d(dtype=float), t: int):
     """Position ``xp`` of tether row t's particle moved to the nearest point within length[t, k] of each pin[t, k]
     (a negative slot: no tether there), pins read from ``x``. With two tethers this is the nearest point of both
@@ -66,15 +75,12 @@ def tethered(xp: Any, x: wp.array(dtype=Any), pin: wp.array2d(dtype=int), length
     a = pin[t, 0]
     if a < 0:
         return xp
-    p = wp.vec3d(xp)
     b = int(-1)
+    lb = wp.float64(0.0)
     if pin.shape[1] > 1:
         b = pin[t, 1]
-    if b < 0:
-        p = into_ball(p, wp.vec3d(x[a]), wp.float64(length[t, 0]))
-    else:
-        p = into_two_balls(p, wp.vec3d(x[a]), wp.float64(length[t, 0]), wp.vec3d(x[b]), wp.float64(length[t, 1]))
-    return type(xp)(p)
+        lb = wp.float64(length[t, 1])
+    return type(xp)(within_pins(wp.vec3d(xp), x, a, wp.float64(length[t, 0]), b, lb))
 
 
 @wp.kernel

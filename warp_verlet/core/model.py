@@ -250,8 +250,8 @@ class Model:
     Tethers (only when a cloth uses them; a row per particle of the tethered cloths' span, T rows from
     ``tether_table.first``, K pins each, constraints/tethers.TetherTable): ``tether_pin`` (T, K) int32 (-1: none;
     -2 in the first slot: the row's particle is pinned) and ``tether_length`` (T, K) float32 m, the rest-pose
-    lengths a State's copy starts from when a cloth can tear. Air (only where ``[simulation.air]`` pushes on a face):
-    ``air``, the faces, the particles' face lists, the keyframes and gusts (core/aerodynamics.AirModel), else
+    lengths a State's copy starts from when a cloth can tear. Air (only where ``[simulation.air]`` pushes on a
+    face): ``air``, the faces, the particles' face lists, the keyframes and gusts (core/aerodynamics.AirModel), else
     None. Other constraint kinds (warp_verlet/constraints/): ``constraints``,
     kind name -> the device data its ``build`` made, documented in its module.
     """

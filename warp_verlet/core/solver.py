@@ -121,15 +121,13 @@ class VerletSolver:
         in float32, 1e-8 s in float64. Without relaxation there is no limit."""
         if "relax" not in self.stage_names:
             return 0.0
-        m = self.model
-        scale = float(np.abs(m.rest_positions).max()) if m.particle_count else 1.0
-        return smallest_dt(self.precision, self.accel_magnitude, scale)
+        return smallest_dt(self.precision, self.accel_magnitude, self._coordinate_scale())
 
-    def _coordinate_spacing(self) -> float:
-        """One spacing of the positions' float type at the scene's largest coordinate (at least 1 mm), m."""
+    def _coordinate_scale(self) -> float:
+        """The scene's largest |rest coordinate|, m (1 without particles): what the positions' float spacing is
+        taken at."""
         m = self.model
-        scale = float(np.abs(m.rest_positions).max()) if m.particle_count else 1.0
-        return spacing_at(self.precision, scale)
+        return float(np.abs(m.rest_positions).max()) if m.particle_count else 1.0
 
     def check_step(self, state: State, dt: float) -> None:
         """Raise one clear error for a dt this solver cannot take from ``state``."""
@@ -153,7 +151,7 @@ class VerletSolver:
         frame_dt = 1.0 / self.settings.fps
         if frame_dt < self.min_dt:
             # No substep count lifts it: the acceleration itself is too weak to resolve at this frame rate.
-            weakest = RESOLVED_SPACINGS * self._coordinate_spacing() / frame_dt ** 2
+            weakest = RESOLVED_SPACINGS * spacing_at(p, self._coordinate_scale()) / frame_dt ** 2
             remedies = [f"even one substep a frame is too short: gravity and wind add up to |a| = "
                         f"{self.accel_magnitude:.3g} m/s^2, which at {self.settings.fps:g} fps and {p} positions "
                         f"must be 0 or at least {weakest:.2g} m/s^2; set simulation.gravity and simulation.wind to "
