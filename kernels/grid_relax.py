@@ -306,7 +306,8 @@ def pull_grid_tethers(
             second_pin = pins[best]
             second_limit = limit
     xp = x[p]
-    x[p] = type(xp)(within_pins(wp.vec3d(xp), x, first_pin, first_limit, second_pin, second_limit))
+    # The limits are float32 values, so exact in either precision of the positions.
+    x[p] = within_pins(xp, x, first_pin, type(xp[0])(first_limit), second_pin, type(xp[0])(second_limit))
 
 
 for_positions(relax_grid_colour, arrays=("x",))

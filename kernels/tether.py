@@ -20,8 +20,9 @@ PINNED_ROW = wp.constant(-2)
 
 
 @wp.func
-def into_ball(p: wp.vec3d, centre: wp.vec3d, radius: wp.float64):
-    """``p`` moved to the nearest point of the ball of ``radius`` about ``centre`` (itself when inside)."""
+def into_ball(p: Any, centre: Any, radius: Any):
+    """``p`` moved to the nearest point of the ball of ``radius`` about ``centre`` (itself when inside), in the
+    precision of its arguments."""
     d = p - centre
     distance = wp.length(d)
     if distance > radius:
@@ -30,39 +31,51 @@ def into_ball(p: wp.vec3d, centre: wp.vec3d, radius: wp.float64):
 
 
 @wp.func
+def into_ball_squared(p: wp.vec3d, centre: wp.vec3d, radius: wp.float64):
+    """``into_ball`` in float64, its test on squares: no root for a point inside."""
+    d = p - centre
+    distance_sq = wp.length_sq(d)
+    if distance_sq > radius * radius:
+        return centre + d * (radius / wp.sqrt(distance_sq))
+    return p
+
+
+@wp.func
 def into_two_balls(p: wp.vec3d, a: wp.vec3d, la: wp.float64, b: wp.vec3d, lb: wp.float64):
     """The nearest point to ``p`` of the intersection of the balls (a, la) and (b, lb): the nearest point of one
-    ball where it lies in the other, else the nearest point of the circle where their spheres meet (float64: that
-    circle's radius is a small difference of large squares near the line between the pins)."""
-    qa = into_ball(p, a, la)
-    if wp.length(qa - b) <= lb:
+    ball where it lies in the other, else the nearest point of the circle where their spheres meet. In float64:
+    near the line between the pins that circle's radius is a small difference of large squares, and a point of
+    one sphere just outside the other lies far from the circle's nearest point where the spheres cross at a
+    shallow angle. The tests compare squares, so a point inside both balls takes no root."""
+    qa = into_ball_squared(p, a, la)
+    if wp.length_sq(qa - b) <= lb * lb:
         return qa
-    qb = into_ball(p, b, lb)
-    if wp.length(qb - a) <= la:
+    qb = into_ball_squared(p, b, lb)
+    if wp.length_sq(qb - a) <= la * la:
         return qb
     axis = b - a
     gap = wp.length(axis)
     if gap == wp.float64(0.0):
         return qb
-    u = axis / gap
+    u = axis * (wp.float64(1.0) / gap)
     along = (gap * gap + la * la - lb * lb) / (wp.float64(2.0) * gap)  # the circle's centre, from a along u
     rho2 = la * la - along * along
     w = (p - a) - u * wp.dot(p - a, u)  # p's offset from the axis
-    across = wp.length(w)
-    if rho2 <= wp.float64(0.0) or across == wp.float64(0.0):
+    across_sq = wp.length_sq(w)
+    if rho2 <= wp.float64(0.0) or across_sq == wp.float64(0.0):
         # The spheres touch at one point of the axis (a cloth's edge running straight between its two pins, the
         # lengths' rounding deciding whether they overlap), or p lies on the axis: that point.
         return a + u * wp.clamp(along, wp.float64(0.0), gap)
-    return a + u * along + w * (wp.sqrt(rho2) / across)
+    return a + u * along + w * wp.sqrt(rho2 / across_sq)
 
 
 @wp.func
-def within_pins(p: wp.vec3d, x: wp.array(dtype=Any), a: int, la: wp.float64, b: int, lb: wp.float64):
-    """``p`` moved to the nearest point within ``la`` of pin a and, where b >= 0, within ``lb`` of pin b (both at
-    once: ``into_two_balls``), the pins read from ``x``."""
+def within_pins(p: Any, x: wp.array(dtype=Any), a: int, la: Any, b: int, lb: Any):
+    """``p`` moved to the nearest point within ``la`` of pin a (in the precision of the positions) and, where
+    b >= 0, within ``lb`` of pin b (both at once, in float64: ``into_two_balls``), the pins read from ``x``."""
     if b < 0:
-        return into_ball(p, wp.vec3d(x[a]), la)
-    return into_two_balls(p, wp.vec3d(x[a]), la, wp.vec3d(x[b]), lb)
+        return into_ball(p, x[a], la)
+    return type(p)(into_two_balls(wp.vec3d(p), wp.vec3d(x[a]), wp.float64(la), wp.vec3d(x[b]), wp.float64(lb)))
 
 
 @wp.func
@@ -76,11 +89,11 @@ def tethered(xp: Any, x: wp.array(dtype=Any), pin: wp.array2d(dtype=int), length
     if a < 0:
         return xp
     b = int(-1)
-    lb = wp.float64(0.0)
+    lb = float(0.0)
     if pin.shape[1] > 1:
         b = pin[t, 1]
-        lb = wp.float64(length[t, 1])
-    return type(xp)(within_pins(wp.vec3d(xp), x, a, wp.float64(length[t, 0]), b, lb))
+        lb = length[t, 1]
+    return within_pins(xp, x, a, type(xp[0])(length[t, 0]), b, type(xp[0])(lb))
 
 
 @wp.kernel
