@@ -31,51 +31,66 @@ def into_ball(p: Any, centre: Any, radius: Any):
 
 
 @wp.func
-def into_ball_squared(p: wp.vec3d, centre: wp.vec3d, radius: wp.float64):
-    """``into_ball`` in float64, its test on squares: no root for a point inside."""
-    d = p - centre
-    distance_sq = wp.length_sq(d)
-    if distance_sq > radius * radius:
-        return centre + d * (radius / wp.sqrt(distance_sq))
-    return p
+def into_two_balls(p: Any, a: Any, la: Any, b: Any, lb: Any):
+    """The nearest point to ``p`` of the intersection (a lens) of the balls (a, la) and (b, lb), in the precision of
+    the arguments: ``p`` where it lies in both; the nearest point of one ball where ``p`` lies in the cone from that
+    ball's centre through the part of its sphere inside the other ball; else the nearest point of the circle where
+    the two spheres meet.
 
-
-@wp.func
-def into_two_balls(p: wp.vec3d, a: wp.vec3d, la: wp.float64, b: wp.vec3d, lb: wp.float64):
-    """The nearest point to ``p`` of the intersection of the balls (a, la) and (b, lb): the nearest point of one
-    ball where it lies in the other, else the nearest point of the circle where their spheres meet. In float64:
-    near the line between the pins that circle's radius is a small difference of large squares, and a point of
-    one sphere just outside the other lies far from the circle's nearest point where the spheres cross at a
-    shallow angle. The tests compare squares, so a point inside both balls takes no root."""
-    qa = into_ball_squared(p, a, la)
-    if wp.length_sq(qa - b) <= lb * lb:
-        return qa
-    qb = into_ball_squared(p, b, lb)
-    if wp.length_sq(qb - a) <= la * la:
-        return qb
+    Near the line between the pins (the top rows of a cloth hung by two corners) the lens is thin: la + lb - gap is
+    a small difference of large lengths, and so is the circle's radius. Written as the difference of squares
+    (la + lb)^2 - gap^2, computed in float64 from the coordinates' exact differences, it keeps its digits; the rest
+    is well conditioned in float32. The cone tests compare angles by a cross product, not distances to the other
+    centre, which hardly change along a sphere that crosses the other at a shallow angle."""
+    pa = p - a
+    pb = p - b
+    da_sq = wp.length_sq(pa)
+    db_sq = wp.length_sq(pb)
+    outside_a = da_sq > la * la
+    outside_b = db_sq > lb * lb
+    if not outside_a and not outside_b:
+        return p
     axis = b - a
-    gap = wp.length(axis)
-    if gap == wp.float64(0.0):
-        return qb
-    u = axis * (wp.float64(1.0) / gap)
-    along = (gap * gap + la * la - lb * lb) / (wp.float64(2.0) * gap)  # the circle's centre, from a along u
-    rho2 = la * la - along * along
-    w = (p - a) - u * wp.dot(p - a, u)  # p's offset from the axis
-    across_sq = wp.length_sq(w)
-    if rho2 <= wp.float64(0.0) or across_sq == wp.float64(0.0):
+    gap_sq = wp.length_sq(wp.vec3d(b) - wp.vec3d(a))  # exact differences of the coordinates
+    sum_l = wp.float64(la) + wp.float64(lb)
+    gap = wp.sqrt(type(la)(gap_sq))
+    if lb + gap <= la:  # ball b lies in ball a (a gap of 0 comes here or to the next test)
+        return into_ball(p, b, lb)
+    if la + gap <= lb:
+        return into_ball(p, a, la)
+    thickness = type(la)(sum_l * sum_l - gap_sq) / (la + lb + gap)  # la + lb - gap, with its digits
+    u = axis / gap
+    # The circle's centre lies at `along` from a towards b, and at along_b from b: la - along and lb - along_b are
+    # the lens's half-thicknesses, in proportion to thickness.
+    la_minus_along = thickness * (lb - la + gap) / (type(la)(2.0) * gap)
+    along = la - la_minus_along
+    if thickness <= type(la)(0.0):
         # The spheres touch at one point of the axis (a cloth's edge running straight between its two pins, the
-        # lengths' rounding deciding whether they overlap), or p lies on the axis: that point.
-        return a + u * wp.clamp(along, wp.float64(0.0), gap)
-    return a + u * along + w * wp.sqrt(rho2 / across_sq)
+        # lengths' rounding deciding whether they overlap) or are apart: that point, or the nearest of the axis.
+        return a + u * wp.clamp(along, type(la)(0.0), gap)
+    along_b = lb - thickness * (la - lb + gap) / (type(la)(2.0) * gap)
+    radius = wp.sqrt(wp.max(la_minus_along * (la + along), type(la)(0.0)))  # la^2 - along^2
+    s = wp.dot(pa, u)
+    w = pa - u * s  # p's offset from the axis
+    across = wp.length(w)
+    # In the half-plane through the axis and p, p is at (s, across) from a and the circle at (along, radius): p
+    # lies in a's cone where its angle from the axis is the smaller, and the same seen from b.
+    if outside_a and s * radius >= across * along:
+        return a + pa * (la / wp.sqrt(da_sq))
+    if outside_b and -wp.dot(pb, u) * radius >= across * along_b:
+        return b + pb * (lb / wp.sqrt(db_sq))
+    if across == type(la)(0.0):
+        return a + u * along
+    return a + u * along + w * (radius / across)
 
 
 @wp.func
 def within_pins(p: Any, x: wp.array(dtype=Any), a: int, la: Any, b: int, lb: Any):
-    """``p`` moved to the nearest point within ``la`` of pin a (in the precision of the positions) and, where
-    b >= 0, within ``lb`` of pin b (both at once, in float64: ``into_two_balls``), the pins read from ``x``."""
+    """``p`` moved to the nearest point within ``la`` of pin a and, where b >= 0, within ``lb`` of pin b (both at
+    once: ``into_two_balls``), the pins read from ``x``."""
     if b < 0:
         return into_ball(p, x[a], la)
-    return type(p)(into_two_balls(wp.vec3d(p), wp.vec3d(x[a]), wp.float64(la), wp.vec3d(x[b]), wp.float64(lb)))
+    return into_two_balls(p, x[a], la, x[b], lb)
 
 
 @wp.func
