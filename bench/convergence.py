@@ -1,13 +1,18 @@
 """Convergence at scale: stretch and position error against time, per method, with the peer in the same run.
 
-    python -m bench.convergence [--device cpu|cuda] [--methods plain tethers ...] [--scenes hanging drape torn_net]
-        [--sizes N ...] [--drape-sizes N ...] [--net-sizes N ...] [--budgets SxK ...] [--ref SxK]
+    python -m bench.convergence [--device cpu|cuda] [--methods plain tethers ...]
+        [--scenes hanging swinging drape torn_net] [--sizes N ...] [--drape-sizes N ...] [--net-sizes N ...]
+        [--budgets SxK ...] [--ref SxK]
         [--peer] [--peer-sizes N ...] [--out DIR] [--stem NAME] [--fresh] [--no-plot]
 
 Scenes (each built as the tables of a scene file, then the method's overrides merged in):
 
 - **hanging**: 1 m square, 0.2 kg, vertical, pinned at its two top corners, structural + shear + bend sticks
   (rigid), damping 0.24 /s (the old drag 0.999 at 240 substeps/s), 60 fps, read at 1 s (60 frames);
+- **swinging**: the hanging cloth started level (horizontal, pinned at the two corners of its edge at y = 1 m)
+  and read at 1 s, as it swings down through the vertical. Hung in its rest pose, every particle of the hanging
+  cloth already lies at the lowest point its two tethers allow, so with tethers that scene measures how still it
+  stays; this one loads the sticks and the tethers as the cloth moves;
 - **drape**: the same cloth flat, no pins, dropped from 0.5 m onto a 0.25 m sphere at the origin, ground at
   -0.5 m, read at 1.5 s (90 frames);
 - **torn_net**: the same cloth flat at y = 1 m, pinned along its left and right edges, tear_threshold 1.5; a
@@ -150,6 +155,11 @@ def hanging(n: int, substeps: int, iterations: int, frames: int = 60) -> dict:
             "cloth": [_sheet(n, origin=[-0.5, 1.0, 0.0], pins=["top-left", "top-right"])]}
 
 
+def swinging(n: int, substeps: int, iterations: int, frames: int = 60) -> dict:
+    return {"simulation": _simulation(substeps, iterations, frames),
+            "cloth": [_sheet(n, origin=[-0.5, 1.0, 0.0], orientation="horizontal", pins=["top-left", "top-right"])]}
+
+
 def drape(n: int, substeps: int, iterations: int, frames: int = 90) -> dict:
     return {"simulation": _simulation(substeps, iterations, frames),
             "cloth": [_sheet(n, origin=[-0.5, 0.5, -0.5], orientation="horizontal")],
@@ -177,13 +187,14 @@ def torn_net(n: int, substeps: int, iterations: int, frames: int = 60) -> dict:
                          {"type": "plane", "name": "ground", "point": [0.0, 0.0, 0.0]}]}
 
 
-SCENES = {"hanging": (hanging, 60), "drape": (drape, 90), "torn_net": (torn_net, 60)}
+SCENES = {"hanging": (hanging, 60), "swinging": (swinging, 60), "drape": (drape, 90), "torn_net": (torn_net, 60)}
 """Scene name -> (builder(n, S, K, frames) -> scene tables, frames read)."""
 
 CLOTH_SIZE = 1.0  # m: every scene's cloth; position errors are also given as a fraction of it
 
-DEFAULT_SIZES = {"cuda": {"hanging": [256, 1024, 2048], "drape": [1024], "torn_net": [512]},
-                 "cpu": {"hanging": [64, 128], "drape": [64], "torn_net": [64]}}
+DEFAULT_SIZES = {"cuda": {"hanging": [256, 1024, 2048], "swinging": [256, 1024, 2048], "drape": [1024],
+                          "torn_net": [512]},
+                 "cpu": {"hanging": [64, 128], "swinging": [64, 128], "drape": [64], "torn_net": [64]}}
 DEFAULT_BUDGETS = {"cuda": [(4, 8), (16, 2), (32, 1), (64, 1), (64, 2), (64, 4)],
                    "cpu": [(1, 8), (2, 8), (4, 8), (8, 4), (16, 1), (16, 2), (24, 1), (32, 1), (64, 1), (64, 2), (64, 4)]}
 RESOLVED_RATIO = 1 / 3  # the reference's half-budget difference must be <= this x the best row's error
@@ -746,7 +757,7 @@ def main(argv=None) -> int:
     p.add_argument("--methods", nargs="+", default=list(METHODS),
                    help=f"methods of METHODS ({', '.join(METHODS)}), combined with '+' (default: all)")
     p.add_argument("--scenes", nargs="+", choices=list(SCENES), default=list(SCENES))
-    p.add_argument("--sizes", type=int, nargs="*", default=None, help="hanging grid sizes")
+    p.add_argument("--sizes", type=int, nargs="*", default=None, help="hanging and swinging grid sizes")
     p.add_argument("--drape-sizes", type=int, nargs="*", default=None)
     p.add_argument("--net-sizes", type=int, nargs="*", default=None)
     p.add_argument("--budgets", type=_budget, nargs="+", default=None, metavar="SxK")
@@ -770,7 +781,7 @@ def main(argv=None) -> int:
             method_overrides(m)
         except KeyError as exc:
             p.error(str(exc.args[0]))
-    sizes = {"hanging": args.sizes, "drape": args.drape_sizes, "torn_net": args.net_sizes}
+    sizes = {"hanging": args.sizes, "swinging": args.sizes, "drape": args.drape_sizes, "torn_net": args.net_sizes}
     plan = {s: (sizes[s] if sizes[s] is not None else DEFAULT_SIZES[kind][s]) for s in args.scenes}
     plan = {s: v for s, v in plan.items() if v}
     cache = load_cache(args.out / f"{args.stem}.json")

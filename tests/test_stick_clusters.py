@@ -326,9 +326,10 @@ def test_auto_sweeps_a_large_mesh_cluster_by_cluster_on_cuda(tmp_path, monkeypat
 @pytest.mark.slow
 def test_every_shipped_scene_a_clustered_sweep_can_take_runs_with_it_as_stretched_as_with_a_launch_per_colour():
     """The clustered sweep composes with every stage the shipped scenes use (mesh colliders, self-collision, air,
-    soft sticks, angle limits, tethers): 30 frames end finite, and over the last 10 of them the mean RMS and max
-    stretch are within 1.5x a launch per colour's, the same projections in another order (a mean, because a flag
-    fluttering in the air changes its stretch 2x from frame to frame, in either order). The scenes of a million
+    soft sticks, angle limits, tethers): 60 frames end finite, and over the last 40 of them the mean RMS and max
+    stretch are within 1.5x a launch per colour's, the same projections in another order (a mean over many frames,
+    because a flag fluttering in the air changes its longest stick's stretch 3x from frame to frame, in either
+    order: over 10 frames the two orders' means of it differed 1.75x). The scenes of a million
     particles are left to the benchmarks."""
     from warp_verlet.core.stages import Requirements, cluster_obstacle
     from warp_verlet.input.scene import load_scene
@@ -342,7 +343,7 @@ def test_every_shipped_scene_a_clustered_sweep_can_take_runs_with_it_as_stretche
         for form in ("explicit", "clustered"):
             sim = Simulator(scene, "cpu", sticks=form)
             late = []
-            for frame in range(30):
+            for frame in range(60):
                 sim.step_frame()
                 if frame >= 20:
                     late.append(sim.stretch())
