@@ -50,8 +50,8 @@ the net tears) the halves differ by centimetres and no row is resolved: there th
 References are cached in DIR/STEM.json (metadata) and DIR/references/*.npy (positions; not committed) and
 reused unless ``--fresh`` or the scene, method or budget changed.
 
-With ``--peer``, Newton's Style3D and VBD run the hanging cloth in the same process (skipped with a message
-when Newton is absent); their position error includes the model difference (a triangle membrane, not sticks).
+With ``--peer``, Newton's Style3D and VBD run the hanging and the swinging cloth (whichever of them run) in the
+same process (skipped with a message when Newton is absent); their position error includes the model difference (a triangle membrane, not sticks).
 
 Outputs in DIR: STEM.md (machine, device, date, command, references, rows, and a targets table at the end),
 STEM.json, and STEM-SCENE-N.png (log-log fronts: ms/frame against RMS stretch and position error, one series
@@ -388,7 +388,8 @@ PEER_SOLVERS = ("style3d", "vbd")
 
 
 def peer_rows(sizes: list[int], device: str, references: dict | None = None,
-              solvers: tuple[str, ...] = PEER_SOLVERS) -> list[dict]:
+              solvers: tuple[str, ...] = PEER_SOLVERS, scene: str = "hanging") -> list[dict]:
+    """Newton's rows for the hanging cloth, or (``scene`` "swinging") the same cloth started level."""
     try:
         from bench import newton_style3d as peer
     except ImportError:
@@ -401,16 +402,16 @@ def peer_rows(sizes: list[int], device: str, references: dict | None = None,
     for solver in solvers:
         for n in sizes:
             try:
-                r = peer.run_peer(solver, n, frames=60, device=device)
+                r = peer.run_peer(solver, n, frames=60, device=device, level=scene == "swinging")
             except Exception as exc:  # a peer failing must not lose our own rows
                 print(f"peer {solver} {n}^2 failed: {exc}")
                 continue
             rms, mx = peer.structural_stretch(r["positions"], n)
-            rows.append({"scene": "hanging", "n": n, "method": f"newton-{solver}", "substeps": r["substeps"],
+            rows.append({"scene": scene, "n": n, "method": f"newton-{solver}", "substeps": r["substeps"],
                          "iterations": r["iterations"], "ms_per_frame": r["ms_per_frame"], "rms": rms, "max": mx,
                          "setup_s": r["setup_s"], "first_frame_s": r["first_frame_s"], "frames": 60,
                          "positions": r["positions"], "torn": None, "peer": True})
-            _with_error(rows[-1], (references or {}).get(("hanging", n)))
+            _with_error(rows[-1], (references or {}).get((scene, n)))
             print(_line(rows[-1]), flush=True)
     return rows
 
@@ -471,8 +472,9 @@ def run(plan: dict[str, list[int]], methods: list[str], budgets: list[tuple[int,
                     rows.append(row)
                     log(_line(row) + f"  [{time.perf_counter() - started:.0f} s]", flush=True)
     if peer:
-        hanging_sizes = plan.get("hanging", [])
-        rows += peer_rows(peer_sizes or hanging_sizes, device, refs, peer_solvers)
+        for scene in ("hanging", "swinging"):
+            if scene in plan:
+                rows += peer_rows(peer_sizes or plan[scene], device, refs, peer_solvers, scene)
     for (kind, n), ref in refs.items():
         if ref is not None:
             ref["check"] = self_consistency(ref, rows)

@@ -141,7 +141,9 @@ class _NewtonCloth(NewtonFrames):
     """The hanging sheet as a Newton model and solver; ``step_frame`` advances one 1/60 s frame."""
 
     def __init__(self, solver: str, n: int, device, substeps: int, iterations: int, self_contact: bool,
-                 vbd_tri_kd: float):
+                 vbd_tri_kd: float, level: bool = False):
+        import math
+
         import warp as wp
 
         import newton
@@ -152,7 +154,11 @@ class _NewtonCloth(NewtonFrames):
         self.dt = 1.0 / (FPS * substeps)
         spacing = SIZE / (n - 1)
         ox, oy, oz = TOP_LEFT
-        grid = {"pos": wp.vec3(ox, oy - SIZE, oz), "rot": wp.quat_identity(), "vel": wp.vec3(0.0, 0.0, 0.0),
+        # Newton lays the grid's rows along +Y from pos; level, they are turned about X onto -Z, so that Newton's last
+        # row (warp_verlet's pinned row 0) lies at z = oz and warp_verlet's row r at z = oz + r * spacing.
+        pos, rot = (wp.vec3(ox, oy, oz + SIZE), wp.quat_from_axis_angle(wp.vec3(1.0, 0.0, 0.0), -0.5 * math.pi)) \
+            if level else (wp.vec3(ox, oy - SIZE, oz), wp.quat_identity())
+        grid = {"pos": pos, "rot": rot, "vel": wp.vec3(0.0, 0.0, 0.0),
                 "dim_x": n - 1, "dim_y": n - 1, "cell_x": spacing, "cell_y": spacing,
                 "mass": TOTAL_MASS / (n * n), "particle_radius": 0.0}
 
@@ -217,8 +223,10 @@ class _NewtonCloth(NewtonFrames):
 
 
 def run_peer(solver: str, n: int, frames: int = 60, device: str | None = None, *, substeps: int | None = None,
-             iterations: int | None = None, self_contact: bool = False, vbd_tri_kd: float = VBD_TRI_KD) -> dict:
-    """Build the hanging sheet with ``n`` x ``n`` particles in Newton, step ``frames`` frames with ``solver``
+             iterations: int | None = None, self_contact: bool = False, vbd_tri_kd: float = VBD_TRI_KD,
+             level: bool = False) -> dict:
+    """Build the hanging sheet with ``n`` x ``n`` particles in Newton (``level``: started level, in the plane
+    y = 1 m with its pinned edge at z = 0 and its rows along +Z, as bench.convergence's swinging scene), step ``frames`` frames with ``solver``
     ("style3d" or "vbd") on ``device`` (Warp's default when None) and return
 
     setup_s        model build (builder, finalize, VBD's colouring) + solver construction (Style3D's PD-matrix
@@ -245,7 +253,7 @@ def run_peer(solver: str, n: int, frames: int = 60, device: str | None = None, *
 
     wp.synchronize_device(device)
     t0 = time.perf_counter()
-    cloth = _NewtonCloth(solver, n, device, substeps, iterations, self_contact, vbd_tri_kd)
+    cloth = _NewtonCloth(solver, n, device, substeps, iterations, self_contact, vbd_tri_kd, level)
     wp.synchronize_device(device)
     setup_s = time.perf_counter() - t0
 

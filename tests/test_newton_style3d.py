@@ -57,3 +57,18 @@ def test_main_prints_or_skips(capsys):
         assert "per frame" in out and "stretch" in out
     else:
         assert newton_style3d.SKIP_MESSAGE in out
+
+
+def test_level_start_lays_the_cloth_as_the_swinging_scene_and_it_swings_down():
+    # bench.convergence's swinging scene in Newton: level at y = 1 m, row r of warp_verlet's order at z = r / (n - 1)
+    # (checked after one frame, when it has fallen under a millimetre), pinned at row 0's corners. After half a
+    # second VBD's far edge has swung far below the pins (measured y = -0.005 m at 8²). Style3D's, with its
+    # example's 2 x 10, has fallen only 0.1 m at 8² to 32² (its PCG carries the whole cloth's fall slowly).
+    pytest.importorskip("newton")
+    n = 8
+    first = newton_style3d.run_peer("style3d", n, frames=1, device="cpu", level=True)["positions"].reshape(n, n, 3)
+    np.testing.assert_allclose(first[:, 0, 2], np.arange(n) / (n - 1), atol=1e-4)
+    np.testing.assert_allclose(first[..., 1], 1.0, atol=5e-3)
+    later = newton_style3d.run_peer("vbd", n, frames=30, device="cpu", level=True)["positions"].reshape(n, n, 3)
+    np.testing.assert_allclose(later[0, [0, -1]], [[-0.5, 1.0, 0.0], [0.5, 1.0, 0.0]], atol=1e-6)
+    assert later[-1, :, 1].max() < 0.5
