@@ -51,7 +51,8 @@ References are cached in DIR/STEM.json (metadata) and DIR/references/*.npy (posi
 reused unless ``--fresh`` or the scene, method or budget changed.
 
 With ``--peer``, Newton's Style3D and VBD run the hanging and the swinging cloth (whichever of them run) in the
-same process (skipped with a message when Newton is absent); their position error includes the model difference (a triangle membrane, not sticks).
+same process (skipped with a message when Newton is absent); their position error includes the model difference
+(a triangle membrane, not sticks).
 
 Outputs in DIR: STEM.md (machine, device, date, command, references, rows, and a targets table at the end),
 STEM.json, and STEM-SCENE-N.png (log-log fronts: ms/frame against RMS stretch and position error, one series

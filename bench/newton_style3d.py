@@ -10,7 +10,9 @@ The cloth is warp_verlet's benchmark sheet: 1 m x 1 m, 0.2 kg spread evenly over
 (spacing 1/(n-1) m), vertical in the XY plane with its top edge at y = 1 m and x from -0.5 to 0.5 m, starting
 flat and at rest, pinned at its two top corners (mass 0 and not ACTIVE), gravity (0, -9.81, 0), 60 fps, read
 after ``frames`` frames (60 = 1 s). Positions come back in warp_verlet's row-major order: particle r * n + c,
-row 0 the pinned top edge, column c along +X (so the pins are particles 0 and n - 1).
+row 0 the pinned top edge, column c along +X (so the pins are particles 0 and n - 1). ``run_peer(level=True)``
+starts it level instead, in the plane y = 1 m with row r at z = r / (n - 1) m, as bench.convergence's swinging
+scene.
 
 Solvers and settings (each taken from Newton 1.8's own ``examples/cloth/example_cloth_hanging.py``):
 
@@ -226,8 +228,8 @@ def run_peer(solver: str, n: int, frames: int = 60, device: str | None = None, *
              iterations: int | None = None, self_contact: bool = False, vbd_tri_kd: float = VBD_TRI_KD,
              level: bool = False) -> dict:
     """Build the hanging sheet with ``n`` x ``n`` particles in Newton (``level``: started level, in the plane
-    y = 1 m with its pinned edge at z = 0 and its rows along +Z, as bench.convergence's swinging scene), step ``frames`` frames with ``solver``
-    ("style3d" or "vbd") on ``device`` (Warp's default when None) and return
+    y = 1 m with its pinned edge at z = 0 and its rows along +Z, as bench.convergence's swinging scene), step
+    ``frames`` frames with ``solver`` ("style3d" or "vbd") on ``device`` (Warp's default when None) and return
 
     setup_s        model build (builder, finalize, VBD's colouring) + solver construction (Style3D's PD-matrix
                    precompute); includes compiling Newton's kernels when Warp's kernel cache is cold
