@@ -318,6 +318,38 @@ def test_two_tethers_in_float32_keep_their_digits_near_the_line_between_the_pins
     assert np.linalg.norm(run(wp.vec3, wp.float32, np.float32) - exact, axis=1).max() < 1.5e-7
 
 
+@pytest.mark.parametrize("vector,scalar", [(wp.vec3, wp.float32), (wp.vec3d, wp.float64)])
+def test_two_tethers_in_extreme_cases_give_a_finite_nearest_point(vector, scalar):
+    # Pins dragged apart past both lengths (no lens: the point where the spheres' radical plane, which holds their
+    # circle while they meet, crosses the axis, as it holds the touching point), pins at one place (the smaller ball), one ball inside the other (that ball), a cut tether (length +inf: the
+    # other ball alone), and p on the axis (no direction off it): each answer finite and where it should be.
+    from warp_verlet.kernels.tether import into_two_balls
+
+    @wp.kernel
+    def nearest(p: wp.array(dtype=Any), a: wp.array(dtype=Any), la: wp.array(dtype=Any), b: wp.array(dtype=Any),
+                lb: wp.array(dtype=Any), out: wp.array(dtype=Any)):
+        i = wp.tid()
+        out[i] = into_two_balls(p[i], a[i], la[i], b[i], lb[i])
+
+    inf = np.inf
+    cases = [  # p, a, la, b, lb, expected
+        ((0.0, -1.0, 0.0), (0, 0, 0), 1.0, (4, 0, 0), 2.0, (1.625, 0.0, 0.0)),   # apart: (16 + 1 - 4) / 8 along
+        ((4.0, 3.0, 0.0), (0, 0, 0), 1.0, (0, 0, 0), 0.5, (0.4, 0.3, 0.0)),      # one place: the smaller ball
+        ((3.5, 4.0, 0.0), (0, 0, 0), 2.0, (0.5, 0, 0), 0.5, (0.8, 0.4, 0.0)),    # b inside a: b's ball
+        ((0.0, 3.0, 0.0), (0, 0, 0), inf, (0, 1, 0), 1.0, (0.0, 2.0, 0.0)),      # a cut: b's ball alone
+        ((0.0, 3.0, 0.0), (0, 0, 0), 1.0, (0, 1, 0), inf, (0.0, 1.0, 0.0)),      # b cut: a's ball alone
+        ((-2.0, 0.0, 0.0), (0, 0, 0), 1.0, (1, 0, 0), 1.0, (0.0, 0.0, 0.0)),     # on the axis, behind a: the lens's tip
+    ]
+    columns = list(zip(*cases))
+    arrays = [wp.array(np.array(c, dtype=float), dtype=vector if k in (0, 1, 3) else scalar, device="cpu")
+              for k, c in enumerate(columns[:5])]
+    out = wp.zeros(len(cases), dtype=vector, device="cpu")
+    wp.launch(nearest, len(cases), inputs=arrays, outputs=[out], device="cpu")
+    got = out.numpy()
+    assert np.isfinite(got).all()
+    np.testing.assert_allclose(got, np.array(columns[5]), atol=1e-6)
+
+
 def test_a_cloth_hung_in_its_rest_pose_by_two_corners_stays_still():
     # Vertical, flat and pinned at its two top corners, the rigid cloth is at rest where it starts: every free
     # particle hangs at the lowest point within its two tethers (the circle about the line between the pins that
