@@ -12,6 +12,7 @@ import warp as wp
 
 from conftest import make_scene
 from warp_verlet.core.simulator import Simulator
+from warp_verlet.kernels.tether import into_two_balls
 
 G = 9.81
 
@@ -237,6 +238,24 @@ def test_a_table_spanning_an_untethered_cloth_holds_its_pin_and_moves_its_free_p
     assert simulator_bytes(sim) == estimate(scene, sim.model.sticks_form).device_bytes  # the table's rows counted
 
 
+@wp.kernel
+def nearest_in_lens(p: wp.array(dtype=Any), a: wp.array(dtype=Any), la: wp.array(dtype=Any), b: wp.array(dtype=Any),
+                    lb: wp.array(dtype=Any), out: wp.array(dtype=Any)):
+    i = wp.tid()
+    out[i] = into_two_balls(p[i], a[i], la[i], b[i], lb[i])
+
+
+def into_lens(p, a, la, b, lb, vector=wp.vec3d, scalar=wp.float64) -> np.ndarray:
+    """kernels/tether.into_two_balls on the CPU for each row of p, a, la, b, lb, in the precision of ``vector`` and
+    ``scalar`` (the inputs rounded to it), as float64."""
+    dtype = np.float32 if scalar == wp.float32 else np.float64
+    cases = [wp.array(np.asarray(v, dtype=dtype), dtype=vector if np.ndim(v) == 2 else scalar, device="cpu")
+             for v in (p, a, la, b, lb)]
+    out = wp.zeros(len(cases[0]), dtype=vector, device="cpu")
+    wp.launch(nearest_in_lens, len(out), inputs=cases, outputs=[out], device="cpu")
+    return out.numpy().astype(np.float64)
+
+
 def nearest_in_two_balls(p, a, la, b, lb, turns: int = 3000):
     """The nearest point to p of the intersection of two balls by Dykstra's alternating projections (float64), an
     independent route to what kernels/tether.into_two_balls computes in closed form."""
@@ -254,14 +273,6 @@ def nearest_in_two_balls(p, a, la, b, lb, turns: int = 3000):
 
 
 def test_two_tethers_move_a_particle_to_the_nearest_point_inside_both():
-    from warp_verlet.kernels.tether import into_two_balls
-
-    @wp.kernel
-    def nearest(p: wp.array(dtype=wp.vec3d), a: wp.array(dtype=wp.vec3d), la: wp.array(dtype=wp.float64),
-                b: wp.array(dtype=wp.vec3d), lb: wp.array(dtype=wp.float64), out: wp.array(dtype=wp.vec3d)):
-        i = wp.tid()
-        out[i] = into_two_balls(p[i], a[i], la[i], b[i], lb[i])
-
     rng = np.random.default_rng(4)
     n = 150
     a = rng.normal(0, 1, (n, 3))
@@ -270,10 +281,7 @@ def test_two_tethers_move_a_particle_to_the_nearest_point_inside_both():
     la = gap * rng.uniform(0.3, 1.2, n)
     lb = np.maximum(gap - la, 0) + gap * rng.uniform(0.05, 1.0, n)  # the balls overlap
     p = a + rng.normal(0, 1.5, (n, 3))  # inside both, one, or neither
-    cases = [wp.array(v, dtype=wp.vec3d if v.ndim == 2 else wp.float64, device="cpu") for v in (p, a, la, b, lb)]
-    out = wp.zeros(n, dtype=wp.vec3d, device="cpu")
-    wp.launch(nearest, n, inputs=cases, outputs=[out], device="cpu")
-    got = out.numpy()
+    got = into_lens(p, a, la, b, lb)
     kinds = set()
     for i in range(n):
         expected = nearest_in_two_balls(p[i], a[i], la[i], b[i], lb[i])
@@ -290,14 +298,6 @@ def test_two_tethers_in_float32_keep_their_digits_near_the_line_between_the_pins
     # lens between them is thin, and la + lb - gap is a small difference of large lengths. In float32 the projection
     # stays within 1.5e-7 m (about one float32 spacing at 1 m) of the float64 one from the same inputs. Computed as
     # la + lb - gap in float32 it misses by 1.2e-4 m; with the cone tests by the distance to the other pin, 1.7e-6 m.
-    from warp_verlet.kernels.tether import into_two_balls
-
-    @wp.kernel
-    def nearest(p: wp.array(dtype=Any), a: wp.array(dtype=Any), la: wp.array(dtype=Any), b: wp.array(dtype=Any),
-                lb: wp.array(dtype=Any), out: wp.array(dtype=Any)):
-        i = wp.tid()
-        out[i] = into_two_balls(p[i], a[i], la[i], b[i], lb[i])
-
     rng = np.random.default_rng(1)
     n, h = 5000, 1.0 / 1023
     rest = np.stack([-0.5 + rng.integers(0, 1024, n) * h, 1 - rng.integers(0, 12, n) * h, np.zeros(n)], 1)
@@ -305,32 +305,17 @@ def test_two_tethers_in_float32_keep_their_digits_near_the_line_between_the_pins
     la = np.linalg.norm(rest - a, axis=1).astype(np.float32)
     lb = np.linalg.norm(rest - b, axis=1).astype(np.float32)
     p = (rest + rng.normal(0, 3 * h, (n, 3)) + [0, -2 * h, 0]).astype(np.float32)  # moved by gravity and the sticks
-
-    def run(vector, scalar, dtype):
-        cases = [wp.array(v.astype(dtype), dtype=vector if v.ndim == 2 else scalar, device="cpu")
-                 for v in (p, a, la, b, lb)]
-        out = wp.zeros(n, dtype=vector, device="cpu")
-        wp.launch(nearest, n, inputs=cases, outputs=[out], device="cpu")
-        return out.numpy().astype(np.float64)
-
-    exact = run(wp.vec3d, wp.float64, np.float64)
+    exact = into_lens(p, a, la, b, lb)
     assert (np.linalg.norm(exact - p, axis=1) > 0).mean() > 0.9  # nearly all were moved: the tethers hold them
-    assert np.linalg.norm(run(wp.vec3, wp.float32, np.float32) - exact, axis=1).max() < 1.5e-7
+    assert np.linalg.norm(into_lens(p, a, la, b, lb, wp.vec3, wp.float32) - exact, axis=1).max() < 1.5e-7
 
 
 @pytest.mark.parametrize("vector,scalar", [(wp.vec3, wp.float32), (wp.vec3d, wp.float64)])
 def test_two_tethers_in_extreme_cases_give_a_finite_nearest_point(vector, scalar):
     # Pins dragged apart past both lengths (no lens: the point where the spheres' radical plane, which holds their
-    # circle while they meet, crosses the axis, as it holds the touching point), pins at one place (the smaller ball), one ball inside the other (that ball), a cut tether (length +inf: the
-    # other ball alone), and p on the axis (no direction off it): each answer finite and where it should be.
-    from warp_verlet.kernels.tether import into_two_balls
-
-    @wp.kernel
-    def nearest(p: wp.array(dtype=Any), a: wp.array(dtype=Any), la: wp.array(dtype=Any), b: wp.array(dtype=Any),
-                lb: wp.array(dtype=Any), out: wp.array(dtype=Any)):
-        i = wp.tid()
-        out[i] = into_two_balls(p[i], a[i], la[i], b[i], lb[i])
-
+    # circle while they meet, crosses the axis, as it holds the touching point), pins at one place (the smaller
+    # ball), one ball inside the other (that ball), a cut tether (length +inf: the other ball alone), and p on the
+    # axis (no direction off it): each answer finite and where it should be.
     inf = np.inf
     cases = [  # p, a, la, b, lb, expected
         ((0.0, -1.0, 0.0), (0, 0, 0), 1.0, (4, 0, 0), 2.0, (1.625, 0.0, 0.0)),   # apart: (16 + 1 - 4) / 8 along
@@ -341,11 +326,7 @@ def test_two_tethers_in_extreme_cases_give_a_finite_nearest_point(vector, scalar
         ((-2.0, 0.0, 0.0), (0, 0, 0), 1.0, (1, 0, 0), 1.0, (0.0, 0.0, 0.0)),     # on the axis, behind a: the lens's tip
     ]
     columns = list(zip(*cases))
-    arrays = [wp.array(np.array(c, dtype=float), dtype=vector if k in (0, 1, 3) else scalar, device="cpu")
-              for k, c in enumerate(columns[:5])]
-    out = wp.zeros(len(cases), dtype=vector, device="cpu")
-    wp.launch(nearest, len(cases), inputs=arrays, outputs=[out], device="cpu")
-    got = out.numpy()
+    got = into_lens(*columns[:5], vector, scalar)
     assert np.isfinite(got).all()
     np.testing.assert_allclose(got, np.array(columns[5]), atol=1e-6)
 
