@@ -10,10 +10,14 @@ regions of one cluster colour share no particle: a launch per cluster colour, Ga
 Each stick is stored once, in the order the blocks read it (cluster colour, cluster, stick colour), with its two
 ends as places in its cluster's region packed into one int (``a | b << 16``; a region holds at most 2048
 particles), so that a block reads its sticks as one contiguous run. A block stages its sticks (ends, rest lengths
-and the colours' starts) in shared memory with its region, before the first barrier: every load of the block is
-then issued at once, and the colour loop, which runs a projection, a barrier and the next colour, touches shared
-memory only (unless a soft stick's compliance and tension are not staged). Read from global memory inside the loop,
-each colour waited on its own sticks' loads.
+and the colours' starts) in shared memory with its region, before the first barrier, so that the colour loop,
+which runs a projection, a barrier and the next colour, touches shared memory only (unless a soft stick's
+compliance and tension are not staged). Read from global memory inside the loop, each colour waited on its own
+sticks' loads. A lane issues all of its share of the staging's loads before it stores any (an unrolled batch in
+registers): a store to shared memory waits on its load, and the compiler does not move the next global load above
+it, so staged one element at a time a lane had a single load in flight, while every block of a launch (under one
+wave at 1024^2) staged at once. The write-back batches the region's indices the same way
+(bench/results/mesh/batched-staging).
 
 The projection is ``stick_correction`` (``compliant_correction`` for soft sticks), as in every other form. A soft
 stick's compliance and tension are either staged with the stick and its tension written back after the colours,
@@ -35,23 +39,33 @@ _KERNELS: dict = {}
 
 
 def relax_stick_clusters(region_capacity: int, stick_capacity: int, colours: int, compliant: bool = False,
-                         max_registers: int | None = None, stage_soft: bool = True):
+                         max_registers: int | None = None, stage_soft: bool = True, block_dim: int = 128):
     """The clustered sweep's kernel for regions of at most ``region_capacity`` particles, clusters of at most
     ``stick_capacity`` sticks, and ``colours`` stick colours (the shared arrays' lengths and the colour loop's
-    bound, compile-time constants). ``compliant``: XPBD sticks (kernels/relax.py), each with its compliance and
+    bound, compile-time constants), launched with ``block_dim`` threads a block on CUDA (the staging's batch: any
+    block size gives the same positions, a smaller one in more batches). ``compliant``: XPBD sticks (kernels/relax.py), each with its compliance and
     the tension it has accumulated over the substep's sweeps, staged in shared memory and written back with the
     sticks (``stage_soft``) or read and written in global memory; otherwise the compliance and tension arrays are
     not read. ``max_registers`` caps a CUDA thread's registers (None: the compiler's)."""
-    key = (region_capacity, stick_capacity, colours, compliant, max_registers, compliant and stage_soft)
+    key = (region_capacity, stick_capacity, colours, compliant, max_registers, compliant and stage_soft, block_dim)
     if key not in _KERNELS:
         _KERNELS[key] = _make_kernel(*key)
     return _KERNELS[key]
 
 
 def _make_kernel(region_capacity: int, stick_capacity: int, colours: int, compliant: bool, max_registers: int | None,
-                 stage_soft: bool):
+                 stage_soft: bool, block_dim: int):
     CAPACITY = region_capacity
     STICKS = stick_capacity
+    # Loads a lane issues before it stores any of them: all of its share of the block's sticks (or region) at
+    # block_dim threads, so that a CUDA lane has them all in flight at once.
+    STICK_BATCH = -(-stick_capacity // block_dim)
+    REGION_BATCH = -(-region_capacity // block_dim)
+    stick_ints = wp.types.vector(length=STICK_BATCH, dtype=int)
+    stick_floats = wp.types.vector(length=STICK_BATCH, dtype=float)
+    region_ints = wp.types.vector(length=REGION_BATCH, dtype=int)
+    region_floats = wp.types.vector(length=REGION_BATCH, dtype=float)
+    region_points = wp.types.matrix(shape=(REGION_BATCH, 3), dtype=float)
     STAGED_SOFT = compliant and stage_soft
     UNSTAGED_SOFT = compliant and not stage_soft
     SOFT_STICKS = stick_capacity if STAGED_SOFT else 1  # the compliances' and tensions' shared arrays
@@ -76,7 +90,10 @@ def _make_kernel(region_capacity: int, stick_capacity: int, colours: int, compli
     @wp.func_native("t.data(wp::tile_coord(i)) = value;")
     def put_start(t: wp.tile(dtype=int, shape=(STARTS,), storage="shared"), i: int, value: int): ...
 
-    @wp.kernel(module="unique", **shared_sweep_options(max_registers))
+    options = shared_sweep_options(max_registers)
+    options["module_options"] = {**options["module_options"], "max_unroll": max(STICK_BATCH, REGION_BATCH)}
+
+    @wp.kernel(module="unique", **options)
     def relax_stick_clusters(
         x: wp.array(dtype=wp.vec3),
         inv_mass: wp.array(dtype=float),
@@ -110,20 +127,43 @@ def _make_kernel(region_capacity: int, stick_capacity: int, colours: int, compli
         starts = wp.tile_empty(shape=STARTS, dtype=int, storage="shared")
         alphas = wp.tile_empty(shape=SOFT_STICKS, dtype=float, storage="shared")
         tensions = wp.tile_empty(shape=SOFT_STICKS, dtype=float, storage="shared")
-        e = lane
-        while e < count:
-            p = region[r0 + e]
-            put_point(points, e, x[p])
-            put_weight(weights, e, inv_mass[p])
-            e += threads
-        e = lane
-        while e < sticks:
-            put_ends(ends, e, stick_ends[s0 + e])
-            put_rest(rests, e, stick_rest[s0 + e])
-            if wp.static(STAGED_SOFT):
-                put_soft(alphas, e, stick_compliance[s0 + e])
-                put_soft(tensions, e, tension[s0 + e])
-            e += threads
+        e0 = lane
+        while e0 < count:
+            # A batch's loads first (a lane past the region reads its last particle again), then its stores.
+            places = region_ints()
+            for j in range(REGION_BATCH):
+                places[j] = region[r0 + wp.min(e0 + j * threads, count - 1)]
+            moved = region_points()
+            held = region_floats()
+            for j in range(REGION_BATCH):
+                moved[j] = x[places[j]]
+                held[j] = inv_mass[places[j]]
+            for j in range(REGION_BATCH):
+                if e0 + j * threads < count:
+                    put_point(points, e0 + j * threads, moved[j])
+                    put_weight(weights, e0 + j * threads, held[j])
+            e0 += REGION_BATCH * threads
+        e0 = lane
+        while e0 < sticks:
+            packed_ends = stick_ints()
+            rest_lengths = stick_floats()
+            stick_alphas = stick_floats()
+            stick_tensions = stick_floats()
+            for j in range(STICK_BATCH):
+                s = s0 + wp.min(e0 + j * threads, sticks - 1)
+                packed_ends[j] = stick_ends[s]
+                rest_lengths[j] = stick_rest[s]
+                if wp.static(STAGED_SOFT):
+                    stick_alphas[j] = stick_compliance[s]
+                    stick_tensions[j] = tension[s]
+            for j in range(STICK_BATCH):
+                if e0 + j * threads < sticks:
+                    put_ends(ends, e0 + j * threads, packed_ends[j])
+                    put_rest(rests, e0 + j * threads, rest_lengths[j])
+                    if wp.static(STAGED_SOFT):
+                        put_soft(alphas, e0 + j * threads, stick_alphas[j])
+                        put_soft(tensions, e0 + j * threads, stick_tensions[j])
+            e0 += STICK_BATCH * threads
         e = lane
         while e < STARTS:
             put_start(starts, e, stick_start[base + e] - s0)
@@ -155,10 +195,15 @@ def _make_kernel(region_capacity: int, stick_capacity: int, colours: int, compli
                 s += threads
             block_barrier()  # the next colour reads this one's moves
 
-        e = lane
-        while e < count:
-            x[region[r0 + e]] = points[e]
-            e += threads
+        e0 = lane
+        while e0 < count:
+            places = region_ints()
+            for j in range(REGION_BATCH):
+                places[j] = region[r0 + wp.min(e0 + j * threads, count - 1)]
+            for j in range(REGION_BATCH):
+                if e0 + j * threads < count:
+                    x[places[j]] = points[e0 + j * threads]
+            e0 += REGION_BATCH * threads
         if wp.static(STAGED_SOFT):
             e = lane
             while e < sticks:

@@ -24,9 +24,14 @@ from ..geometry.colouring import shared_particle_pairs
 from ..launches import FLOAT, INT, VEC2I, BoundStage, PhaseTask, start_compliant_substep
 
 CLUSTER_PARTICLES = 256
-"""Particles a cluster owns: with 128 threads a block, about one stick of each colour a thread."""
-CLUSTER_BLOCK = 128
-"""Threads per block of the clustered sweep."""
+"""Particles a cluster owns: a triangle or quad mesh's cluster then holds about 1,500 sticks in 12 colours, so
+each colour's sticks take one pass of a block's threads. Larger clusters swept a 1024^2 mesh a little faster, but
+give a 512^2 mesh fewer blocks a launch than an H100 has multiprocessors, and a block twice the shared memory
+(bench/results/mesh/batched-staging)."""
+CLUSTER_BLOCK = 256
+"""Threads per block of the clustered sweep: more than a colour's sticks (half the threads sit out each colour), but
+each lane's staging batch is half as long and the block has twice the warps to hide its loads' latency: faster than
+128 on an H100 and an H200 (bench/results/mesh/batched-staging)."""
 MAX_REGION = 2048
 """The most particles a cluster's region (its own and its sticks' other ends) may hold: a stick's two places in it
 are packed into one int, 16 bits each."""
@@ -228,7 +233,7 @@ class StickClusters(ConstraintSet):
         data = model.constraints[self.name]
         soft = data.compliance is not None
         kernel = relax_stick_clusters(data.capacity, data.stick_capacity, data.colours, soft,
-                                      stage_soft=data.stage_soft)
+                                      stage_soft=data.stage_soft, block_dim=CLUSTER_BLOCK)
         # XPBD: the tension of each stick over the substep's sweeps, in the clusters' order of the sticks.
         tension = solver.scratch("cluster_tension", len(data.rest), float) if soft else data.no_tension
         compliance = data.compliance if soft else data.no_tension

@@ -1,0 +1,168 @@
+"""Clustered sweeps over stick arrays (warp_verlet/constraints/stick_clusters.py): the mesh's form of the grid's
+tiled sweep (kernels/grid_tiles.py), block Gauss-Seidel over clusters of particles held in shared memory.
+
+A cluster owns the sticks whose first particle it holds; its *region* is its particles and the other ends of its
+sticks. A block stages its cluster's region (positions and weights) in shared memory, projects the cluster's
+sticks colour by colour in the stick colouring's order, a thread per stick of the colour (a colour's sticks share
+no particle; a barrier separates the colours), and writes the region back. Clusters are coloured so that the
+regions of one cluster colour share no particle: a launch per cluster colour, Gauss-Seidel across them.
+
+Each stick is stored once, in the order the blocks read it (cluster colour, cluster, stick colour), with its two
+ends as places in its cluster's region packed into one int (``a | b << 16``; a region holds at most 2048
+particles), so that a block reads its sticks as one contiguous run. A block stages its sticks (ends, rest lengths
+and the colours' starts) in shared memory with its region, before the first barrier: every load of the block is
+then issued at once, and the colour loop, which runs a projection, a barrier and the next colour, touches shared
+memory only (unless a soft stick's compliance and tension are not staged). Read from global memory inside the loop,
+each colour waited on its own sticks' loads.
+
+The projection is ``stick_correction`` (``compliant_correction`` for soft sticks), as in every other form. A soft
+stick's compliance and tension are either staged with the stick and its tension written back after the colours,
+or read and written in global memory inside the colour loop (a stick is projected once a sweep, by one thread, so
+either is the same arithmetic). Staged, they take a third more shared memory a block: faster while a launch's
+blocks still fit on the GPU at once, slower where that pushes a launch past one wave
+(constraints/stick_clusters.py, ``stage_soft_sticks``). Only the order of the projections differs from the other
+forms, and that order is fixed (cluster colour, cluster, stick colour, stick), which the CPU runs literally (one
+lane per block).
+"""
+
+import warp as wp
+
+from warp_verlet.kernels.grid_tiles import block_barrier, shared_sweep_options
+from warp_verlet.kernels.positions import scaled
+from warp_verlet.kernels.relax import compliant_correction, stick_correction
+
+_KERNELS: dict = {}
+
+
+def relax_stick_clusters(region_capacity: int, stick_capacity: int, colours: int, compliant: bool = False,
+                         max_registers: int | None = None, stage_soft: bool = True):
+    """The clustered sweep's kernel for regions of at most ``region_capacity`` particles, clusters of at most
+    ``stick_capacity`` sticks, and ``colours`` stick colours (the shared arrays' lengths and the colour loop's
+    bound, compile-time constants). ``compliant``: XPBD sticks (kernels/relax.py), each with its compliance and
+    the tension it has accumulated over the substep's sweeps, staged in shared memory and written back with the
+    sticks (``stage_soft``) or read and written in global memory; otherwise the compliance and tension arrays are
+    not read. ``max_registers`` caps a CUDA thread's registers (None: the compiler's)."""
+    key = (region_capacity, stick_capacity, colours, compliant, max_registers, compliant and stage_soft)
+    if key not in _KERNELS:
+        _KERNELS[key] = _make_kernel(*key)
+    return _KERNELS[key]
+
+
+def _make_kernel(region_capacity: int, stick_capacity: int, colours: int, compliant: bool, max_registers: int | None,
+                 stage_soft: bool):
+    CAPACITY = region_capacity
+    STICKS = stick_capacity
+    STAGED_SOFT = compliant and stage_soft
+    UNSTAGED_SOFT = compliant and not stage_soft
+    SOFT_STICKS = stick_capacity if STAGED_SOFT else 1  # the compliances' and tensions' shared arrays
+    COLOURS = colours
+    STARTS = colours + 1
+
+    @wp.func_native("t.data(wp::tile_coord(i)) = value;")
+    def put_point(t: wp.tile(dtype=wp.vec3, shape=(CAPACITY,), storage="shared"), i: int, value: wp.vec3): ...
+
+    @wp.func_native("t.data(wp::tile_coord(i)) = value;")
+    def put_weight(t: wp.tile(dtype=float, shape=(CAPACITY,), storage="shared"), i: int, value: float): ...
+
+    @wp.func_native("t.data(wp::tile_coord(i)) = value;")
+    def put_ends(t: wp.tile(dtype=int, shape=(STICKS,), storage="shared"), i: int, value: int): ...
+
+    @wp.func_native("t.data(wp::tile_coord(i)) = value;")
+    def put_rest(t: wp.tile(dtype=float, shape=(STICKS,), storage="shared"), i: int, value: float): ...
+
+    @wp.func_native("t.data(wp::tile_coord(i)) = value;")
+    def put_soft(t: wp.tile(dtype=float, shape=(SOFT_STICKS,), storage="shared"), i: int, value: float): ...
+
+    @wp.func_native("t.data(wp::tile_coord(i)) = value;")
+    def put_start(t: wp.tile(dtype=int, shape=(STARTS,), storage="shared"), i: int, value: int): ...
+
+    @wp.kernel(module="unique", **shared_sweep_options(max_registers))
+    def relax_stick_clusters(
+        x: wp.array(dtype=wp.vec3),
+        inv_mass: wp.array(dtype=float),
+        region_start: wp.array(dtype=int),
+        region: wp.array(dtype=int),
+        stick_start: wp.array(dtype=int),
+        stick_ends: wp.array(dtype=int),
+        stick_rest: wp.array(dtype=float),
+        stick_compliance: wp.array(dtype=float),
+        inv_dt2: float,
+        tension: wp.array(dtype=float),
+        first_cluster: int,
+    ):
+        """One sweep over the clusters first_cluster, first_cluster + 1, ... (one cluster colour; block k takes
+        cluster first_cluster + k). Cluster c's region is region[region_start[c] : region_start[c + 1]]; its
+        sticks of colour n are stick_start[c * COLOURS + n] .. stick_start[c * COLOURS + n + 1] - 1, each given
+        by its ends' places in the region, packed a | b << 16. Compliant: stick_compliance (m/N) and tension (the
+        substep's mu so far, updated) are in the same order as the sticks."""
+        block, lane = wp.tid()
+        threads = wp.block_dim()
+        c = first_cluster + block
+        r0 = region_start[c]
+        count = region_start[c + 1] - r0
+        base = c * COLOURS
+        s0 = stick_start[base]
+        sticks = stick_start[base + COLOURS] - s0
+        points = wp.tile_empty(shape=CAPACITY, dtype=wp.vec3, storage="shared")
+        weights = wp.tile_empty(shape=CAPACITY, dtype=float, storage="shared")
+        ends = wp.tile_empty(shape=STICKS, dtype=int, storage="shared")
+        rests = wp.tile_empty(shape=STICKS, dtype=float, storage="shared")
+        starts = wp.tile_empty(shape=STARTS, dtype=int, storage="shared")
+        alphas = wp.tile_empty(shape=SOFT_STICKS, dtype=float, storage="shared")
+        tensions = wp.tile_empty(shape=SOFT_STICKS, dtype=float, storage="shared")
+        e = lane
+        while e < count:
+            p = region[r0 + e]
+            put_point(points, e, x[p])
+            put_weight(weights, e, inv_mass[p])
+            e += threads
+        e = lane
+        while e < sticks:
+            put_ends(ends, e, stick_ends[s0 + e])
+            put_rest(rests, e, stick_rest[s0 + e])
+            if wp.static(STAGED_SOFT):
+                put_soft(alphas, e, stick_compliance[s0 + e])
+                put_soft(tensions, e, tension[s0 + e])
+            e += threads
+        e = lane
+        while e < STARTS:
+            put_start(starts, e, stick_start[base + e] - s0)
+            e += threads
+        block_barrier()
+
+        for n in range(COLOURS):
+            s = starts[n] + lane
+            stop = starts[n + 1]
+            while s < stop:
+                packed = ends[s]
+                a = packed & 0xFFFF
+                b = packed >> 16
+                wa = weights[a]
+                wb = weights[b]
+                xa = points[a]
+                xb = points[b]
+                if wp.static(STAGED_SOFT):
+                    d, mu = compliant_correction(xa, xb, wa, wb, rests[s], 1.0, alphas[s], inv_dt2, tensions[s])
+                    put_soft(tensions, s, mu)
+                elif wp.static(UNSTAGED_SOFT):
+                    d, mu = compliant_correction(xa, xb, wa, wb, rests[s], 1.0, stick_compliance[s0 + s], inv_dt2,
+                                                 tension[s0 + s])
+                    tension[s0 + s] = mu
+                else:
+                    d = stick_correction(xa, xb, wa, wb, rests[s], 1.0)
+                put_point(points, a, xa + scaled(d, wa))
+                put_point(points, b, xb - scaled(d, wb))
+                s += threads
+            block_barrier()  # the next colour reads this one's moves
+
+        e = lane
+        while e < count:
+            x[region[r0 + e]] = points[e]
+            e += threads
+        if wp.static(STAGED_SOFT):
+            e = lane
+            while e < sticks:
+                tension[s0 + e] = tensions[e]
+                e += threads
+
+    return relax_stick_clusters
