@@ -39,14 +39,15 @@ _KERNELS: dict = {}
 
 
 def relax_stick_clusters(region_capacity: int, stick_capacity: int, colours: int, compliant: bool = False,
-                         max_registers: int | None = None, stage_soft: bool = True, block_dim: int = 128):
+                         max_registers: int | None = None, stage_soft: bool = True, block_dim: int = 256):
     """The clustered sweep's kernel for regions of at most ``region_capacity`` particles, clusters of at most
     ``stick_capacity`` sticks, and ``colours`` stick colours (the shared arrays' lengths and the colour loop's
-    bound, compile-time constants), launched with ``block_dim`` threads a block on CUDA (the staging's batch: any
-    block size gives the same positions, a smaller one in more batches). ``compliant``: XPBD sticks (kernels/relax.py), each with its compliance and
-    the tension it has accumulated over the substep's sweeps, staged in shared memory and written back with the
-    sticks (``stage_soft``) or read and written in global memory; otherwise the compliance and tension arrays are
-    not read. ``max_registers`` caps a CUDA thread's registers (None: the compiler's)."""
+    bound, compile-time constants), for blocks of ``block_dim`` threads on CUDA (it sizes the staging's batches;
+    launched with another block size, the kernel gives the same positions in more or fewer batches).
+    ``compliant``: XPBD sticks (kernels/relax.py), each with its compliance and the tension it has accumulated over
+    the substep's sweeps, staged in shared memory and written back with the sticks (``stage_soft``) or read and
+    written in global memory; otherwise the compliance and tension arrays are not read. ``max_registers`` caps a
+    CUDA thread's registers (None: the compiler's)."""
     key = (region_capacity, stick_capacity, colours, compliant, max_registers, compliant and stage_soft, block_dim)
     if key not in _KERNELS:
         _KERNELS[key] = _make_kernel(*key)
