@@ -49,6 +49,19 @@ def shared_bytes(region_capacity: int, stick_capacity: int, colours: int, staged
 
 BLOCK_RESERVED_SHARED = 1024
 """Shared memory CUDA reserves per resident block beside the kernel's own (bytes; compute capability 8.0 on)."""
+THREADS_PER_MULTIPROCESSOR = {75: 1024, 86: 1536, 87: 1536, 89: 1536, 120: 1536}
+"""The most resident threads a multiprocessor holds, by compute capability (major * 10 + minor) where it is not
+2048 (CUDA programming guide, its table of technical specifications): with them, at most this // CLUSTER_BLOCK
+blocks of the clustered sweep fit on a multiprocessor at once, whatever their shared memory."""
+
+
+def resident_blocks(block_shared: int, device) -> int:
+    """How many blocks of CLUSTER_BLOCK threads with ``block_shared`` bytes of shared memory each the CUDA
+    ``device`` holds at once: the fewer of its multiprocessors' shared memory and threads allow."""
+    per_multiprocessor = device.max_shared_memory_per_block + BLOCK_RESERVED_SHARED
+    by_shared = per_multiprocessor // (block_shared + BLOCK_RESERVED_SHARED)
+    by_threads = THREADS_PER_MULTIPROCESSOR.get(device.arch, 2048) // CLUSTER_BLOCK
+    return device.sm_count * min(by_shared, by_threads)
 
 
 def stage_soft_sticks(layout: "ClusterLayout", device) -> bool:
@@ -63,10 +76,7 @@ def stage_soft_sticks(layout: "ClusterLayout", device) -> bool:
         return False
     if device.is_cpu:
         return True
-    # A multiprocessor's shared memory is the opt-in most a block may take plus the one reserved block's share.
-    per_multiprocessor = device.max_shared_memory_per_block + BLOCK_RESERVED_SHARED
-    resident = device.sm_count * (per_multiprocessor // (staged + BLOCK_RESERVED_SHARED))
-    return max(count for _, count in layout.launches) <= resident
+    return max(count for _, count in layout.launches) <= resident_blocks(staged, device)
 
 
 class ClustersRefused(ArgumentError):
