@@ -28,6 +28,11 @@ gives the same scenes on every machine):
 With ``--cache`` each scene runs as ``warp-verlet run`` runs it (``warp_verlet.apps.runner.run_scene``), writing its
 USD point cache, which must then pass ``validate_cache``; a cache that does not is a finding too.
 
+With ``--sticks FORM`` each scene's simulator is asked for that form of its sticks (``Simulator(sticks=FORM)``:
+"explicit", "implicit", "tiled" or "clustered"), so that the shared-memory sweeps, which "auto" takes only on a GPU,
+run the random scenes on the CPU too. A form that does not take a scene refuses it with an ``ArgumentError`` that
+names the form (``sticks = 'clustered' ...``): that counts as refused, any other ``ArgumentError`` as a finding.
+
 A scene the loader refuses (a ``SceneError``, one clear message) counts as refused; one the simulator stops with a
 ``WarpVerletError`` of its own (a divergence it detects, a step below the float type's limit, memory it lacks:
 named) as stopped. An ``ArgumentError`` or ``StateError`` is the project calling itself wrongly, not a refusal of
@@ -335,18 +340,22 @@ def _stopped(e: WarpVerletError) -> str:
     return f"stopped: {str(e)[:200]}"
 
 
-def run_scene(data: dict, frames: int, device: str = "cpu", cache: Path | None = None) -> str:
+def run_scene(data: dict, frames: int, device: str = "cpu", cache: Path | None = None, sticks: str = "auto") -> str:
     """Run the scene tables ``data`` for ``frames`` frames: "finite", "refused: ...", "stopped: ..." or a finding,
     "non-finite at frame F", "invalid cache: ..." or "error: ...". With ``cache`` (a path ending .usdc or .usda),
-    run it as ``warp-verlet run`` does, writing its cache there, and validate the cache. Never raises."""
+    run it as ``warp-verlet run`` does, writing its cache there, and validate the cache. ``sticks``: the form of the
+    sticks the simulator is asked for; where it is not "auto", the form's refusal of the scene counts as refused.
+    Never raises."""
     try:
         scene = parse_scene(data, file="<fuzz>")
         if cache is not None:
             return _run_with_cache(scene, frames, device, cache)
-        sim = Simulator(scene, device)
+        sim = Simulator(scene, device, sticks=sticks)
     except SceneError as e:
         return f"refused: {str(e)[:200]}"
     except WarpVerletError as e:
+        if sticks != "auto" and isinstance(e, ArgumentError) and str(e).startswith(f"sticks = {sticks!r}"):
+            return f"refused: {str(e)[:200]}"
         return _stopped(e)
     except Exception as e:  # noqa: BLE001 - a fuzz reports whatever it finds
         return f"error: {type(e).__name__}: {str(e)[:300]}"
@@ -382,16 +391,16 @@ def is_finding(outcome: str) -> bool:
 
 
 def fuzz(kind: str, seed: int, scenes: int, frames: int | None = None, device: str = "cpu",
-         cache_dir: Path | None = None, log=print) -> dict[str, int]:
+         cache_dir: Path | None = None, log=print, sticks: str = "auto") -> dict[str, int]:
     """Generate and run ``scenes`` scenes of ``kind`` from ``seed`` for ``frames`` frames each (None: each scene's
-    own), writing and validating each cache in ``cache_dir`` when given; print each finding with its tables. The
-    count of each outcome: finite, refused, stopped, findings."""
+    own), writing and validating each cache in ``cache_dir`` when given, with the sticks' form ``sticks``; print
+    each finding with its tables. The count of each outcome: finite, refused, stopped, findings."""
     rng = np.random.default_rng(seed)
     counts = {"finite": 0, "refused": 0, "stopped": 0, "findings": 0}
     for index in range(scenes):
         data = KINDS[kind](rng)
         cache = None if cache_dir is None else cache_dir / f"scene{index}{'.usda' if index % 2 else '.usdc'}"
-        outcome = run_scene(data, frames or data["simulation"]["frames"], device, cache)
+        outcome = run_scene(data, frames or data["simulation"]["frames"], device, cache, sticks)
         if is_finding(outcome):
             counts["findings"] += 1
             log(f"finding: scene {index}: {outcome}\n  {data}")
@@ -410,19 +419,24 @@ def main(argv=None) -> int:
     p.add_argument("--device", default="cpu")
     p.add_argument("--cache", action="store_true", help="run each scene as warp-verlet run does, writing its USD "
                                                         "cache (.usdc and .usda in turn), and validate the cache")
+    p.add_argument("--sticks", choices=("auto", "explicit", "implicit", "tiled", "clustered"), default="auto",
+                   help="the form of the sticks each simulator is asked for (not with --cache)")
     p.add_argument("--out", type=Path, default=None, help="write fuzz-KIND-SEED.md and .csv there")
     args = p.parse_args(argv)
+    if args.cache and args.sticks != "auto":
+        p.error("--sticks runs the simulator directly; --cache runs each scene as warp-verlet run does")
     quiet_warp()
     frames = args.frames
     with tempfile.TemporaryDirectory() as scratch:
         counts = fuzz(args.kind, args.seed, args.scenes, frames, args.device,
-                      Path(scratch) if args.cache else None)
+                      Path(scratch) if args.cache else None, sticks=args.sticks)
     command = ["bench.fuzz", *(argv if argv is not None else sys.argv[1:])]
     header = "\n".join(machine(args.device).lines(command))
+    forced = "" if args.sticks == "auto" else f"-{args.sticks}"
     write_table([{"kind": args.kind, "seed": args.seed, "scenes": args.scenes,
                   "frames": frames or "each scene's", "caches": "written and validated" if args.cache else "none",
-                  **counts}],
-                args.out, f"fuzz-{args.kind}-{args.seed}{'-cache' if args.cache else ''}",
+                  "sticks": args.sticks, **counts}],
+                args.out, f"fuzz-{args.kind}-{args.seed}{'-cache' if args.cache else ''}{forced}",
                 f"Fuzz: {args.kind}, seed {args.seed}\n\n{header}")
     return 1 if counts["findings"] else 0
 

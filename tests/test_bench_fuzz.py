@@ -60,6 +60,22 @@ def test_with_a_cache_the_scene_runs_as_warp_verlet_run_does_and_its_cache_is_va
     assert outcome == "invalid cache: a bad cache" and fuzz.is_finding(outcome)
 
 
+def test_a_stick_form_asked_for_refuses_what_it_cannot_take_and_runs_the_rest(monkeypatch):
+    from warp_verlet.errors import ArgumentError
+
+    assert fuzz.run_scene(SMALL, 2, sticks="clustered") == "finite"
+    tearing = {**SMALL, "cloth": [{**SMALL["cloth"][0], "tear_threshold": 2.0}]}
+    outcome = fuzz.run_scene(tearing, 2, sticks="clustered")
+    assert outcome.startswith("refused: sticks = 'clustered'") and not fuzz.is_finding(outcome)
+    assert fuzz.run_scene(tearing, 2) == "finite"  # "auto" takes the scene as it is
+
+    def wrong_call(self):
+        raise ArgumentError("every phase needs one entry per thread")
+
+    monkeypatch.setattr(Simulator, "step_frame", wrong_call)
+    assert fuzz.is_finding(fuzz.run_scene(SMALL, 2, sticks="clustered"))  # not the form's refusal: a finding
+
+
 def test_the_command_writes_its_counts(tmp_path):
     assert fuzz.main(["--kind", "lines", "--seed", "3", "--scenes", "2", "--frames", "1", "--cache",
                       "--out", str(tmp_path)]) == 0
