@@ -4,8 +4,9 @@ model; each variant's sweeps captured in a graph and timed with CUDA events; bit
 As run on 2026-12-06, beside base_clusters.py, made by
     git show 7b4e94b:kernels/stick_clusters.py | sed 's/^from \./from warp_verlet.kernels./' > base_clusters.py
 and with the batched kernel of that day's working tree as warp_verlet.kernels.stick_clusters (the landed kernel
-keeps its signature: relax_stick_clusters(..., block_dim=N)). The first lease ran sizes 512 and 1024 with the
-kernels listed first here; the second (STEM=staging-h200.json) ran 1024 with the 512-particle layouts."""
+keeps its signature: relax_stick_clusters(..., block_dim=N)). The first lease ran sizes 512 and 1024 with another
+list of kernels (base and batched at 256 particles / 128 threads and 128 / 64, batched at 256 / 64 and 256 / 256);
+the second (STEM=staging-h200.json) ran 1024 with the list here."""
 import sys, tempfile, time, json, os
 from pathlib import Path
 import numpy as np
