@@ -39,7 +39,7 @@ _KERNELS: dict = {}
 
 
 def relax_stick_clusters(region_capacity: int, stick_capacity: int, colours: int, compliant: bool = False,
-                         max_registers: int | None = None, stage_soft: bool = True, block_dim: int = 256):
+                         max_registers: int | None = None, stage_soft: bool = True, *, block_dim: int):
     """The clustered sweep's kernel for regions of at most ``region_capacity`` particles, clusters of at most
     ``stick_capacity`` sticks, and ``colours`` stick colours (the shared arrays' lengths and the colour loop's
     bound, compile-time constants), for blocks of ``block_dim`` threads on CUDA (it sizes the staging's batches;
@@ -88,6 +88,15 @@ def _make_kernel(region_capacity: int, stick_capacity: int, colours: int, compli
     @wp.func_native("t.data(wp::tile_coord(i)) = value;")
     def put_soft(t: wp.tile(dtype=float, shape=(SOFT_STICKS,), storage="shared"), i: int, value: float): ...
 
+    @wp.func
+    def region_places(region: wp.array(dtype=int), r0: int, count: int, e0: int, threads: int):
+        """A lane's batch of the region's particles from its place e0 (a lane past the region reads its last
+        particle again, so that every load of the batch is issued unconditionally)."""
+        places = region_ints()
+        for j in range(REGION_BATCH):
+            places[j] = region[r0 + wp.min(e0 + j * threads, count - 1)]
+        return places
+
     @wp.func_native("t.data(wp::tile_coord(i)) = value;")
     def put_start(t: wp.tile(dtype=int, shape=(STARTS,), storage="shared"), i: int, value: int): ...
 
@@ -130,10 +139,8 @@ def _make_kernel(region_capacity: int, stick_capacity: int, colours: int, compli
         tensions = wp.tile_empty(shape=SOFT_STICKS, dtype=float, storage="shared")
         e0 = lane
         while e0 < count:
-            # A batch's loads first (a lane past the region reads its last particle again), then its stores.
-            places = region_ints()
-            for j in range(REGION_BATCH):
-                places[j] = region[r0 + wp.min(e0 + j * threads, count - 1)]
+            # A batch's loads first, then its stores.
+            places = region_places(region, r0, count, e0, threads)
             moved = region_points()
             held = region_floats()
             for j in range(REGION_BATCH):
@@ -198,9 +205,7 @@ def _make_kernel(region_capacity: int, stick_capacity: int, colours: int, compli
 
         e0 = lane
         while e0 < count:
-            places = region_ints()
-            for j in range(REGION_BATCH):
-                places[j] = region[r0 + wp.min(e0 + j * threads, count - 1)]
+            places = region_places(region, r0, count, e0, threads)
             for j in range(REGION_BATCH):
                 if e0 + j * threads < count:
                     x[places[j]] = points[e0 + j * threads]

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .kind import ConstraintSet
-from ..errors import ArgumentError
+from ..errors import StickFormRefused
 from ..geometry.colouring import shared_particle_pairs
 from ..launches import FLOAT, INT, VEC2I, BoundStage, PhaseTask, start_compliant_substep
 
@@ -58,6 +58,7 @@ blocks of the clustered sweep fit on a multiprocessor at once, whatever their sh
 def resident_blocks(block_shared: int, device) -> int:
     """How many blocks of CLUSTER_BLOCK threads with ``block_shared`` bytes of shared memory each the CUDA
     ``device`` holds at once: the fewer of its multiprocessors' shared memory and threads allow."""
+    # A multiprocessor's shared memory is the opt-in most a block may take plus the one reserved block's share.
     per_multiprocessor = device.max_shared_memory_per_block + BLOCK_RESERVED_SHARED
     by_shared = per_multiprocessor // (block_shared + BLOCK_RESERVED_SHARED)
     by_threads = THREADS_PER_MULTIPROCESSOR.get(device.arch, 2048) // CLUSTER_BLOCK
@@ -79,7 +80,7 @@ def stage_soft_sticks(layout: "ClusterLayout", device) -> bool:
     return max(count for _, count in layout.launches) <= resident_blocks(staged, device)
 
 
-class ClustersRefused(ArgumentError):
+class ClustersRefused(StickFormRefused):
     """The clustered sweep cannot take this model's sticks (the reason in the message). Asked for, it is the
     caller's error; chosen by "auto", the model keeps a launch per colour instead."""
 
