@@ -30,8 +30,9 @@ USD point cache, which must then pass ``validate_cache``; a cache that does not 
 
 With ``--sticks FORM`` each scene's simulator is asked for that form of its sticks (``Simulator(sticks=FORM)``:
 "explicit", "implicit", "tiled" or "clustered"), so that the shared-memory sweeps, which "auto" takes only on a GPU,
-run the random scenes on the CPU too. A form that does not take a scene refuses it with an ``ArgumentError`` that
-names the form (``sticks = 'clustered' ...``): that counts as refused, any other ``ArgumentError`` as a finding.
+run the random scenes on the CPU too. A form that does not take a scene refuses it with a ``StickFormRefused``
+(an ``ArgumentError`` that names the form and the reason): that counts as refused, any other ``ArgumentError`` as a
+finding.
 
 A scene the loader refuses (a ``SceneError``, one clear message) counts as refused; one the simulator stops with a
 ``WarpVerletError`` of its own (a divergence it detects, a step below the float type's limit, memory it lacks:
@@ -50,7 +51,8 @@ from pathlib import Path
 import numpy as np
 
 from warp_verlet.core.simulator import Simulator
-from warp_verlet.errors import ArgumentError, SceneError, StateError, WarpVerletError
+from warp_verlet.core.stages import STICK_FORMS
+from warp_verlet.errors import ArgumentError, SceneError, StateError, StickFormRefused, WarpVerletError
 from warp_verlet.input.scene import parse_scene
 
 from .common import arg_parser, machine, quiet_warp, write_table
@@ -354,7 +356,7 @@ def run_scene(data: dict, frames: int, device: str = "cpu", cache: Path | None =
     except SceneError as e:
         return f"refused: {str(e)[:200]}"
     except WarpVerletError as e:
-        if sticks != "auto" and isinstance(e, ArgumentError) and str(e).startswith(f"sticks = {sticks!r}"):
+        if sticks != "auto" and isinstance(e, StickFormRefused):
             return f"refused: {str(e)[:200]}"
         return _stopped(e)
     except Exception as e:  # noqa: BLE001 - a fuzz reports whatever it finds
@@ -419,7 +421,7 @@ def main(argv=None) -> int:
     p.add_argument("--device", default="cpu")
     p.add_argument("--cache", action="store_true", help="run each scene as warp-verlet run does, writing its USD "
                                                         "cache (.usdc and .usda in turn), and validate the cache")
-    p.add_argument("--sticks", choices=("auto", "explicit", "implicit", "tiled", "clustered"), default="auto",
+    p.add_argument("--sticks", choices=STICK_FORMS, default="auto",
                    help="the form of the sticks each simulator is asked for (not with --cache)")
     p.add_argument("--out", type=Path, default=None, help="write fuzz-KIND-SEED.md and .csv there")
     args = p.parse_args(argv)

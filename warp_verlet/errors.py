@@ -20,6 +20,11 @@ class ArgumentError(WarpVerletError, ValueError):
     """A function of the API was given an argument it cannot use."""
 
 
+class StickFormRefused(ArgumentError):
+    """The form of the sticks asked for (``Simulator(sticks=...)``: "implicit", "tiled", "clustered") cannot take
+    this scene; the message names the form and the reason."""
+
+
 class StateError(WarpVerletError, RuntimeError):
     """An object was used when it cannot be (for example a point cache after it was closed)."""
 

@@ -116,11 +116,11 @@ class Requirements:
                 and cluster_obstacle(scene, req) is None):
             req = replace(req, stick_clusters=True)
         if sticks == "clustered":
-            from ..errors import ArgumentError
+            from ..errors import StickFormRefused
 
             obstacle = cluster_obstacle(scene, req)
             if obstacle is not None:
-                raise ArgumentError(f"sticks = 'clustered' sweeps float32 stick arrays of the coloured solver that "
+                raise StickFormRefused(f"sticks = 'clustered' sweeps float32 stick arrays of the coloured solver that "
                                     f"cannot tear, but {obstacle}")
             req = replace(req, stick_clusters=True)
         return req
@@ -201,13 +201,13 @@ def grid_counts(scene: "Scene", sticks: str) -> dict:
     :func:`implicit_grid_obstacle` names one); "implicit" where one is named raises ArgumentError. "auto"
     computes the sticks and keeps the tether table; "implicit" computes the tethers too (of a cloth with at most
     MAX_GRID_TETHER_PINS pins), so that no per-stick or per-particle table is left on the device."""
-    from ..errors import ArgumentError
+    from ..errors import ArgumentError, StickFormRefused
 
     if sticks not in STICK_FORMS:
         raise ArgumentError(f"sticks must be one of {', '.join(STICK_FORMS)}, got {sticks!r}")
     obstacle = implicit_grid_obstacle(scene)
     if sticks in ("implicit", "tiled") and obstacle is not None:
-        raise ArgumentError(f"sticks = {sticks!r} needs one grid cloth that cannot tear and the coloured solver, "
+        raise StickFormRefused(f"sticks = {sticks!r} needs one grid cloth that cannot tear and the coloured solver, "
                             f"but {obstacle}")
     if sticks in ("explicit", "clustered") or obstacle is not None:
         return {}
