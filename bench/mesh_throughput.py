@@ -37,8 +37,8 @@ around it, and the grid by "top-edge".
 Each variant simulates 60 frames (1 s) at --substeps x --iterations (4 x 8, as bench.throughput): frames
 1-2 are a warm-up (compilation, graph capture), frames 3-60 are timed in --repeats equal batches, the
 median batch gives ms per frame and the spread is half the range. Stick projections per second are sticks
-x substeps x iterations over that time. Stretch |D - L|/L (RMS and max) is over the structural sticks at
-frame 60. "load s" is parse_scene's time (for a mesh: reading, welding and checking it; writing the file
+x substeps x iterations over that time. Stretch |D - L|/L (RMS and max, a ratio: 1.0 is 100%) is over the
+structural sticks at frame 60. "load s" is parse_scene's time (for a mesh: reading, welding and checking it; writing the file
 beforehand is not counted); "build s" is the Simulator's construction (topology, colouring, device arrays).
 
 Setup at 1024^2 (1M particles), measured on a shared 2-core AMD EPYC: the quad .usdc writes in 0.5 s and
@@ -392,7 +392,7 @@ def main(argv=None) -> int:
              "- balance: largest colour over smallest. load s: parse_scene (the mesh read, welded, checked; "
              "files written beforehand, not counted). build s: the Simulator's construction (colouring "
              "included). Mproj/s: sticks x substeps x iterations per second. Stretch |D - L|/L over the "
-             f"structural sticks at frame {args.frames}.\n" + notes(rows))
+             f"structural sticks at frame {args.frames}, as a ratio (1.0 is 100%).\n" + notes(rows))
     write_table(rows, args.out, args.stem, title)
     return 0
 
