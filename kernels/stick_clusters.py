@@ -27,8 +27,8 @@ data that is reused (bench/results/mesh/streamed-sticks).
 The projection is ``stick_correction`` (``compliant_correction`` for soft sticks), as in every other form. A soft
 stick's compliance and tension are either staged with the stick and its tension written back after the colours,
 or read and written in global memory inside the colour loop (a stick is projected once a sweep, by one thread, so
-either is the same arithmetic). Staged, they take a third more shared memory a block: faster while a launch's
-blocks still fit on the GPU at once, slower where that pushes a launch past one wave
+either is the same arithmetic). Staged, they take a third more shared memory a block, and measured faster at
+every size; global memory serves where staging would pass a block's shared-memory limit
 (constraints/stick_clusters.py, ``stage_soft_sticks``). Only the order of the projections differs from the other
 forms, and that order is fixed (cluster colour, cluster, stick colour, stick), which the CPU runs literally (one
 lane per block).
@@ -65,7 +65,7 @@ def streamed_float(values: wp.array(dtype=float), i: int) -> float:
 
 def relax_stick_clusters(region_capacity: int, stick_capacity: int, colours: int, compliant: bool = False,
                          max_registers: int | None = None, stage_soft: bool = True, *, block_dim: int,
-                         streamed: bool = True, soft_registers: bool = False):
+                         streamed: bool = True):
     """The clustered sweep's kernel for regions of at most ``region_capacity`` particles, clusters of at most
     ``stick_capacity`` sticks, and ``colours`` stick colours (the shared arrays' lengths and the colour loop's
     bound, compile-time constants), for blocks of ``block_dim`` threads on CUDA (it sizes the staging's batches;
@@ -76,14 +76,14 @@ def relax_stick_clusters(region_capacity: int, stick_capacity: int, colours: int
     CUDA thread's registers (None: the compiler's). ``streamed=False`` loads the sticks as any other data (the
     comparison of bench/results/mesh/streamed-sticks; the same positions)."""
     key = (region_capacity, stick_capacity, colours, compliant, max_registers, compliant and stage_soft, block_dim,
-           streamed, compliant and soft_registers)
+           streamed)
     if key not in _KERNELS:
         _KERNELS[key] = _make_kernel(*key)
     return _KERNELS[key]
 
 
 def _make_kernel(region_capacity: int, stick_capacity: int, colours: int, compliant: bool, max_registers: int | None,
-                 stage_soft: bool, block_dim: int, streamed: bool, soft_registers: bool):
+                 stage_soft: bool, block_dim: int, streamed: bool):
     CAPACITY = region_capacity
     STICKS = stick_capacity
     # Loads a lane issues before it stores any of them: all of its share of the block's sticks (or region) at
@@ -95,10 +95,8 @@ def _make_kernel(region_capacity: int, stick_capacity: int, colours: int, compli
     region_ints = wp.types.vector(length=REGION_BATCH, dtype=int)
     region_floats = wp.types.vector(length=REGION_BATCH, dtype=float)
     region_points = wp.types.matrix(shape=(REGION_BATCH, 3), dtype=float)
-    HELD_SOFT = compliant and soft_registers
-    STAGED_SOFT = compliant and stage_soft and not soft_registers
-    UNSTAGED_SOFT = compliant and not stage_soft and not soft_registers
-    colour_floats = wp.types.vector(length=colours, dtype=float)
+    STAGED_SOFT = compliant and stage_soft
+    UNSTAGED_SOFT = compliant and not stage_soft
     SOFT_STICKS = stick_capacity if STAGED_SOFT else 1  # the compliances' and tensions' shared arrays
     COLOURS = colours
     STARTS = colours + 1
@@ -131,8 +129,7 @@ def _make_kernel(region_capacity: int, stick_capacity: int, colours: int, compli
     def put_start(t: wp.tile(dtype=int, shape=(STARTS,), storage="shared"), i: int, value: int): ...
 
     options = shared_sweep_options(max_registers)
-    options["module_options"] = {**options["module_options"],
-                                 "max_unroll": max(STICK_BATCH, REGION_BATCH, COLOURS if HELD_SOFT else 1)}
+    options["module_options"] = {**options["module_options"], "max_unroll": max(STICK_BATCH, REGION_BATCH)}
 
     @wp.kernel(module="unique", **options)
     def relax_stick_clusters(
@@ -214,15 +211,6 @@ def _make_kernel(region_capacity: int, stick_capacity: int, colours: int, compli
         while e < STARTS:
             put_start(starts, e, stick_start[base + e] - s0)
             e += threads
-        held_alphas = colour_floats()
-        held_tensions = colour_floats()
-        if wp.static(HELD_SOFT):
-            # each lane's first stick of each colour: its compliance and tension in registers
-            for n in range(COLOURS):
-                s = stick_start[base + n] + lane
-                if s < stick_start[base + n + 1]:
-                    held_alphas[n] = streamed_float(stick_compliance, s)
-                    held_tensions[n] = tension[s]
         block_barrier()
 
         for n in range(COLOURS):
@@ -239,18 +227,6 @@ def _make_kernel(region_capacity: int, stick_capacity: int, colours: int, compli
                 if wp.static(STAGED_SOFT):
                     d, mu = compliant_correction(xa, xb, wa, wb, rests[s], 1.0, alphas[s], inv_dt2, tensions[s])
                     put_soft(tensions, s, mu)
-                elif wp.static(HELD_SOFT):
-                    alpha = held_alphas[n]
-                    mu0 = held_tensions[n]
-                    in_register = s == starts[n] + lane
-                    if not in_register:
-                        alpha = stick_compliance[s0 + s]
-                        mu0 = tension[s0 + s]
-                    d, mu = compliant_correction(xa, xb, wa, wb, rests[s], 1.0, alpha, inv_dt2, mu0)
-                    if in_register:
-                        held_tensions[n] = mu
-                    else:
-                        tension[s0 + s] = mu
                 elif wp.static(UNSTAGED_SOFT):
                     d, mu = compliant_correction(xa, xb, wa, wb, rests[s], 1.0, stick_compliance[s0 + s], inv_dt2,
                                                  tension[s0 + s])
@@ -269,11 +245,6 @@ def _make_kernel(region_capacity: int, stick_capacity: int, colours: int, compli
                 if e0 + j * threads < count:
                     x[places[j]] = points[e0 + j * threads]
             e0 += REGION_BATCH * threads
-        if wp.static(HELD_SOFT):
-            for n in range(COLOURS):
-                s = starts[n] + lane
-                if s < starts[n + 1]:
-                    tension[s0 + s] = held_tensions[n]
         if wp.static(STAGED_SOFT):
             e = lane
             while e < sticks:

@@ -47,37 +47,13 @@ def shared_bytes(region_capacity: int, stick_capacity: int, colours: int, staged
     return region_capacity * 16 + stick_capacity * (16 if staged_soft else 8) + (colours + 1) * 4
 
 
-BLOCK_RESERVED_SHARED = 1024
-"""Shared memory CUDA reserves per resident block beside the kernel's own (bytes; compute capability 8.0 on)."""
-THREADS_PER_MULTIPROCESSOR = {75: 1024, 86: 1536, 87: 1536, 89: 1536, 120: 1536}
-"""The most resident threads a multiprocessor holds, by compute capability (major * 10 + minor) where it is not
-2048 (CUDA programming guide, its table of technical specifications): with them, at most this // CLUSTER_BLOCK
-blocks of the clustered sweep fit on a multiprocessor at once, whatever their shared memory."""
-
-
-def resident_blocks(block_shared: int, device) -> int:
-    """How many blocks of CLUSTER_BLOCK threads with ``block_shared`` bytes of shared memory each the CUDA
-    ``device`` holds at once: the fewer of its multiprocessors' shared memory and threads allow."""
-    # A multiprocessor's shared memory is the opt-in most a block may take plus the one reserved block's share.
-    per_multiprocessor = device.max_shared_memory_per_block + BLOCK_RESERVED_SHARED
-    by_shared = per_multiprocessor // (block_shared + BLOCK_RESERVED_SHARED)
-    by_threads = THREADS_PER_MULTIPROCESSOR.get(device.arch, 2048) // CLUSTER_BLOCK
-    return device.sm_count * min(by_shared, by_threads)
-
-
 def stage_soft_sticks(layout: "ClusterLayout", device) -> bool:
     """Whether a soft clustered sweep stages each stick's compliance and tension in shared memory (else it reads
-    and writes them in global memory in the colour loop; the two are the same arithmetic, bit for bit). Staged
-    while the largest cluster-colour launch's blocks all fit on the GPU at once with the larger shared arrays:
-    on an H100, staging was faster where a launch was a fraction of a wave (a 512^2 triangle mesh, 256 blocks a
-    launch) and slower where it pushed a launch past one wave (1024^2, 1,024 blocks against 924 resident)
-    (bench/results/mesh/soft-staging.md). On the CPU both run alike; it stages."""
-    staged = shared_bytes(layout.capacity, layout.stick_capacity, layout.colours, staged_soft=True)
-    if staged > MAX_SHARED_BYTES:
-        return False
-    if device.is_cpu:
-        return True
-    return max(count for _, count in layout.launches) <= resident_blocks(staged, device)
+    and writes them in global memory in the colour loop; the two are the same arithmetic, bit for bit): wherever
+    the larger shared arrays stay within a block's limit. On an H100 staged was faster at 512^2 and, since the
+    staging's loads are batched and its sticks streamed, at 1024^2 too, though a launch there is then more than
+    the GPU holds at once (bench/results/mesh/soft-registers)."""
+    return shared_bytes(layout.capacity, layout.stick_capacity, layout.colours, staged_soft=True) <= MAX_SHARED_BYTES
 
 
 class ClustersRefused(StickFormRefused):

@@ -1,11 +1,13 @@
 """The clustered sweep of soft sticks (bend compliance 1.0 m/N, shear and structural rigid) with each stick's
-compliance and tension held three ways: in global memory read inside the colour loop ("global"), staged in
-shared memory with the sticks ("shared"), or in registers, each thread holding those of its first stick of each
-colour ("registers"); on one triangle-mesh model of the benchmark's hanging cloth, 32 sweeps captured in a graph,
+compliance and tension held in global memory read inside the colour loop ("global") or staged in shared memory
+with the sticks ("shared"); on one triangle-mesh model of the benchmark's hanging cloth, 32 sweeps captured in a graph,
 CUDA events, median of 7; positions and tensions after one sweep compared bit for bit. DEV=cpu: the comparison
 only.
 
     PYTHONPATH=. python bench/results/mesh/soft-registers/soft_modes.py 512 1024
+
+As run on 2026-12-06 it also timed a third way, "registers" (each thread holding the compliance and tension of
+its first stick of each colour in registers), with the kernel of commit 4dd5af5, which the next commit removed.
 """
 import json
 import os
@@ -24,8 +26,7 @@ from warp_verlet.kernels.stick_clusters import relax_stick_clusters
 wp.config.quiet = True
 DEV = os.environ.get("DEV", "cuda")
 out = Path(os.environ.get("OUT", "/tmp"))
-MODES = {"global": dict(stage_soft=False), "shared": dict(stage_soft=True),
-         "registers": dict(stage_soft=False, soft_registers=True)}
+MODES = {"global": dict(stage_soft=False), "shared": dict(stage_soft=True)}
 rows = []
 for n in [int(a) for a in sys.argv[1:]] or [512, 1024]:
     with tempfile.TemporaryDirectory() as d:
@@ -73,7 +74,7 @@ for n in [int(a) for a in sys.argv[1:]] or [512, 1024]:
                 row["32 sweeps ms"] = round(float(np.median(times)), 4)
             rows.append(row)
             print(row, flush=True)
-        for mode in ("shared", "registers"):
+        for mode in ("shared",):
             same = all(np.array_equal(a, b) for a, b in zip(results["global"], results[mode]))
             print(f"{n}: {mode} equal to global bit for bit (positions and tensions, two sweeps): {same}", flush=True)
             rows.append({"size": n, "mode": mode, "bitwise": same})
