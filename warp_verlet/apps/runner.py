@@ -21,6 +21,7 @@ import numpy as np
 
 from .. import __version__
 from ..output.background_writer import BackgroundWriter
+from .contact_speed import ContactSpeedWatch
 from ..constraints.line_solve import passes_of, why_no_lines
 from ..errors import DivergenceError, SceneError
 from ..output.output_file import CacheOutput, input_files
@@ -60,6 +61,7 @@ class RunSummary:
     rubbery: str | None = None  # the cloth left over RUBBERY_RMS long, and what to change (rubbery_note)
     kernel_seconds: float = 0.0  # of which Warp's kernel modules, compiled or loaded from its kernel cache
     sweep: str = ""  # how the relaxation swept the sticks (sweep_description)
+    contact_speed: str | None = None  # self-colliding particles that outran the contact (ContactSpeedWatch)
 
     def format(self) -> str:
         rate = self.frames / self.wall_seconds if self.wall_seconds > 0 else float("inf")
@@ -90,6 +92,8 @@ class RunSummary:
                 + (f" {self.unconverged}" if self.unconverged else ""))
         elif self.rubbery:
             lines.append(f"note             {self.rubbery}")
+        if self.contact_speed:
+            lines.append(f"warning          {self.contact_speed}")
         return "\n".join(lines)
 
 
@@ -135,15 +139,17 @@ def _simulate(scene: Scene, output: Path, target: CacheOutput, device: str | Non
     check_initial_state(scene, sim)
     writer = open_writer(scene, sim, target, settings.frames + 1)
     to_cache = CacheVertices(model, scene, override)
+    contact_speed = ContactSpeedWatch(scene, model)
     start = time.perf_counter()
     startup = start - began
     points = sim.positions()
+    contact_speed.observe(0, points, sim.substeps)
     with writer:
         writer.write_frame(0, to_cache(points), model.colliders.moving_centres(sim.state))
         background = BackgroundWriter(writer.write_frame) if overlap else None
         write = background.submit if background else writer.write_frame
         try:
-            _step_loop(sim, settings, write, progress, to_cache)
+            _step_loop(sim, settings, write, progress, to_cache, contact_speed)
         finally:
             if background is not None:
                 background.close()  # the frames already handed over are written before the cache is saved
@@ -163,7 +169,7 @@ def _simulate(scene: Scene, output: Path, target: CacheOutput, device: str | Non
         stretch_max=stretch.max, stretch_rms=stretch.rms, torn=sim.torn_count() if model.tears else None,
         threads=sim.threads, budget=sim.budget.report() if sim.budget is not None else None,
         notes=tuple(target.notes), startup_seconds=startup, kernel_seconds=kernel_seconds, unconverged=unconverged,
-        rubbery=rubbery, sweep=sweep_description(model),
+        rubbery=rubbery, sweep=sweep_description(model), contact_speed=contact_speed.advice(),
     )
 
 
@@ -362,12 +368,13 @@ class CacheVertices:
 
 
 def _step_loop(sim, settings, write: Callable[..., None], progress: Callable[[int], None] | None,
-               to_cache: Callable[[np.ndarray], list[np.ndarray]]) -> None:
+               to_cache: Callable[[np.ndarray], list[np.ndarray]], contact_speed: ContactSpeedWatch) -> None:
     """Simulate frames 1 .. frames, handing each one to ``write`` (frame, points per cloth, moving sphere
-    centres, hidden faces or None)."""
+    centres, hidden faces or None) and to ``contact_speed``."""
     model = sim.model
     torn = 0
     for frame in range(1, settings.frames + 1):
+        substeps = sim.substeps  # a target_stretch budget may choose others for the next frame
         sim.step_frame()
         points = sim.positions()  # the one host copy per frame, which the writer needs anyway
         particle = sim.diverged_particle()  # checked on the device: one integer comes back
@@ -375,6 +382,7 @@ def _step_loop(sim, settings, write: Callable[..., None], progress: Callable[[in
             slot = next(s for s in model.cloths if s.first <= particle < s.first + s.count)
             reason = divergence_reason(points[particle], settings.position_bound)
             raise DivergenceError(frame, slot.name, particle - slot.first, points[particle], reason)
+        contact_speed.observe(frame, points, substeps)
         hidden = None
         if model.tears:  # one integer per frame; the stick flags only when it changed
             count = sim.torn_count()

@@ -82,8 +82,8 @@ COLLISION_THICKNESS = Key(
     doc="The contact distance of `self_collision` (each colliding particle a sphere of this diameter; a pair of two "
         "cloths uses the mean of theirs). The collision spacing is the rest spacing (a grid's `size / (n - 1)`, the "
         "smaller of its two axes, or a mesh's median edge) times `self_collision_stride`. Keep a particle's move "
-        "per substep under half of it, or a fast layer can pass through another between two substeps. Only with "
-        "`self_collision = true`.")
+        "per substep under half of it, or a fast layer can pass through another between two substeps (the run "
+        "summary warns where colliding particles approached each other faster). Only with `self_collision = true`.")
 SELF_COLLISION_STRIDE = Key(
     "self_collision_stride", integer(1), None, type="integer", unit="particles", default_text="`1`",
     allowed="≥ 1; on a grid, less than its rows and columns",
