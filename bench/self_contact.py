@@ -26,6 +26,8 @@ without, and the worst penetration over the run, 1 - (least distance between two
 neighbours) / thickness, taken at the end of every frame (after timing it) by a hash-grid query on the device
 (0: no pair closer than the thickness; 1: two particles at one point); with a stride, over the colliding particles
 at their thickness. The run without self-collision shows how far the same cloth passes through itself.
+"approach": the fastest relative move per substep of colliding particles near each other, over the thickness, as
+``warp-verlet run`` reads it for its summary's warning (warp_verlet/apps/contact_speed.py), which it gives above 0.5.
 
 --peer adds NVIDIA Newton's rows for the same scene (bench/newton_self_contact.py, which lists what differs):
 newton-vbd (SolverVBD, its particle self-contact off and on) and newton-style3d (SolverStyle3D, its collision
@@ -45,6 +47,7 @@ from pathlib import Path
 import numpy as np
 import warp as wp
 
+from warp_verlet.apps.contact_speed import ContactSpeedWatch
 from warp_verlet.constraints.self_contact import DEFAULT_FRACTION, REST_EXCLUSION, colliding_particles
 from warp_verlet.core.simulator import Simulator
 from warp_verlet.input.scene import parse_scene
@@ -141,11 +144,20 @@ def run(n: int, self_collision: bool, frames: int, substeps: int, iterations: in
     colliding = colliding_particles(scene.cloths[0])  # the scene's order, which a grid's device order is
     meter = PointsGapMeter(sim.model.rest_positions[colliding], thickness, sim.device)
     readings = []
-    times = timed_frames(sim, frames, lambda: readings.append(meter.penetration_of(sim.positions()[colliding])))
+    watch = ContactSpeedWatch(scene, sim.model, gate=0.0)  # every frame's moves, not only those past 0.5
+    watch.observe(0, sim.positions(), substeps)
+
+    def after_frame():
+        points = sim.positions()
+        readings.append(meter.penetration_of(points[colliding]))
+        watch.observe(len(readings), points, substeps)
+
+    times = timed_frames(sim, frames, after_frame)
     worst = max([0.0, *readings])
     return {"n": n, "self_collision": "on" if self_collision else "off", "particles": n * n,
             "stride": stride if self_collision else "", "thickness mm": round(1e3 * thickness, 3),
             "ms/frame": round(1e3 * statistics.median(times[1:]), 3), "worst penetration": round(worst, 4),
+            "approach": round(watch.worst / watch.thickness, 3) if watch.active else "",
             "build s": round(build, 2), "graph": sim.replays_frames}
 
 
@@ -186,7 +198,7 @@ def main(argv: list[str] | None = None) -> int:
     title = (f"Self-collision: a folded 1 m cloth dropped on the ground, {args.frames} frames at 60 fps, "
              f"{args.substeps} substeps, {args.iterations} sweeps, {on}\n\n" + "\n".join(where.lines(command)))
     columns = ["n", "particles", "self_collision", "stride", "thickness mm", "ms/frame", "x without",
-               "worst penetration", "build s"]
+               "worst penetration", "approach", "build s"]
     if args.peer:
         columns = ["simulator", *columns, "graph"]
     write_table([{k: row.get(k, "") for k in columns} for row in rows], args.out, STEM, title, columns)

@@ -34,7 +34,9 @@ class ContactSpeedWatch:
     """Follows the colliding particles of the cloths with ``self_collision`` through the run's frames
     (``observe``) and keeps the fastest relative move per substep against the thinnest of their thicknesses."""
 
-    def __init__(self, scene, model):
+    def __init__(self, scene, model, gate: float = SAFE_FRACTION):
+        """``gate``: the fraction of the thickness below which a frame's cells are not sorted out (the check
+        needs only moves past the warning's limit; a measurement of the moves themselves passes 0)."""
         from ..constraints.self_contact import colliding_particles, thickness_of
 
         indices, thicknesses, names = [], [], []
@@ -53,6 +55,7 @@ class ContactSpeedWatch:
         self.watched = watched[::step]
         self.thickness = min(thicknesses)
         self.thinnest = names[thicknesses.index(self.thickness)]
+        self.gate = gate * self.thickness
         self.cloths = names
         self.previous: np.ndarray | None = None
         self.worst = 0.0  # the fastest relative move per substep seen, m
@@ -67,7 +70,7 @@ class ContactSpeedWatch:
         if self.previous is not None:
             moves = now - self.previous
             # The spread of all the moves bounds every cell's: cells are sorted out only where it could matter.
-            limit = max(self.worst, SAFE_FRACTION * self.thickness) * substeps
+            limit = max(self.worst, self.gate) * substeps
             if np.linalg.norm(moves.max(axis=0) - moves.min(axis=0)) > limit:
                 spread = local_spread(now, moves, NEAR_THICKNESSES * self.thickness) / substeps
                 if spread > self.worst:
