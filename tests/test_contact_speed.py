@@ -88,3 +88,30 @@ def test_the_spread_is_of_moves_per_substep_between_particles_that_end_the_frame
     apart = moved + np.where(start[:, :1] < 5.5 * SPACING, [-0.5, 0.0, 0.0], [0.5, 0.0, 0.0])
     watch.observe(2, apart, 4)
     assert watch.worst == pytest.approx(0.1 / 4) and watch.worst_frame == 1
+
+
+def test_a_large_cloth_is_watched_through_a_fixed_sample_spread_over_it(monkeypatch):
+    from warp_verlet.apps import contact_speed
+
+    n = 140  # 19,600 colliding particles, over the limit
+    scene = parse_scene(landing(substeps=2, cloths=[{**sheet("big", 0.6), "resolution": [n, n]}]), file="<t>")
+
+    class Model:
+        cloths = [type("Slot", (), {"first": 0})()]
+
+    watch = ContactSpeedWatch(scene, Model())
+    again = ContactSpeedWatch(scene, Model())
+    assert len(watch.watched) == contact_speed.SAMPLE_LIMIT and np.array_equal(watch.watched, again.watched)
+    assert np.all(np.diff(watch.watched) > 0) and watch.watched[-1] < n * n
+    rows, cols = np.divmod(watch.watched, n)
+    # every tenth of the rows and of the columns holds its share of the sample, give or take a fifth
+    share = contact_speed.SAMPLE_LIMIT / 10
+    for of in (rows, cols):
+        assert np.all(np.abs(np.bincount(of * 10 // n, minlength=10) - share) < 0.2 * share)
+
+
+def test_a_sampled_watch_still_sees_the_landing(monkeypatch, tmp_path):
+    from warp_verlet.apps import contact_speed
+
+    monkeypatch.setattr(contact_speed, "SAMPLE_LIMIT", 60)  # 60 of the two sheets' 288 particles
+    assert summary_of(landing(substeps=2), tmp_path).contact_speed is not None
