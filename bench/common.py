@@ -155,6 +155,20 @@ def time_frames(stepper, frames: int, repeats: int, warm_up: int = 0) -> list[fl
     return out
 
 
+def graph_median_ms(graph, repeats: int = 7) -> float:
+    """The median of ``repeats`` replays of a captured CUDA ``graph``, in milliseconds, each between two CUDA
+    events on the current stream."""
+    times = []
+    for _ in range(repeats):
+        begin, end = wp.Event(enable_timing=True), wp.Event(enable_timing=True)
+        wp.record_event(begin)
+        wp.capture_launch(graph)
+        wp.record_event(end)
+        wp.synchronize()
+        times.append(wp.get_event_elapsed_time(begin, end))
+    return float(statistics.median(times))
+
+
 def median_spread(values: list[float]) -> tuple[float, float]:
     """Median and half the range, as a fraction of the median."""
     med = statistics.median(values)
