@@ -115,3 +115,29 @@ def test_a_sampled_watch_still_sees_the_landing(monkeypatch, tmp_path):
 
     monkeypatch.setattr(contact_speed, "SAMPLE_LIMIT", 60)  # 60 of the two sheets' 288 particles
     assert summary_of(landing(substeps=2), tmp_path).contact_speed is not None
+
+
+def test_the_thicker_contact_it_names_holds_the_same_landing(tmp_path):
+    text = summary_of(landing(substeps=2), tmp_path).contact_speed
+    strides = dict((name, int(k)) for k, name in re.findall(r"self_collision_stride = (\d+) on cloth '(\w+)'", text))
+    assert set(strides) == {"bottom", "top"} and all(k > 1 for k in strides.values())
+    cloths = [{**sheet(name, height), "self_collision_stride": strides[name]}
+              for name, height in (("bottom", 0.03), ("top", 0.6))]
+    assert summary_of(landing(substeps=2, cloths=cloths), tmp_path).contact_speed is None
+
+
+def test_the_thicker_contact_for_a_given_thickness_and_where_no_stride_allows_one():
+    from warp_verlet.apps.contact_speed import thicker_contact
+
+    def spec_of(**cloth):
+        return parse_scene(landing(substeps=2, cloths=[{**sheet("c", 0.6), **cloth}]), file="<t>").cloths[0]
+
+    given = spec_of(collision_thickness=0.02)
+    # Within the collision spacing (45 mm): the thickness alone.
+    assert thicker_contact(given, 0.02, 0.04) == "collision_thickness = 0.04 on cloth 'c' (m; at most 0.0455 at its stride)"
+    # Past it: the stride that makes room for it.
+    assert thicker_contact(given, 0.02, 0.06) == "self_collision_stride = 2 and collision_thickness = 0.06 on cloth 'c' (m)"
+    # A default thickness grows with the stride, up to the grid's 11 spacings.
+    default = spec_of()
+    assert thicker_contact(default, THICKNESS, 3 * THICKNESS).startswith("self_collision_stride = 3 on cloth 'c'")
+    assert thicker_contact(default, THICKNESS, 12 * THICKNESS) is None

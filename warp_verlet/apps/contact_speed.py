@@ -8,8 +8,8 @@ without a sign. The run cannot see each substep, but it holds every frame's posi
 frame of S substeps, the colliding particles that end the frame in one cell of ``NEAR_THICKNESSES`` x the
 thickness are near enough to have met; the box their moves spread over, its diagonal divided by S, bounds how
 fast any two of them approached each other in an average substep. Where that exceeds ``SAFE_FRACTION`` of the
-thinnest colliding cloth's thickness, the summary warns, with the frame, the speed and the substeps that would keep
-it under. A cloth that falls or swings as one piece spreads nothing in a cell, and neither do two far-apart parts
+thinnest colliding cloth's thickness, the summary warns, with the frame, the speed, the substeps that would keep
+it under, and the stride or thickness of each cloth that would make the contact thick enough instead. A cloth that falls or swings as one piece spreads nothing in a cell, and neither do two far-apart parts
 of a cloth that move differently.
 """
 
@@ -39,7 +39,7 @@ class ContactSpeedWatch:
         needs only moves past the warning's limit; a measurement of the moves themselves passes 0)."""
         from ..constraints.self_contact import colliding_particles, thickness_of
 
-        indices, thicknesses, names = [], [], []
+        indices, thicknesses, names, specs = [], [], [], []
         for slot, spec in zip(model.cloths, scene.cloths):
             h = thickness_of(spec)
             if h is None:
@@ -47,6 +47,7 @@ class ContactSpeedWatch:
             indices.append(slot.first + colliding_particles(spec))
             thicknesses.append(h)
             names.append(spec.name)
+            specs.append(spec)
         self.active = bool(indices)
         if not self.active:
             return
@@ -58,6 +59,7 @@ class ContactSpeedWatch:
         self.watched = watched
         self.thickness = min(thicknesses)
         self.thinnest = names[thicknesses.index(self.thickness)]
+        self.specs = list(zip(specs, thicknesses))
         self.gate = gate * self.thickness
         self.cloths = names
         self.previous: np.ndarray | None = None
@@ -87,11 +89,40 @@ class ContactSpeedWatch:
         needed = math.ceil(self.worst_substeps * self.worst / (SAFE_FRACTION * self.thickness))
         which = (f"cloth '{self.cloths[0]}'" if len(self.cloths) == 1
                  else "the self-colliding cloths (" + ", ".join(f"'{n}'" for n in self.cloths) + ")")
+        wanted = self.worst / SAFE_FRACTION
+        thicker = [thicker_contact(spec, h, wanted) for spec, h in self.specs if h < wanted]
+        thicker = " and ".join(thicker) if all(thicker) else None
         return (f"{which}: colliding particles moved up to {self.worst * 1e3:.3g} mm relative to each other in a "
                 f"substep (frame {self.worst_frame}, {self.worst_substeps} substeps), over "
                 f"{SAFE_FRACTION:g} x the collision_thickness ({self.thickness * 1e3:.3g} mm, cloth "
                 f"'{self.thinnest}'): layers that fast can pass through each other between two substeps; give it "
-                f"substeps = {needed} or more, or a thicker contact (a larger self_collision_stride)")
+                f"substeps = {needed} or more, or {thicker or 'a thicker contact (a larger self_collision_stride)'}")
+
+
+def thicker_contact(spec, thickness: float, needed: float) -> str | None:
+    """The keys that give cloth ``spec`` (now at collision ``thickness``, m) a contact of at least ``needed`` m,
+    as the summary's advice, or None where no stride of it allows one: a larger ``self_collision_stride`` where
+    the thickness is its default (which grows with the stride), else ``collision_thickness``, with a stride where
+    the thickness would pass its collision spacing (the rest spacing times the stride)."""
+    from ..constraints.self_contact import DEFAULT_FRACTION, rest_spacing, stride_of
+
+    stride, spacing = stride_of(spec), rest_spacing(spec)
+    if spacing is None:
+        return None
+    longest = None if spec.mesh is not None else min(spec.resolution) - 1  # a grid's largest stride
+    where = f"on cloth '{spec.name}'"
+    if math.isclose(thickness, DEFAULT_FRACTION * spacing * stride, rel_tol=1e-6):
+        wider = math.ceil(stride * needed / thickness * (1 - 1e-9))
+        if longest is not None and wider > longest:
+            return None
+        return (f"self_collision_stride = {wider} {where} (its default thickness then "
+                f"{DEFAULT_FRACTION * spacing * wider * 1e3:.3g} mm)")
+    if needed <= spacing * stride:
+        return f"collision_thickness = {needed:.3g} {where} (m; at most {spacing * stride:.3g} at its stride)"
+    wider = math.ceil(needed / spacing * (1 - 1e-9))
+    if longest is not None and wider > longest:
+        return None
+    return f"self_collision_stride = {wider} and collision_thickness = {needed:.3g} {where} (m)"
 
 
 def local_spread(points: np.ndarray, moves: np.ndarray, cell: float) -> float:
