@@ -141,3 +141,24 @@ def test_the_thicker_contact_for_a_given_thickness_and_where_no_stride_allows_on
     default = spec_of()
     assert thicker_contact(default, THICKNESS, 3 * THICKNESS).startswith("self_collision_stride = 3 on cloth 'c'")
     assert thicker_contact(default, THICKNESS, 12 * THICKNESS) is None
+
+
+def test_a_mesh_cloths_advice_is_its_stride_over_its_median_edge(tmp_path):
+    from test_angle_limit import strip_obj
+
+    strip_obj(tmp_path / "strip.obj", rows=12, cols=12)  # 12 x 12 vertices, 0.05 m apart: default thickness 40 mm
+    scene = parse_scene({"simulation": {"substeps": 2}, "cloth": [{"mesh": "strip.obj", "self_collision": True}]},
+                        str(tmp_path / "s.toml"), tmp_path / "s.toml")
+
+    class Model:
+        cloths = [type("Slot", (), {"first": 0})()]
+
+    watch = ContactSpeedWatch(scene, Model())
+    start = scene.cloths[0].mesh.mesh.particle_points.astype(np.float64)
+    watch.observe(0, start, 2)
+    moved = start.copy()
+    moved[0, 1] -= 0.1  # one particle 50 mm a substep against its neighbours: 1.25 thicknesses
+    watch.observe(1, moved, 2)
+    text = watch.advice()
+    assert "substeps = 5 or more" in text  # 2 x 50 / 20 mm
+    assert "self_collision_stride = 3 on cloth" in text  # 100 mm needed, 40 mm a stride
