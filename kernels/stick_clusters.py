@@ -21,8 +21,8 @@ wave at 1024^2) staged at once. The write-back batches the region's indices the 
 
 A sweep reads each stick once, and a large mesh's sticks (8 bytes each, 50 MB at 1024^2) outgrow the L2 cache that
 would otherwise hold the positions, weights and region indices every launch reads again. So the sticks' staging
-loads are marked as data read once (``streamed``: CUDA's ``__ldcs``, evicted first), which leaves the L2 to the
-data that is reused (bench/results/mesh/streamed-sticks).
+loads are marked as data read once (``streamed_int``, ``streamed_float``: CUDA's ``__ldcs``, evicted first), which
+leaves the L2 to the data that is reused (bench/results/mesh/streamed-sticks).
 
 The projection is ``stick_correction`` (``compliant_correction`` for soft sticks), as in every other form. A soft
 stick's compliance and tension are either staged with the stick and its tension written back after the colours,
@@ -64,8 +64,7 @@ def streamed_float(values: wp.array(dtype=float), i: int) -> float:
 
 
 def relax_stick_clusters(region_capacity: int, stick_capacity: int, colours: int, compliant: bool = False,
-                         max_registers: int | None = None, stage_soft: bool = True, *, block_dim: int,
-                         streamed: bool = True):
+                         max_registers: int | None = None, stage_soft: bool = True, *, block_dim: int):
     """The clustered sweep's kernel for regions of at most ``region_capacity`` particles, clusters of at most
     ``stick_capacity`` sticks, and ``colours`` stick colours (the shared arrays' lengths and the colour loop's
     bound, compile-time constants), for blocks of ``block_dim`` threads on CUDA (it sizes the staging's batches;
@@ -73,17 +72,15 @@ def relax_stick_clusters(region_capacity: int, stick_capacity: int, colours: int
     ``compliant``: XPBD sticks (kernels/relax.py), each with its compliance and the tension it has accumulated over
     the substep's sweeps, staged in shared memory and written back with the sticks (``stage_soft``) or read and
     written in global memory; otherwise the compliance and tension arrays are not read. ``max_registers`` caps a
-    CUDA thread's registers (None: the compiler's). ``streamed=False`` loads the sticks as any other data (the
-    comparison of bench/results/mesh/streamed-sticks; the same positions)."""
-    key = (region_capacity, stick_capacity, colours, compliant, max_registers, compliant and stage_soft, block_dim,
-           streamed)
+    CUDA thread's registers (None: the compiler's)."""
+    key = (region_capacity, stick_capacity, colours, compliant, max_registers, compliant and stage_soft, block_dim)
     if key not in _KERNELS:
         _KERNELS[key] = _make_kernel(*key)
     return _KERNELS[key]
 
 
 def _make_kernel(region_capacity: int, stick_capacity: int, colours: int, compliant: bool, max_registers: int | None,
-                 stage_soft: bool, block_dim: int, streamed: bool):
+                 stage_soft: bool, block_dim: int):
     CAPACITY = region_capacity
     STICKS = stick_capacity
     # Loads a lane issues before it stores any of them: all of its share of the block's sticks (or region) at
@@ -187,17 +184,10 @@ def _make_kernel(region_capacity: int, stick_capacity: int, colours: int, compli
             stick_tensions = stick_floats()
             for j in range(STICK_BATCH):
                 s = s0 + wp.min(e0 + j * threads, sticks - 1)
-                if wp.static(streamed):
-                    packed_ends[j] = streamed_int(stick_ends, s)
-                    rest_lengths[j] = streamed_float(stick_rest, s)
-                else:
-                    packed_ends[j] = stick_ends[s]
-                    rest_lengths[j] = stick_rest[s]
+                packed_ends[j] = streamed_int(stick_ends, s)
+                rest_lengths[j] = streamed_float(stick_rest, s)
                 if wp.static(STAGED_SOFT):
-                    if wp.static(streamed):
-                        stick_alphas[j] = streamed_float(stick_compliance, s)
-                    else:
-                        stick_alphas[j] = stick_compliance[s]
+                    stick_alphas[j] = streamed_float(stick_compliance, s)
                     stick_tensions[j] = tension[s]
             for j in range(STICK_BATCH):
                 if e0 + j * threads < sticks:

@@ -5,6 +5,9 @@ graph and timed with CUDA events (median of 7), positions after one sweep compar
 (DEV=cpu) only the comparison runs.
 
     PYTHONPATH=. python bench/results/mesh/streamed-sticks/streamed.py 512 1024
+
+As run on 2026-12-06, when relax_stick_clusters took a ``streamed`` keyword (commit 25e54ad to 73bc29e); the kernel
+now always streams its sticks, so the comparison runs again on a checkout of one of those commits.
 """
 import json
 import os
