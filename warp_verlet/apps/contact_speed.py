@@ -39,15 +39,13 @@ class ContactSpeedWatch:
         needs only moves past the warning's limit; a measurement of the moves themselves passes 0)."""
         from ..constraints.self_contact import colliding_particles, thickness_of
 
-        indices, thicknesses, names, specs = [], [], [], []
+        indices, self.specs = [], []  # per colliding cloth: (its spec, its thickness m)
         for slot, spec in zip(model.cloths, scene.cloths):
             h = thickness_of(spec)
             if h is None:
                 continue
             indices.append(slot.first + colliding_particles(spec))
-            thicknesses.append(h)
-            names.append(spec.name)
-            specs.append(spec)
+            self.specs.append((spec, h))
         self.active = bool(indices)
         if not self.active:
             return
@@ -57,11 +55,9 @@ class ContactSpeedWatch:
             # them falls in a few columns, which another layer's sample may never share a cell with).
             watched = np.sort(np.random.default_rng(0).choice(watched, SAMPLE_LIMIT, replace=False))
         self.watched = watched
-        self.thickness = min(thicknesses)
-        self.thinnest = names[thicknesses.index(self.thickness)]
-        self.specs = list(zip(specs, thicknesses))
+        thinnest, self.thickness = min(self.specs, key=lambda pair: pair[1])
+        self.thinnest = thinnest.name
         self.gate = gate * self.thickness
-        self.cloths = names
         self.previous: np.ndarray | None = None
         self.worst = 0.0  # the fastest relative move per substep seen, m
         self.worst_frame = 0
@@ -87,8 +83,9 @@ class ContactSpeedWatch:
         if not self.active or self.worst <= SAFE_FRACTION * self.thickness:
             return None
         needed = math.ceil(self.worst_substeps * self.worst / (SAFE_FRACTION * self.thickness))
-        which = (f"cloth '{self.cloths[0]}'" if len(self.cloths) == 1
-                 else "the self-colliding cloths (" + ", ".join(f"'{n}'" for n in self.cloths) + ")")
+        names = [spec.name for spec, _ in self.specs]
+        which = (f"cloth '{names[0]}'" if len(names) == 1
+                 else "the self-colliding cloths (" + ", ".join(f"'{n}'" for n in names) + ")")
         wanted = self.worst / SAFE_FRACTION
         thicker = [thicker_contact(spec, h, wanted) for spec, h in self.specs if h < wanted]
         thicker = " and ".join(thicker) if all(thicker) else None

@@ -120,8 +120,8 @@ class Requirements:
 
             obstacle = cluster_obstacle(scene, req)
             if obstacle is not None:
-                raise StickFormRefused(f"sticks = 'clustered' sweeps float32 stick arrays of the coloured solver that "
-                                    f"cannot tear, but {obstacle}")
+                raise StickFormRefused(f"sticks = 'clustered' sweeps float32 stick arrays of the coloured solver "
+                                       f"that cannot tear, but {obstacle}")
             req = replace(req, stick_clusters=True)
         return req
 
@@ -207,8 +207,8 @@ def grid_counts(scene: "Scene", sticks: str) -> dict:
         raise ArgumentError(f"sticks must be one of {', '.join(STICK_FORMS)}, got {sticks!r}")
     obstacle = implicit_grid_obstacle(scene)
     if sticks in ("implicit", "tiled") and obstacle is not None:
-        raise StickFormRefused(f"sticks = {sticks!r} needs one grid cloth that cannot tear and the coloured solver, "
-                            f"but {obstacle}")
+        raise StickFormRefused(f"sticks = {sticks!r} needs one grid cloth that cannot tear and the coloured "
+                               f"solver, but {obstacle}")
     if sticks in ("explicit", "clustered") or obstacle is not None:
         return {}
     cloth = scene.cloths[0]
