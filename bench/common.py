@@ -155,6 +155,14 @@ def time_frames(stepper, frames: int, repeats: int, warm_up: int = 0) -> list[fl
     return out
 
 
+def captured(work, device, times: int = 32):
+    """A CUDA graph of ``times`` calls of ``work()`` on ``device``, captured without running them."""
+    with wp.ScopedCapture(device=device) as capture:
+        for _ in range(times):
+            work()
+    return capture.graph
+
+
 def graph_median_ms(graph, repeats: int = 7) -> float:
     """The median of ``repeats`` replays of a captured CUDA ``graph``, in milliseconds, each between two CUDA
     events on the current stream."""

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import warp as wp
 
-from bench.common import graph_median_ms
+from bench.common import captured, graph_median_ms
 from bench.mesh_throughput import grid_and_meshes
 from warp_verlet.constraints.stick_clusters import CLUSTER_BLOCK
 from warp_verlet.core.simulator import Simulator
@@ -52,10 +52,7 @@ for n in [int(a) for a in sys.argv[1:]] or [1024]:
             wp.synchronize()
             results[read_ahead] = x.numpy().copy()
             if DEV != "cpu":
-                with wp.ScopedCapture(device=DEV) as capture:
-                    for _ in range(32):
-                        sweep()
-                graphs[read_ahead] = capture.graph
+                graphs[read_ahead] = captured(sweep, DEV)
         for turn in range(2 if DEV != "cpu" else 0):
             for read_ahead, graph in graphs.items():
                 wp.copy(x, start)

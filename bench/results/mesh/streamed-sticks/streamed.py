@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import warp as wp
 
-from bench.common import graph_median_ms
+from bench.common import captured, graph_median_ms
 from bench.mesh_throughput import grid_and_meshes
 from warp_verlet.constraints import stick_clusters as sc
 from warp_verlet.core.simulator import Simulator
@@ -63,11 +63,9 @@ for n in [int(a) for a in sys.argv[1:]] or [512, 1024]:
                 row = {"size": n, "layout": f"{particles}/{block}", "streamed": streamed}
                 if DEV != "cpu":
                     wp.copy(x, start)
-                    with wp.ScopedCapture(device=DEV) as capture:
-                        for _ in range(32):
-                            sweep()
-                    wp.capture_launch(capture.graph)
-                    median_ms = graph_median_ms(capture.graph)
+                    graph = captured(sweep, DEV)
+                    wp.capture_launch(graph)
+                    median_ms = graph_median_ms(graph)
                     row["32 sweeps ms"] = round(median_ms, 4)
                 rows.append(row)
                 print(row, flush=True)

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import warp as wp
 
-from bench.common import graph_median_ms
+from bench.common import captured, graph_median_ms
 from bench.mesh_throughput import grid_and_meshes
 from paired_clusters import paired_clusters
 from warp_verlet.constraints import stick_clusters as sc
@@ -69,10 +69,8 @@ for n in [int(a) for a in sys.argv[1:]] or [512, 1024]:
                 row = {"size": n, "layout": layout_text, "kernel": name}
                 if DEV != "cpu":
                     wp.copy(x, start)
-                    with wp.ScopedCapture(device=DEV) as capture:
-                        for _ in range(32):
-                            sweep()
-                    median_ms = graph_median_ms(capture.graph)
+                    graph = captured(sweep, DEV)
+                    median_ms = graph_median_ms(graph)
                     row["32 sweeps ms"] = round(median_ms, 4)
                 rows.append(row)
                 print(row, flush=True)

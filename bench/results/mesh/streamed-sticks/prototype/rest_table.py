@@ -172,7 +172,7 @@ def relax_rest_table(region_capacity, stick_capacity, table_capacity, colours, e
 
 
 if __name__ == "__main__":
-    from bench.common import graph_median_ms
+    from bench.common import captured, graph_median_ms
     from bench.mesh_throughput import grid_and_meshes
     from warp_verlet.constraints import stick_clusters as sc
     from warp_verlet.core.simulator import Simulator
@@ -227,11 +227,9 @@ if __name__ == "__main__":
                     row = {"size": n, "variant": variant, "kernel": name}
                     if DEV != "cpu":
                         wp.copy(x, start)
-                        with wp.ScopedCapture(device=DEV) as capture:
-                            for _ in range(32):
-                                sweep()
-                        wp.capture_launch(capture.graph)
-                        median_ms = graph_median_ms(capture.graph)
+                        graph = captured(sweep, DEV)
+                        wp.capture_launch(graph)
+                        median_ms = graph_median_ms(graph)
                         row["32 sweeps ms"] = round(median_ms, 4)
                     rows.append(row)
                     print(row, flush=True)
