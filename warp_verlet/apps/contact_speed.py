@@ -76,7 +76,7 @@ class ContactSpeedWatch:
                 spread = local_spread(now, moves, NEAR_THICKNESSES * self.thickness) / substeps
                 if spread > self.worst:
                     self.worst, self.worst_frame, self.worst_substeps = spread, frame, substeps
-        self.previous = now.copy()
+        self.previous = now  # points[watched] is a copy already
 
     def advice(self) -> str | None:
         """The warning where the colliding particles outran the contact, else None."""

@@ -21,12 +21,12 @@ import numpy as np
 
 from .. import __version__
 from ..output.background_writer import BackgroundWriter
-from .contact_speed import ContactSpeedWatch
 from ..constraints.line_solve import passes_of, why_no_lines
 from ..errors import DivergenceError, SceneError
 from ..output.output_file import CacheOutput, input_files
 from ..input.scene import Scene
 from ..writer_registry import CacheRequest, format_for
+from .contact_speed import ContactSpeedWatch
 
 
 # A structural stick stretched to twice its rest length: far outside anything cloth does, so the solver has
