@@ -17,7 +17,10 @@ sticks' loads. A lane issues all of its share of the staging's loads before it s
 registers): a store to shared memory waits on its load, and the compiler does not move the next global load above
 it, so staged one element at a time a lane had a single load in flight, while every block of a launch (under one
 wave at 1024^2) staged at once. The write-back batches the region's indices the same way
-(bench/results/mesh/batched-staging).
+(bench/results/mesh/batched-staging). With soft sticks staged, a lane goes further: the sticks' loads go out
+before the region's stores, so that they overlap the region's second round trip (its indices, then positions);
+the rigid kernel would need more than 32 registers a thread for that, and loses more by it than it gains
+(bench/results/mesh/joint-staging).
 
 A sweep reads each stick once, and a large mesh's sticks (8 bytes each, 50 MB at 1024^2) outgrow the L2 cache that
 would otherwise hold the positions, weights and region indices every launch reads again. So the sticks' staging
@@ -162,45 +165,85 @@ def _make_kernel(region_capacity: int, stick_capacity: int, colours: int, compli
         starts = wp.tile_empty(shape=STARTS, dtype=int, storage="shared")
         alphas = wp.tile_empty(shape=SOFT_STICKS, dtype=float, storage="shared")
         tensions = wp.tile_empty(shape=SOFT_STICKS, dtype=float, storage="shared")
-        e0 = lane
-        while e0 < count:
-            # A batch's loads first, then its stores.
-            places = region_places(region, r0, count, e0, threads)
-            moved = region_points()
-            held = region_floats()
-            for j in range(REGION_BATCH):
-                moved[j] = x[places[j]]
-                held[j] = inv_mass[places[j]]
-            for j in range(REGION_BATCH):
-                if e0 + j * threads < count:
-                    put_point(points, e0 + j * threads, moved[j])
-                    put_weight(weights, e0 + j * threads, held[j])
-            e0 += REGION_BATCH * threads
-        e0 = lane
-        while e0 < sticks:
-            packed_ends = stick_ints()
-            rest_lengths = stick_floats()
-            stick_alphas = stick_floats()
-            stick_tensions = stick_floats()
-            for j in range(STICK_BATCH):
-                s = s0 + wp.min(e0 + j * threads, sticks - 1)
-                packed_ends[j] = streamed_int(stick_ends, s)
-                rest_lengths[j] = streamed_float(stick_rest, s)
-                if wp.static(STAGED_SOFT):
-                    stick_alphas[j] = streamed_float(stick_compliance, s)
-                    stick_tensions[j] = tension[s]
-            for j in range(STICK_BATCH):
-                if e0 + j * threads < sticks:
-                    put_ends(ends, e0 + j * threads, packed_ends[j])
-                    put_rest(rests, e0 + j * threads, rest_lengths[j])
-                    if wp.static(STAGED_SOFT):
-                        put_soft(alphas, e0 + j * threads, stick_alphas[j])
-                        put_soft(tensions, e0 + j * threads, stick_tensions[j])
-            e0 += STICK_BATCH * threads
-        e = lane
-        while e < STARTS:
-            put_start(starts, e, stick_start[base + e] - s0)
-            e += threads
+        if wp.static(STAGED_SOFT):
+            # One batch: region indices and colour starts, then positions and weights, then the sticks, before any
+            # store (the module's docstring says why only here).
+            e_region = lane
+            e_stick = lane
+            e_start = lane
+            while e_region < count or e_stick < sticks or e_start < STARTS:
+                places = region_ints()
+                start = int(0)
+                if e_region < count:
+                    places = region_places(region, r0, count, e_region, threads)
+                if e_start < STARTS:
+                    start = stick_start[base + e_start]
+                moved = region_points()
+                held = region_floats()
+                if e_region < count:
+                    for j in range(REGION_BATCH):
+                        moved[j] = x[places[j]]
+                        held[j] = inv_mass[places[j]]
+                packed_ends = stick_ints()
+                rest_lengths = stick_floats()
+                stick_alphas = stick_floats()
+                stick_tensions = stick_floats()
+                if e_stick < sticks:
+                    for j in range(STICK_BATCH):
+                        s = s0 + wp.min(e_stick + j * threads, sticks - 1)
+                        packed_ends[j] = streamed_int(stick_ends, s)
+                        rest_lengths[j] = streamed_float(stick_rest, s)
+                        stick_alphas[j] = streamed_float(stick_compliance, s)
+                        stick_tensions[j] = tension[s]
+                if e_region < count:
+                    for j in range(REGION_BATCH):
+                        if e_region + j * threads < count:
+                            put_point(points, e_region + j * threads, moved[j])
+                            put_weight(weights, e_region + j * threads, held[j])
+                if e_stick < sticks:
+                    for j in range(STICK_BATCH):
+                        if e_stick + j * threads < sticks:
+                            put_ends(ends, e_stick + j * threads, packed_ends[j])
+                            put_rest(rests, e_stick + j * threads, rest_lengths[j])
+                            put_soft(alphas, e_stick + j * threads, stick_alphas[j])
+                            put_soft(tensions, e_stick + j * threads, stick_tensions[j])
+                if e_start < STARTS:
+                    put_start(starts, e_start, start - s0)
+                e_region += REGION_BATCH * threads
+                e_stick += STICK_BATCH * threads
+                e_start += threads
+        else:
+            e0 = lane
+            while e0 < count:
+                # A batch's loads first, then its stores.
+                places = region_places(region, r0, count, e0, threads)
+                moved = region_points()
+                held = region_floats()
+                for j in range(REGION_BATCH):
+                    moved[j] = x[places[j]]
+                    held[j] = inv_mass[places[j]]
+                for j in range(REGION_BATCH):
+                    if e0 + j * threads < count:
+                        put_point(points, e0 + j * threads, moved[j])
+                        put_weight(weights, e0 + j * threads, held[j])
+                e0 += REGION_BATCH * threads
+            e0 = lane
+            while e0 < sticks:
+                packed_ends = stick_ints()
+                rest_lengths = stick_floats()
+                for j in range(STICK_BATCH):
+                    s = s0 + wp.min(e0 + j * threads, sticks - 1)
+                    packed_ends[j] = streamed_int(stick_ends, s)
+                    rest_lengths[j] = streamed_float(stick_rest, s)
+                for j in range(STICK_BATCH):
+                    if e0 + j * threads < sticks:
+                        put_ends(ends, e0 + j * threads, packed_ends[j])
+                        put_rest(rests, e0 + j * threads, rest_lengths[j])
+                e0 += STICK_BATCH * threads
+            e = lane
+            while e < STARTS:
+                put_start(starts, e, stick_start[base + e] - s0)
+                e += threads
         block_barrier()
 
         for n in range(COLOURS):
