@@ -52,14 +52,15 @@ def contact_candidates(
     reach: float,
     query_radius: Any,
     max_candidates: int,
+    first: int,
     candidate: wp.array(dtype=int),
     candidate_count: wp.array(dtype=int),
 ):
     """Once a substep: each colliding particle's pairs within ``reach`` x their thickness, in the grid's order,
-    the first ``max_candidates`` of them. Thread k takes the grid's k-th point in cell order, so that a warp's
-    queries walk the same cells; a pair farther than the query radius (reach x the largest thickness) is
-    dropped before its thickness and rest positions are read."""
-    i = wp.hash_grid_point_id(grid, wp.tid())
+    the first ``max_candidates`` of them. Thread k takes the grid's (first + k)-th point in cell order, so that a
+    warp's queries walk the same cells (a CPU thread takes a run of them from ``first``); a pair farther than the
+    query radius (reach x the largest thickness) is dropped before its thickness and rest positions are read."""
+    i = wp.hash_grid_point_id(grid, first + wp.tid())
     count = int(0)
     if thickness[i] > 0.0:
         xi = x[i]

@@ -168,6 +168,23 @@ def test_contact_runs_after_the_sticks_in_every_sweep(launches):
     assert names.index("contact_gather") > first_stick
 
 
+def test_the_search_divides_over_cpu_threads_bit_for_bit(launches):
+    # Each thread of the CPU team searches its own run of the grid's points once a substep; a particle's candidates
+    # do not depend on who finds them, so every thread count gives the same positions.
+    scene = drop([sheet("lower", HEIGHT, self_collision=True),
+                  sheet("upper", HEIGHT + 1.5 * THICKNESS, self_collision=True)]).scene
+    positions = []
+    for threads in (1, 2, 3):
+        sim = Simulator(scene, "cpu", use_graph=False, threads=threads)
+        assert launches.of(sim.step).count("contact_candidates") == threads
+        for _ in range(15):
+            sim.step_frame()
+        positions.append(sim.positions())
+        sim.close()
+    assert np.abs(positions[0][:N * N, 1]).max() < HEIGHT  # it fell and met the ground
+    assert all(np.array_equal(positions[0], other) for other in positions[1:])
+
+
 def test_a_scene_without_self_collision_launches_and_allocates_nothing_new(launches):
     plain = drop([sheet("sheet", HEIGHT)]).scene
     off = drop([sheet("sheet", HEIGHT, self_collision=False)]).scene
@@ -297,7 +314,7 @@ def grid_candidates(points: np.ndarray, thickness: np.ndarray, dims, reach: floa
         for build in range(builds):
             x.assign(points if build == builds - 1 else rng.permutation(points) + rng.normal(0, 0.05, points.shape))
             grid.build(x, cell)
-        wp.launch(contact_candidates, n, [wp.uint64(grid.id), x, h, rest, cloth, REST_EXCLUSION, reach, radius, cap],
+        wp.launch(contact_candidates, n, [wp.uint64(grid.id), x, h, rest, cloth, REST_EXCLUSION, reach, radius, cap, 0],
                   [candidate, count])
         found, counts = candidate.numpy().reshape(n, cap), count.numpy()
     return [list(found[i, :counts[i]]) for i in range(n)]

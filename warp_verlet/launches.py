@@ -29,12 +29,15 @@ class BoundStage:
     """A stage's work against one State: ``run(state, dt)`` does it (the closures hold that state's arrays,
     never the State itself, so a solver's cache does not keep a dropped state alive); ``phases`` (constraint
     sets only) are the per-thread tasks of one sweep, phase after phase, which the CPU thread team may run
-    instead; ``before_replay()``, where given, must run before each replay of a captured frame (host state that
-    the capture's work reads at replay, such as Warp's hash-grid descriptor)."""
+    instead; ``substep_phases`` (constraint sets only) are per-thread tasks that run once a substep, after ``run``
+    and before the first sweep (a set's per-substep work that divides over threads, such as a search);
+    ``before_replay()``, where given, must run before each replay of a captured frame (host state that the
+    capture's work reads at replay, such as Warp's hash-grid descriptor)."""
 
     run: Callable[[Any, float], None] | None  # (a State, dt)
     phases: list[list[PhaseTask | None]] | None = None
     before_replay: Callable[[], None] | None = None
+    substep_phases: list[list[PhaseTask | None]] | None = None
 
 
 def recorded(kernel, dim: int, inputs: list, outputs: list | None = None, block_dim: int = 256) -> PhaseTask:

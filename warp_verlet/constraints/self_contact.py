@@ -14,8 +14,9 @@ grid's every k-th row and column (and its last) or a mesh's spread subset (``spr
 cloth between them, so the thickness may reach k spacings, and everything below runs over them alone.
 
 Each substep (``run``) rebuilds a ``wp.HashGrid`` of the colliding particles with cells of ``GRID_CELL`` × the query
-radius (``QUERY_REACH`` × the largest thickness) and lists each particle's candidate pairs, those within
-``QUERY_REACH`` × their thickness (at most ``MAX_CANDIDATES``): rebuilt every substep because at the shipped
+radius (``QUERY_REACH`` × the largest thickness); then (``substep_phases``, divided over the CPU's relaxation
+threads) each particle lists its candidate pairs, those within ``QUERY_REACH`` × their thickness (at most
+``MAX_CANDIDATES``): rebuilt every substep because at the shipped
 speeds a particle moves up to about a thickness per substep, so a list kept for longer would miss new pairs (a
 list kept while the cloth moves less than a skin was measured slower on a GPU: bench/results/self_contact.md).
 Each sweep then (``phases``) gathers, per particle, the pushes of its candidates closer than the thickness, from
@@ -381,15 +382,16 @@ class SelfContact(ConstraintSet):
         grid = wp.HashGrid(*data.dims, device=model.device, dtype=real)
         grid.reserve(n)
         cell = data.cell
-        find = recorded(contact_candidates, n, [wp.uint64(grid.id), searched, data.thickness, data.rest, data.cloth,
-                                                REST_EXCLUSION, QUERY_REACH, real(data.radius), MAX_CANDIDATES],
-                        [candidate, candidate_count])
 
-        def search(state, dt: float) -> None:
+        def find(f, count):
+            return recorded(contact_candidates, count, [wp.uint64(grid.id), searched, data.thickness, data.rest,
+                                                        data.cloth, REST_EXCLUSION, QUERY_REACH, real(data.radius),
+                                                        MAX_CANDIDATES, f], [candidate, candidate_count])
+
+        def build_grid(state, dt: float) -> None:
             if collect is not None:
                 collect.run()
             grid.build(searched, cell)
-            find.run()
 
         def gather(f, count):
             return recorded(contact_gather, count, [x, model.inv_mass, data.particle, data.thickness, candidate,
@@ -408,6 +410,8 @@ class SelfContact(ConstraintSet):
 
         write_back = (copy_back_phase(x, scratch, n, solver.threads) if data.every_particle
                       else split_tasks(scatter, 0, n, solver.threads))
-        # ``search`` holds the grid, which the recorded launch reads by its id only.
-        return BoundStage(search, [split_tasks(gather, 0, n, solver.threads), write_back],
-                          point_descriptor_at_this_grid if model.device.is_cuda else None)
+        # ``build_grid`` holds the grid, which the recorded launches read by its id only. The search, a query per
+        # particle, divides over the CPU's relaxation threads as the gather does.
+        return BoundStage(build_grid, [split_tasks(gather, 0, n, solver.threads), write_back],
+                          point_descriptor_at_this_grid if model.device.is_cuda else None,
+                          substep_phases=[split_tasks(find, 0, n, solver.threads)])

@@ -398,10 +398,12 @@ class Relax:
         kinds = [c for c in constraint_kinds() if c.needed(solver.req)]
         sets = [c.bind(model, state, solver) for c in kinds]
         phases = [phase for bound in sets for phase in bound.phases]
-        # The phases of the first sweep: without the tether pass where the Verlet step has run it.
+        # The phases of the first sweep: the sets' once-a-substep phases, then the sweep's, without the tether
+        # pass where the Verlet step has run it.
         folded = tethers_in_integrate(solver)
-        first = [phase for c, bound in zip(kinds, sets) if not (folded and isinstance(c, Tethers))
-                 for phase in bound.phases]
+        first = [phase for bound in sets for phase in bound.substep_phases or ()]
+        first += [phase for c, bound in zip(kinds, sets) if not (folded and isinstance(c, Tethers))
+                  for phase in bound.phases]
         before = [bound.run for bound in sets if bound.run is not None]  # per-substep set-up (dt, zeroing)
         replay_hooks = [bound.before_replay for bound in sets if bound.before_replay is not None]
         collide_first = ()
