@@ -1,8 +1,8 @@
 """Whether the landed clustered kernel (kernels/stick_clusters.py) compiles to the same PTX as the kernels measured
-on the GPU: its rigid form as commit 88a8c52's kernel (staged one kind after another), its staged-soft form as
-prototype/hold_region.py (the one-batch kernel of the lease's last run, h100/final.txt). NVRTC compiles for sm_90
-without a GPU; the PTX is compared after the module names are taken out. Comments and source lines aside, the
-landed kernel only rearranges the measured ones' static branches.
+on the GPU: its rigid form as commit 88a8c52's kernel (staged one kind after another), its staged-soft form as the
+one-batch kernel of the lease's last run (h100/final.txt), rebuilt from 88a8c52's by prototype/hold_region.diff.
+NVRTC compiles for sm_90 without a GPU; the PTX is compared after the module names are taken out. Comments and
+source lines aside, the landed kernel only rearranges the measured ones' static branches.
 
     PYTHONPATH=. python bench/results/mesh/joint-staging/ptx_identity.py
 """
@@ -27,7 +27,9 @@ base = subprocess.run(["git", "show", "88a8c52:kernels/stick_clusters.py"], capt
 for module in ("grid_tiles", "positions", "relax"):
     base = base.replace(f"from .{module}", f"from warp_verlet.kernels.{module}")
 (work / "base_clusters.py").write_text(base)
-sys.path[:0] = [str(work), str(here / "prototype")]
+subprocess.run(["patch", "-s", "-o", str(work / "hold_region.py"), str(work / "base_clusters.py"),
+                str(here / "prototype" / "hold_region.diff")], check=True)
+sys.path[:0] = [str(work)]
 import base_clusters  # noqa: E402
 import hold_region  # noqa: E402
 from warp_verlet.kernels import stick_clusters as landed  # noqa: E402
@@ -51,4 +53,4 @@ for soft, measured in ((False, base_clusters), (True, hold_region)):
     same = ptx(measured.relax_stick_clusters, soft, f"m{int(soft)}") == ptx(landed.relax_stick_clusters, soft,
                                                                                    f"l{int(soft)}")
     print(f"{'soft, staged' if soft else 'rigid'}: landed PTX {'identical to' if same else 'DIFFERS from'} the "
-          f"measured kernel's ({'prototype/hold_region.py' if soft else 'commit 88a8c52'})")
+          f"measured kernel's ({'prototype/hold_region.diff' if soft else 'commit 88a8c52'})")
