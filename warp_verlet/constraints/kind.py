@@ -51,7 +51,8 @@ class ConstraintKind(Protocol):
 
     def bind(self, model, state, solver) -> "BoundStage":
         """Its launches against ``state`` (a State of ``model``, stepped by ``solver``, a VerletSolver): per-substep
-        set-up as ``run``, one sweep as ``phases``."""
+        set-up as ``run``, per-substep work that divides over the CPU's threads as ``substep_phases`` (run after
+        every set's ``run``, before the first sweep), one sweep as ``phases``."""
 
     def on_tear(self, model, state, torn: "np.ndarray") -> None:
         """React to the torn set changing (``torn``: per stick in ``model.host_sticks`` order)."""
