@@ -16,9 +16,9 @@ cloth between them, so the thickness may reach k spacings, and everything below 
 Each substep (``run``) rebuilds a ``wp.HashGrid`` of the colliding particles with cells of ``GRID_CELL`` × the query
 radius (``QUERY_REACH`` × the largest thickness); then (``substep_phases``, divided over the CPU's relaxation
 threads) each particle lists its candidate pairs, those within ``QUERY_REACH`` × their thickness (at most
-``MAX_CANDIDATES``): rebuilt every substep because at the shipped
-speeds a particle moves up to about a thickness per substep, so a list kept for longer would miss new pairs (a
-list kept while the cloth moves less than a skin was measured slower on a GPU: bench/results/self_contact.md).
+``MAX_CANDIDATES``). Both are redone every substep because at the shipped speeds a particle moves up to about a
+thickness per substep, so a list kept for longer would miss new pairs (a list kept while the cloth moves less
+than a skin was measured slower on a GPU: bench/results/self_contact.md).
 Each sweep then (``phases``) gathers, per particle, the pushes of its candidates closer than the thickness, from
 the same old positions, into a scratch buffer (their average: Jacobi, as the Jacobi sticks do in
 kernels/relax.py) and copies the buffer back in a second launch: no atomics on positions, so the result is
