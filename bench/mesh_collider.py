@@ -202,7 +202,7 @@ class ClampTimer:
         no_pushes = wp.empty(0, dtype=wp.vec3, device=sim.device)  # no stage reads the clamp's pushes here
         self.launch = wp.launch(collide_meshes, model.particle_count,
                                 inputs=[q, inertial, dq, model.inv_mass, c.mesh_ids, state.mesh_offsets, c.mesh_reach,
-                                        c.mesh_thickness, c.mesh_friction, no_pushes], device=sim.device,
+                                        c.mesh_thickness, c.mesh_friction, no_pushes, 0], device=sim.device,
                                 record_cmd=True)
 
     def frame_ms(self) -> float:

@@ -80,10 +80,11 @@ def collide_meshes(
     thickness: wp.array(dtype=float),
     friction: wp.array(dtype=wp.vec2),  # (mu_k, mu_s) per collider
     pushes: wp.array(dtype=wp.vec3),  # empty, or each particle's pushes summed (collide_response.py)
+    first: int,  # the first particle (a CPU thread clamps a run of them from here)
 ):
     """Keeps each free particle ``thickness`` outside every mesh: along the face's normal where its closest point
     lies inside a face, else along the outward direction from that point."""
-    i = wp.tid()
+    i = first + wp.tid()
     if inv_mass[i] == 0.0:
         return
     xi = x[i]
@@ -117,13 +118,14 @@ def collide_moving_meshes(
     thickness: wp.array(dtype=float),
     friction: wp.array(dtype=wp.vec2),  # (mu_k, mu_s) per collider
     pushes: wp.array(dtype=wp.vec3),  # empty, or each particle's pushes summed (collide_response.py)
+    first: int,  # the first particle (a CPU thread clamps a run of them from here)
 ):
     """``collide_meshes`` for scenes where a mesh moves: each BVH holds its mesh in its own frame, placed by a
     rotation and a translation (the State's, at the end of the substep; ``*_before`` at its start), and the
     points of a deforming mesh are placed and refitted each substep, with their displacement over the substep as
     the wp.Mesh's velocities. Friction acts on the particle's motion relative to the surface point it touches,
     which moved by (its place now) - (its place at the start of the substep)."""
-    i = wp.tid()
+    i = first + wp.tid()
     if inv_mass[i] == 0.0:
         return
     xi = x[i]

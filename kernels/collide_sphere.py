@@ -19,9 +19,10 @@ def collide_spheres(
     radii: wp.array(dtype=float),
     friction: wp.array(dtype=wp.vec2),  # (mu_k, mu_s) per collider
     pushes: wp.array(dtype=wp.vec3),  # empty, or each particle's pushes summed (collide_response.py)
+    first: int,  # the first particle (a CPU thread clamps a run of them from here)
 ):
     """``radii`` already include each sphere's thickness."""
-    i = wp.tid()
+    i = first + wp.tid()
     if inv_mass[i] == 0.0:
         return
     xi = x[i]

@@ -96,6 +96,37 @@ def test_contact_projected_every_sweep_runs_threaded_and_bit_identical(solver):
         assert np.array_equal(points, one), f"{threads} threads changed the result"
 
 
+def test_colliders_clamp_on_every_thread_bit_for_bit(launches):
+    # After the sweeps each thread of the team clamps its own run of particles, kind after kind (a mesh's clamp, a
+    # BVH query a particle, can cost more than the sweeps): every thread count gives one thread's positions.
+    from pathlib import Path
+
+    from warp_verlet.input.scene import read_toml_file
+
+    path = Path(__file__).resolve().parents[1] / "scenes" / "cloth_on_table.toml"
+    table = read_toml_file(path)
+    table["cloth"][0]["resolution"] = [24, 18]
+    # Every kind touches the cloth within the run: a bump on the table top, and the ground raised to catch the
+    # overhang as it folds down.
+    table["collider"][1]["point"] = [0.0, 0.68, 0.0]
+    table["collider"].append({"type": "sphere", "radius": 0.1, "centre": [0.0, 0.72, 0.0]})
+    scene = parse_scene(table, str(path), path)
+    kinds = ("collide_meshes", "collide_moving_meshes", "collide_spheres", "collide_planes")
+    positions = []
+    for threads in (1, 2, 3):
+        sim = Simulator(scene, "cpu", threads=threads, use_graph=False)
+        issued = launches.of(sim.step)
+        assert sorted(name for name in issued if name in kinds) == sorted(
+            ["collide_meshes"] * threads + ["collide_spheres"] * threads + ["collide_planes"] * threads)
+        for _ in range(30):
+            sim.step_frame()
+        positions.append(sim.positions())
+    low = positions[0][:, 1]
+    assert low.max() > 0.8 and abs(low.min() - 0.685) < 1e-3  # over the bump, and the overhang on the ground
+    for threads, points in zip((2, 3), positions[1:]):
+        assert np.array_equal(points, positions[0]), f"{threads} threads changed the result"
+
+
 def test_captured_cpu_frames_match_launch_by_launch():
     scene = busy_scene("coloured")
     captured, torn_captured = run_frames(scene, 20, threads=1)
@@ -200,16 +231,18 @@ def test_dropping_a_threaded_simulator_stops_its_threads(solver):
 
 
 def test_dropping_a_state_stops_the_threads_that_relaxed_it():
-    # A threaded solver starts a team of workers for every state it steps (its launches are bound to that
-    # state's arrays): checkpoints must not leave threads behind once they are dropped.
+    # A threaded solver starts teams of workers for every state it steps (its launches are bound to that state's
+    # arrays): checkpoints must not leave threads behind once they are dropped.
     sim = Simulator(busy_scene("coloured"), "cpu", threads=3)
     sim.step()
     own = {w for team in sim.solver._teams for w in team._workers}
+    teams_per_state = len(sim.solver._teams)  # the sweeps' and the colliders' clamps'
+    assert teams_per_state == 2
     clones = [sim.state.clone() for _ in range(3)]
     for clone in clones:
         sim.solver.step(clone, sim.settings.dt)
     workers = {w for team in sim.solver._teams for w in team._workers} - own
-    assert len(workers) == 3 * 2 and all(w.is_alive() for w in workers)
+    assert len(workers) == 3 * teams_per_state * 2 and all(w.is_alive() for w in workers)
     del clones, clone
     gc.collect()
     for worker in workers:

@@ -156,7 +156,8 @@ def test_the_kernel_pushes_out_along_the_outward_direction(tmp_path):
     c = sim.model.colliders
     wp.launch(collide_meshes, 4, inputs=[sim.state.particle_q, sim.state.particle_q_inertial, sim.state.particle_dq,
                                          sim.model.inv_mass, c.mesh_ids, sim.state.mesh_offsets, c.mesh_reach,
-                                         c.mesh_thickness, c.mesh_friction, wp.empty(0, dtype=wp.vec3, device="cpu")],
+                                         c.mesh_thickness, c.mesh_friction, wp.empty(0, dtype=wp.vec3, device="cpu"),
+                                         0],
               device="cpu")
     expected = np.array([[0.05, 0.11, 0.0], [0.31, 0.0, 0.01], [0.0, 0.11, -0.1], [0.0, -0.3, 0.0]])
     np.testing.assert_allclose(sim.positions(), expected, atol=TOL)

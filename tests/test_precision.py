@@ -245,11 +245,11 @@ def kernel_cases():
          lambda vec, real: [q(vec), q(vec, x_in), q(vec, dq), f(w), f(np.array([[0.0, -0.5, 0.0], [1.0, 0.0, 0.0]],
                             np.float32), wp.vec3), f(np.array([[0.0, 1.0, 0.0], [-0.6, 0.0, 0.8]], np.float32), wp.vec3),
                             f(np.array([0.01, 0.0], np.float32)),
-                            f(np.array([[0.3, 0.4], [0.0, 0.0]], np.float32), wp.vec2), no_pushes()]),
+                            f(np.array([[0.3, 0.4], [0.0, 0.0]], np.float32), wp.vec2), no_pushes(), 0]),
         ("collide_spheres", collide_sphere.collide_spheres, n,
          lambda vec, real: [q(vec), q(vec, x_in), q(vec, dq), f(w), f(np.array([[0.5, 0.5, 0.0], [-1.0, 0.0, 1.0]],
                             np.float32), wp.vec3), f(np.array([1.0, 0.7], np.float32)),
-                            f(np.array([[0.4, 0.5], [0.0, 0.0]], np.float32), wp.vec2), no_pushes()]),
+                            f(np.array([[0.4, 0.5], [0.0, 0.0]], np.float32), wp.vec2), no_pushes(), 0]),
         ("tear_sticks", tear.tear_sticks, len(ends),
          lambda vec, real: [q(vec), f(ends, wp.vec2i), f(rest), f(ones), f(np.zeros(1, np.int32), int)]),
         ("find_diverged", guard.find_diverged, n,
@@ -296,7 +296,7 @@ def f64_case(name: str):
     moved = [[X + D / 2, 0, 0], [X + 0.125 + D / 2, 0, 0]]  # equal masses: each end takes half
     ends = lambda: f([0, 1], dtype=wp.vec2i)  # noqa: E731
     planes = (f([0.0, X, 0.0], dtype=wp.vec3), f([0.0, 1.0, 0.0], dtype=wp.vec3), f(0.0), f([0.0, 0.0], dtype=wp.vec2),
-              no_pushes())
+              no_pushes(), 0)
     cases = {
         "verlet_step": (integrate.verlet_step, 1,
                         [q([X, X, X]), q([X, X, X]), q([D, 0, 0]), f(1.0), wp.float64(1.0), wp.vec3d(0.0, -2 * D, 0.0)],
@@ -315,7 +315,7 @@ def f64_case(name: str):
                            f(1.0), *planes], {0: [[0.7, X, 0.2]]}),
         "collide_spheres": (collide_sphere.collide_spheres, 1, [q([X + 0.5 - D, 0, 0]), q([X + 0.5 - D, 0, 0]), q([0, 0, 0]),
                             f(1.0), f([X, 0.0, 0.0], dtype=wp.vec3), f(0.5), f([0.0, 0.0], dtype=wp.vec2),
-                            no_pushes()],
+                            no_pushes(), 0],
                             {0: [[X + 0.5, 0, 0]]}),
         # Sticks D longer and D shorter than their 0.25 m tear length: only the first tears.
         "tear_sticks": (tear.tear_sticks, 2, [q([X, 0, 0], [X + 0.25 + D, 0, 0], [X, 1, 0], [X + 0.25 - D, 1, 0]),

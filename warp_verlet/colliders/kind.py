@@ -26,10 +26,19 @@ VEC3, FLOAT, INT, FLOAT64 = 12, 4, 4, 8  # device bytes, for the kinds' device_b
 class ColliderLaunches:
     """A kind's part of the Collide stage against one State: ``before`` runs first each substep (with dt), for
     every kind in registry order (a moving collider is placed here); then ``clamps``, the recorded launches that
-    project particles out, again in registry order."""
+    project particles out, again in registry order. ``clamp_pieces`` makes each clamp's launch over particles
+    ``first .. first + count - 1`` (``(first, count) -> PhaseTask``), so that the CPU's relaxation threads can
+    clamp a run of particles each: a particle's clamp reads and writes that particle alone."""
 
     before: tuple[Callable[[float], None], ...] = ()
     clamps: tuple["PhaseTask", ...] = ()
+    clamp_pieces: tuple[Callable[[int, int], "PhaseTask"], ...] = ()
+
+
+def clamp_launches(make: Callable[[int, int], "PhaseTask"], particles: int,
+                   before: tuple[Callable[[float], None], ...] = ()) -> ColliderLaunches:
+    """A kind's ColliderLaunches for one clamp kernel over every particle, from its maker (first, count)."""
+    return ColliderLaunches(before, (make(0, particles),), (make,))
 
 
 @dataclass(frozen=True)

@@ -29,7 +29,8 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..scene_keys import ARRAY, Key, accepts, any_real, scale_factors, text, vector
-from .kind import FLOAT, FLOAT64, INT, VEC3, ColliderLaunches, InsideReport, LiveDrawing, coulomb, push_record
+from .kind import (FLOAT, FLOAT64, INT, VEC3, ColliderLaunches, InsideReport, LiveDrawing, clamp_launches, coulomb,
+                   push_record)
 
 MESH_ID = 8  # bytes of a wp.Mesh id (uint64) on the device
 QUAT = 16  # bytes of a wp.quat
@@ -383,11 +384,13 @@ class MeshKind:
         removed = push_record(pushes, model.device)
         c = model.colliders
         if not c.meshes_move:
-            clamp = recorded(collide_meshes, model.particle_count,
-                             [state.particle_q, state.particle_q_inertial, state.particle_dq, model.inv_mass,
-                              c.mesh_ids, state.mesh_offsets, c.mesh_reach, c.mesh_thickness, c.mesh_friction,
-                              removed])
-            return ColliderLaunches((), (clamp,))
+            def clamp(first: int, count: int):
+                return recorded(collide_meshes, count,
+                                [state.particle_q, state.particle_q_inertial, state.particle_dq, model.inv_mass,
+                                 c.mesh_ids, state.mesh_offsets, c.mesh_reach, c.mesh_thickness, c.mesh_friction,
+                                 removed, first])
+
+            return clamp_launches(clamp, model.particle_count)
         clock = state.mesh_clock
         place = recorded(place_moving_meshes, len(c.meshes),
                          [clock, c.mesh_key_start, c.mesh_key_times, c.mesh_key_offsets, c.mesh_key_rotations],
@@ -403,12 +406,14 @@ class MeshKind:
                 points.run()
                 bvh.refit()
 
-        clamp = recorded(collide_moving_meshes, model.particle_count,
-                         [state.particle_q, state.particle_q_inertial, state.particle_dq, model.inv_mass,
-                          c.mesh_ids, state.mesh_offsets, state.mesh_rotations, state.mesh_offsets_before,
-                          state.mesh_rotations_before, c.mesh_deforms, c.mesh_reach, c.mesh_thickness,
-                          c.mesh_friction, removed])
-        return ColliderLaunches((advance,), (clamp,))
+        def moving_clamp(first: int, count: int):
+            return recorded(collide_moving_meshes, count,
+                            [state.particle_q, state.particle_q_inertial, state.particle_dq, model.inv_mass,
+                             c.mesh_ids, state.mesh_offsets, state.mesh_rotations, state.mesh_offsets_before,
+                             state.mesh_rotations_before, c.mesh_deforms, c.mesh_reach, c.mesh_thickness,
+                             c.mesh_friction, removed, first])
+
+        return clamp_launches(moving_clamp, model.particle_count, (advance,))
 
     def capturable(self, specs: tuple[MeshCollider, ...], device) -> bool:
         """Whether a frame's launches replay from a capture: not with a deforming mesh, whose BVH refit

@@ -7,7 +7,8 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..scene_keys import Key, any_real, real, vector
-from .kind import FLOAT, VEC3, ColliderLaunches, InsideReport, LiveDrawing, coulomb, push_record
+from .kind import (FLOAT, VEC3, ColliderLaunches, InsideReport, LiveDrawing, clamp_launches, coulomb,
+                   push_record)
 
 
 @dataclass(frozen=True)
@@ -114,11 +115,14 @@ class PlaneKind:
         from ..launches import recorded
 
         c = model.colliders
-        clamp = recorded(collide_planes, model.particle_count,
-                         [state.particle_q, state.particle_q_inertial, state.particle_dq, model.inv_mass,
-                          c.plane_points, c.plane_normals, c.plane_thickness, c.plane_friction,
-                          push_record(pushes, model.device)])
-        return ColliderLaunches((), (clamp,))
+        removed = push_record(pushes, model.device)
+
+        def clamp(first: int, count: int):
+            return recorded(collide_planes, count,
+                            [state.particle_q, state.particle_q_inertial, state.particle_dq, model.inv_mass,
+                             c.plane_points, c.plane_normals, c.plane_thickness, c.plane_friction, removed, first])
+
+        return clamp_launches(clamp, model.particle_count)
 
     # ------------------------------------------------------------------ output
     def samples(self, colliders, state, always_moving: bool = False):

@@ -6,8 +6,8 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..scene_keys import ARRAY, Invalid, Key, accepts, any_real, describe, per_element, real, vector
-from .kind import (FLOAT, FLOAT64, INT, VEC3, ColliderLaunches, InsideReport, LiveDrawing, coulomb, keyframe_arrays,
-                   push_record)
+from .kind import (FLOAT, FLOAT64, INT, VEC3, ColliderLaunches, InsideReport, LiveDrawing, clamp_launches, coulomb,
+                   keyframe_arrays, push_record)
 
 
 @dataclass(frozen=True)
@@ -164,11 +164,14 @@ class SphereKind:
                 place.run()
 
             before = (advance,)
-        clamp = recorded(collide_spheres, model.particle_count,
-                         [state.particle_q, state.particle_q_inertial, state.particle_dq, model.inv_mass,
-                          state.sphere_centres, c.sphere_reach, c.sphere_friction,
-                          push_record(pushes, model.device)])
-        return ColliderLaunches(before, (clamp,))
+        removed = push_record(pushes, model.device)
+
+        def clamp(first: int, count: int):
+            return recorded(collide_spheres, count,
+                            [state.particle_q, state.particle_q_inertial, state.particle_dq, model.inv_mass,
+                             state.sphere_centres, c.sphere_reach, c.sphere_friction, removed, first])
+
+        return clamp_launches(clamp, model.particle_count, before)
 
     # ------------------------------------------------------------------ output
     def samples(self, colliders, state, always_moving: bool = False):

@@ -89,8 +89,8 @@ class VerletSolver:
         return self._scratch[name]
 
     def team(self, phases: list[list[PhaseTask | None]], repeats: int | None = None) -> PhaseTeam | None:
-        """A CPU thread team for the relaxation's phases, run ``repeats`` times (None: once a sweep), or None when it
-        runs on one thread."""
+        """A CPU thread team for a stage's phases (the relaxation's sweeps, the colliders' clamps), run ``repeats``
+        times (None: once a sweep), or None when it runs on one thread."""
         if self.threads <= 1 or not phases:
             return None
         team = PhaseTeam([[t.run if t is not None else None for t in phase] for phase in phases],

@@ -29,7 +29,7 @@ if TYPE_CHECKING:  # pragma: no cover
 
 from ..constraints import kinds as constraint_kinds
 from ..constraints.tethers import Tethers
-from ..launches import FLOAT, VEC2I, VEC3, VEC3D, BoundStage, noted_pushes, recorded
+from ..launches import FLOAT, VEC2I, VEC3, VEC3D, BoundStage, noted_pushes, recorded, split_tasks
 
 
 @dataclass(frozen=True)
@@ -484,10 +484,17 @@ class Collide:
         before = ([prepare for launches in bound for prepare in launches.before]
                   if collider_placement(solver) == self.name else [])
         clamps = [task for launches in bound for task in launches.clamps]
+        # On CPU threads each thread clamps its own run of particles, kind after kind (a clamp reads and writes its
+        # particle alone, so the positions are those of one thread bit for bit).
+        team = solver.team([split_tasks(make, 0, model.particle_count, solver.threads)
+                            for launches in bound for make in launches.clamp_pieces], repeats=1)
 
         def run(state, dt: float) -> None:
             for prepare in before:
                 prepare(dt)
+            if team is not None:
+                team.run()
+                return
             for task in clamps:
                 task.run()
 

@@ -3,7 +3,7 @@ simulator's default relaxation threads (or THREADS), for the build whose tree is
 run. Run it alternately on two trees to compare them:
 
     for r in 1 2 3 4 5; do for tree in BASE .; do (cd $tree && PYTHONPATH=$tree python \\
-        /path/to/bench/results/self_contact_threads/ab.py 256); done; done
+        /path/to/bench/results/cpu_threads/ab.py 256); done; done
 """
 import os
 import sys

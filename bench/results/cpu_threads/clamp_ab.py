@@ -1,0 +1,31 @@
+"""bench.mesh_collider's drop onto a triangle-mesh ball (an icosphere of 20,480 triangles) at one size, 8 substeps x 8
+sweeps, frames 13-18 timed on the CPU with the simulator's default relaxation threads (or THREADS), for the build
+whose tree is first on PYTHONPATH; one line a run. Run it alternately on two trees to compare them:
+
+    for r in 1 2 3; do for tree in BASE .; do (cd $tree && PYTHONPATH=$tree python \\
+        /path/to/bench/results/cpu_threads/clamp_ab.py 256); done; done
+"""
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from bench import mesh_collider as bench
+from bench.common import quiet_warp
+from warp_verlet.core.simulator import Simulator
+
+quiet_warp()
+n = int(sys.argv[1]) if len(sys.argv) > 1 else 256
+threads = int(os.environ.get("THREADS", "0")) or None
+with tempfile.TemporaryDirectory() as folder:
+    scene, _ = bench.drop_scene(n, "mesh", 5, Path(folder), 30, 8, 8)
+    sim = Simulator(scene, "cpu", threads=threads)
+    for _ in range(12):
+        sim.step_frame()
+    start = time.perf_counter()
+    for _ in range(6):
+        sim.step_frame()
+tree = os.path.basename(os.path.dirname(os.path.dirname(os.path.abspath(bench.__file__))))
+print(f"{tree} {n}^2 mesh ball, threads={sim.solver.threads}: {(time.perf_counter() - start) / 6 * 1e3:.1f} ms/frame "
+      f"(load {os.getloadavg()[0]:.2f})", flush=True)
