@@ -487,7 +487,8 @@ class Collide:
         # On CPU threads each thread clamps its own run of particles, kind after kind (a clamp reads and writes its
         # particle alone, so the positions are those of one thread bit for bit).
         team = solver.team([split_tasks(make, 0, model.particle_count, solver.threads)
-                            for launches in bound for make in launches.clamp_pieces], repeats=1)
+                            for launches in bound for make in launches.clamp_pieces],
+                           repeats=1) if solver.threads > 1 else None
 
         def run(state, dt: float) -> None:
             for prepare in before:
