@@ -279,6 +279,21 @@ def test_a_kind_registered_in_a_test_clamps_is_estimated_and_launched(with_level
     assert Simulator(falling_scene(ground), "cpu", use_graph=False).state.level_floors is None
 
 
+def test_a_kind_without_clamp_pieces_still_clamps_on_cpu_threads(with_level):
+    # The level kind makes its clamp over every particle only (no ``clamp_pieces``): on CPU threads the Collide
+    # stage runs it whole, on the team's first thread, where the library's kinds clamp a run of particles each.
+    level = {"type": "level", "level": -0.25, "thickness": 0.01}
+    ground = {"type": "plane", "point": [0.0, -1.0, 0.0]}
+    heights = []
+    for threads in (1, 2):
+        sim = Simulator(falling_scene(level, ground), "cpu", threads=threads)
+        for _ in range(60):
+            sim.step_frame()
+        heights.append(sim.positions()[:, 1])
+    np.testing.assert_allclose(heights[0], -0.24, atol=1e-6)
+    np.testing.assert_array_equal(heights[1], heights[0])
+
+
 def test_a_kind_registered_in_a_test_is_written_to_the_cache_and_read_back(monkeypatch, tmp_path):
     from pxr import Usd
 

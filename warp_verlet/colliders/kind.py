@@ -28,7 +28,8 @@ class ColliderLaunches:
     every kind in registry order (a moving collider is placed here); then ``clamps``, the recorded launches that
     project particles out, again in registry order. ``clamp_pieces`` makes each clamp's launch over particles
     ``first .. first + count - 1`` (``(first, count) -> PhaseTask``), so that the CPU's relaxation threads can
-    clamp a run of particles each: a particle's clamp reads and writes that particle alone."""
+    clamp a run of particles each: a particle's clamp reads and writes that particle alone. A kind that gives none
+    has its ``clamps`` run whole, by one thread."""
 
     before: tuple[Callable[[float], None], ...] = ()
     clamps: tuple["PhaseTask", ...] = ()

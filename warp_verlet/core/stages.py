@@ -485,10 +485,19 @@ class Collide:
                   if collider_placement(solver) == self.name else [])
         clamps = [task for launches in bound for task in launches.clamps]
         # On CPU threads each thread clamps its own run of particles, kind after kind (a clamp reads and writes its
-        # particle alone, so the positions are those of one thread bit for bit).
-        team = solver.team([split_tasks(make, 0, model.particle_count, solver.threads)
-                            for launches in bound for make in launches.clamp_pieces],
-                           repeats=1) if solver.threads > 1 else None
+        # particle alone, so the positions are those of one thread bit for bit). A kind that makes no clamp pieces
+        # has its whole clamps run by the team's first thread while the others wait.
+        team = None
+        if solver.threads > 1:
+            idle = [None] * (solver.threads - 1)
+            phases = []
+            for launches in bound:
+                if launches.clamp_pieces:
+                    phases += [split_tasks(make, 0, model.particle_count, solver.threads)
+                               for make in launches.clamp_pieces]
+                else:
+                    phases += [[task, *idle] for task in launches.clamps]
+            team = solver.team(phases, repeats=1)
 
         def run(state, dt: float) -> None:
             for prepare in before:
