@@ -109,7 +109,7 @@ def test_a_soft_clustered_sweep_is_the_sequential_xpbd_sweep_in_cluster_order_bi
     from warp_verlet.kernels.relax import relax_colour_compliant
 
     monkeypatch.setattr(stick_clusters, "CLUSTER_PARTICLES", 64)
-    monkeypatch.setattr(stick_clusters, "stage_soft_sticks", lambda layout, device: staged)
+    monkeypatch.setattr(stick_clusters, "stage_soft_sticks", lambda layout: staged)
     clustered = Simulator(triangle_scene(tmp_path, compliance={"bend": 0.02}), "cpu", threads=1, sticks="clustered")
     m, dt = clustered.model, 1.0 / 240.0  # sweep()'s substep
     assert m.compliant and m.constraints["stick clusters"].stage_soft == staged
@@ -207,16 +207,14 @@ def test_soft_sticks_are_staged_wherever_they_fit_a_blocks_shared_memory():
 
     from warp_verlet.constraints.stick_clusters import MAX_SHARED_BYTES, shared_bytes, stage_soft_sticks
 
-    # A 1024^2 triangle mesh's layout: 30,260 bytes staged, more blocks a launch than an H100 holds at once.
+    # A 1024^2 triangle mesh's layout: 30,260 bytes staged, more blocks a launch than an H100 holds at once. The
+    # rule is the same on every device.
     layout = SimpleNamespace(capacity=352, stick_capacity=1536, colours=12, launches=[(0, 1024)])
     assert shared_bytes(352, 1536, 12, staged_soft=True) == 30260
-    h100 = SimpleNamespace(is_cpu=False, sm_count=132, max_shared_memory_per_block=227 * 1024, arch=90)
-    assert stage_soft_sticks(layout, h100)
-    assert stage_soft_sticks(layout, SimpleNamespace(is_cpu=True))
+    assert stage_soft_sticks(layout)
     big = SimpleNamespace(capacity=MAX_SHARED_BYTES // 16 - 64, stick_capacity=64, colours=12, launches=[(0, 1)])
     assert shared_bytes(big.capacity, 64, 12) <= MAX_SHARED_BYTES < shared_bytes(big.capacity, 64, 12, True)
-    assert not stage_soft_sticks(big, h100)  # staged, it would pass the block's limit: global memory
-    assert not stage_soft_sticks(big, SimpleNamespace(is_cpu=True))
+    assert not stage_soft_sticks(big)  # staged, it would pass the block's limit: global memory
 
 
 @pytest.mark.cuda
@@ -227,7 +225,7 @@ def test_soft_sticks_are_staged_wherever_they_fit_a_blocks_shared_memory():
 def test_a_clustered_sweep_on_cuda_is_repeatable_and_agrees_with_the_cpu(tmp_path, monkeypatch, cloth, staged):
     from warp_verlet.constraints import stick_clusters
 
-    monkeypatch.setattr(stick_clusters, "stage_soft_sticks", lambda layout, device: staged)
+    monkeypatch.setattr(stick_clusters, "stage_soft_sticks", lambda layout: staged)
     scene = triangle_scene(tmp_path, **cloth)
     cpu = Simulator(scene, "cpu", threads=1, sticks="clustered")
     start = perturbed(cpu)

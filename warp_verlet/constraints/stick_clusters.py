@@ -47,7 +47,7 @@ def shared_bytes(region_capacity: int, stick_capacity: int, colours: int, staged
     return region_capacity * 16 + stick_capacity * (16 if staged_soft else 8) + (colours + 1) * 4
 
 
-def stage_soft_sticks(layout: "ClusterLayout", device) -> bool:
+def stage_soft_sticks(layout: "ClusterLayout") -> bool:
     """Whether a soft clustered sweep stages each stick's compliance and tension in shared memory (else it reads
     and writes them in global memory in the colour loop; the two are the same arithmetic, bit for bit): wherever
     the larger shared arrays stay within a block's limit. On an H100 staged was faster at 512^2 and, since the
@@ -257,4 +257,4 @@ class DeviceClusters:
         self.capacity = layout.capacity
         self.stick_capacity = layout.stick_capacity
         # Soft sticks' compliance and tension in shared memory (True) or read in global memory (stage_soft_sticks).
-        self.stage_soft = compliance is not None and stage_soft_sticks(layout, wp.get_device(device))
+        self.stage_soft = compliance is not None and stage_soft_sticks(layout)
