@@ -19,7 +19,7 @@ import bench_package  # noqa: F401  (makes the repository's bench/ importable as
 from bench import stability_cases as cases
 from conftest import make_scene
 from test_stability import assert_all_pass
-from warp_verlet.core.cpu_team import PhaseTeam, auto_threads
+from warp_verlet.core.cpu_team import FrameTeam, PhaseTeam, auto_threads
 from warp_verlet.launches import split
 from warp_verlet.errors import WarpVerletError
 from warp_verlet.input.scene import parse_scene
@@ -135,10 +135,76 @@ def test_captured_cpu_frames_match_launch_by_launch():
     assert np.array_equal(captured, launched)
 
 
+@pytest.mark.parametrize("solver", ["coloured", "jacobi"])
+def test_frames_captured_on_cpu_threads_give_one_threads_positions_bit_for_bit(solver, monkeypatch):
+    # On threads a frame is captured as one graph a thread, meeting at barriers in C++ (cpu_team.FrameTeam): every
+    # stage of the busy scene (soft sticks, tethers, a moving ball, the ground, tearing) then replays from the
+    # graphs, and a replayed frame hands work to the threads once, not once a phase.
+    scene = busy_scene(solver)
+    one, torn_one = run_frames(scene, 20, threads=1)
+    runs = []
+    original = PhaseTeam.run
+    monkeypatch.setattr(PhaseTeam, "run", lambda team: (runs.append(team), original(team))[1])
+    for threads in (2, 3):
+        sim = Simulator(scene, "cpu", threads=threads)
+        assert sim.threads == threads and sim.replays_frames
+        for _ in range(20):
+            runs.clear()
+            sim.step_frame()
+        frame = sim._frame_graphs[sim.settings.substeps]
+        assert isinstance(frame, FrameTeam) and runs == [frame._team]  # the last frame: one hand-off
+        assert sim.torn_count() == torn_one > 0
+        assert np.array_equal(sim.positions(), one), f"{threads} threads changed the result"
+        sim.close()
+
+
+def test_the_native_barrier_lets_every_thread_go_once_the_abort_flag_is_set():
+    from warp_verlet.core.cpu_team import yield_address
+    from warp_verlet.kernels.team_barrier import team_barrier
+
+    state = wp.zeros(3, dtype=int, device="cpu")
+    state.numpy()[2] = 1  # aborted: a barrier of five threads returns to each one that arrives
+    for _ in range(3):
+        wp.launch(team_barrier, 1, inputs=[state, 5, wp.uint64(yield_address())], device="cpu")
+    wp.synchronize_device("cpu")
+    assert list(state.numpy()[:2]) == [3, 0]  # each arrival counted, the generation never advanced
+
+
+def test_an_error_in_one_thread_of_a_captured_frame_reaches_the_caller_without_a_hang(monkeypatch):
+    sim = Simulator(busy_scene("coloured"), "cpu", threads=2)
+    for _ in range(2):
+        sim.step_frame()  # the second frame is captured
+    assert isinstance(sim._frame_graphs[sim.settings.substeps], FrameTeam)
+    replay = wp.capture_launch
+
+    def fail_in_workers(graph):
+        if threading.current_thread().name.startswith("warp-verlet-relax"):
+            raise RuntimeError("replay failed in a worker")
+        replay(graph)
+
+    monkeypatch.setattr(wp, "capture_launch", fail_in_workers)
+    raised = []
+
+    def step():
+        try:
+            sim.step_frame()
+        except RuntimeError as exc:
+            raised.append(exc)
+
+    caller = threading.Thread(target=step, daemon=True)
+    caller.start()
+    caller.join(timeout=60)
+    assert not caller.is_alive(), "the caller's thread still waits at a barrier for the failed one"
+    assert raised and "replay failed in a worker" in str(raised[0])
+    with pytest.raises(WarpVerletError, match="stopped after an earlier error"):
+        sim.step_frame()
+
+
 @pytest.fixture
 def always_three_threads(monkeypatch):
     """Make auto_threads pick three threads for any grid, so the stability cases run threaded."""
     monkeypatch.setattr(cpu_team, "LAUNCH_COST_S", 1e-15)
+    monkeypatch.setattr(cpu_team, "CAPTURED_PHASE_COST_S", 1e-15)
     monkeypatch.setattr(cpu_team, "usable_cores", lambda: 3)
     created = []
     original = Simulator.__init__
@@ -220,8 +286,11 @@ def test_phases_run_in_order_with_every_member_and_workers_stop_on_close():
 @pytest.mark.parametrize("solver", ["coloured", "jacobi"])
 def test_dropping_a_threaded_simulator_stops_its_threads(solver):
     sim = Simulator(busy_scene(solver), "cpu", threads=3)
-    sim.step_frame()
+    for _ in range(3):
+        sim.step_frame()  # the first frame's teams, and the frames captured after it
     workers = [w for team in sim.solver._teams for w in team._workers]
+    workers += [w for frame in sim._frame_graphs.values() for w in frame._team._workers]
+    assert len(workers) == 3 * 2  # the sweeps', the clamps' and the captured frame's, two workers each
     assert workers and all(w.is_alive() for w in workers)
     del sim
     gc.collect()

@@ -14,6 +14,11 @@ Measured (bench/thread_scaling.py, hanging cloth 4 x 8, coloured): on the 2-core
 ran 3x slower on 2 threads, 128^2 1.15x slower, 256^2 1.45x faster and 512^2 1.8x; on a 16-core Xeon
 128^2 gained 1.1x at best (2 threads), 256^2 2.1x (4 threads) and 1024^2 5.5x on 8 threads
 (bench/results/xeon16).
+
+A whole frame of fixed substeps is captured instead (``TeamRecording``, ``FrameTeam``; Simulator.step_frame): one
+graph a thread, in which each phase's piece is followed by a barrier kernel that waits in C++
+(kernels/team_barrier.py), and each thread replays its own graph. A frame then costs one Python hand-off per
+thread instead of one per thread and phase, and the positions are still those of one thread, bit for bit.
 """
 
 from __future__ import annotations
@@ -29,6 +34,10 @@ from ..errors import ArgumentError, WarpVerletError
 LAUNCH_COST_S = 13e-6
 """Fixed cost per thread and phase. With it, a 128^2 colour stays on one thread (two were slower on a 2-core
 machine) and a 256^2 colour is cut over a few (bench/results/code_choices.md)."""
+
+CAPTURED_PHASE_COST_S = 1.5e-6
+"""The same cost where a frame is captured, one graph a thread meeting at barriers in C++ (``FrameTeam``): about
+1.2 us a phase on two threads of the 2-core EPYC (bench/results/cpu_threads/captured-frames.md)."""
 
 MAX_AUTO_THREADS = 8
 """The barrier's cost grows with the thread count, and past 8 threads the speed-up stopped being repeatable
@@ -53,11 +62,13 @@ def usable_cores() -> int:
     return max(1, os.cpu_count() or 1)
 
 
-def auto_threads(phase_seconds: float, cores: int | None = None) -> int:
-    """Threads for phases that take ``phase_seconds`` on one thread: sqrt(phase_seconds / LAUNCH_COST_S) rounded
-    down (when in doubt, fewer), at least 1, at most the cores and MAX_AUTO_THREADS."""
+def auto_threads(phase_seconds: float, cores: int | None = None, captured: bool = False) -> int:
+    """Threads for phases that take ``phase_seconds`` on one thread: sqrt(phase_seconds / cost) rounded down (when
+    in doubt, fewer), at least 1, at most the cores and MAX_AUTO_THREADS; the cost is LAUNCH_COST_S, or
+    CAPTURED_PHASE_COST_S where the frames are ``captured``."""
     cores = usable_cores() if cores is None else cores
-    best = math.floor(math.sqrt(max(phase_seconds, 0.0) / LAUNCH_COST_S))
+    cost = CAPTURED_PHASE_COST_S if captured else LAUNCH_COST_S
+    best = math.floor(math.sqrt(max(phase_seconds, 0.0) / cost))
     return int(max(1, min(best, cores, MAX_AUTO_THREADS)))
 
 
@@ -71,6 +82,8 @@ class PhaseTeam:
 
     def __init__(self, phases: Sequence[Sequence[Callable[[], None] | None]], repeats: int):
         self.threads = len(phases[0]) if phases else 1
+        # While a frame is captured (Simulator.step_frame), run() records each member's work there instead.
+        self.recording: TeamRecording | None = None
         if any(len(phase) != self.threads for phase in phases):
             raise ArgumentError("every phase needs one entry per thread")
         self._phases = [list(phase) for phase in phases]
@@ -128,7 +141,11 @@ class PhaseTeam:
         barrier.abort()
 
     def run(self) -> None:
-        """One run: every member does its work of every phase, ``repeats`` times; returns when all are done."""
+        """One run: every member does its work of every phase, ``repeats`` times; returns when all are done. While a
+        recording is set, member 0's work is issued (into the frame's capture) and the others' recorded instead."""
+        if self.recording is not None:
+            self.recording.team_run(self._phases, self._repeats)
+            return
         if self._state["closed"] or self._barrier.broken:
             raise WarpVerletError("the CPU relaxation threads stopped after an earlier error") from self._state["error"]
         try:
@@ -145,3 +162,95 @@ class PhaseTeam:
     def close(self) -> None:
         """Stop the worker threads (also done when the team is collected)."""
         self._finalizer()
+
+
+def yield_address() -> int:
+    """The address of the C library's ``sched_yield`` (``SwitchToThread`` on Windows): what a thread waiting at the
+    native barrier calls to give its core to the others."""
+    import ctypes
+    import sys
+
+    if sys.platform == "win32":
+        function = ctypes.windll.kernel32.SwitchToThread
+    else:
+        function = ctypes.CDLL(None).sched_yield
+    return ctypes.cast(function, ctypes.c_void_p).value
+
+
+class TeamRecording:
+    """One frame of a CPU thread team, recorded for capture: while it is set on the solver's teams, a team's run()
+    issues member 0's tasks (so that the frame's capture on the calling thread records them, with every stage's
+    single-thread work) and lists every other member's, each phase followed by a barrier. ``member_graphs()`` then
+    captures each other member's list as its own graph. Each team run starts with a barrier too, so that no member
+    starts a phase before member 0 has done the frame's work that comes before it."""
+
+    def __init__(self, threads: int):
+        import warp as wp
+
+        from warp_verlet.kernels.team_barrier import team_barrier
+
+        self.threads = threads
+        self.barrier_state = wp.zeros(3, dtype=int, device="cpu")  # arrived, generation, aborted
+        self.barrier = wp.launch(team_barrier, 1, inputs=[self.barrier_state, threads, wp.uint64(yield_address())],
+                                 device="cpu", record_cmd=True)
+        self._others: list[list[Callable[[], None] | None]] = [[] for _ in range(threads - 1)]  # None: a barrier
+
+    def team_run(self, phases: Sequence[Sequence[Callable[[], None] | None]], repeats: int) -> None:
+        if len(phases[0]) != self.threads:
+            raise WarpVerletError(f"a team of {len(phases[0])} threads in a frame recorded for {self.threads}")
+        self._barrier_for_all()
+        for _ in range(repeats):
+            for phase in phases:
+                if phase[0] is not None:
+                    phase[0]()
+                for ops, task in zip(self._others, phase[1:]):
+                    if task is not None:
+                        ops.append(task)
+                self._barrier_for_all()
+
+    def _barrier_for_all(self) -> None:
+        self.barrier.launch()
+        for ops in self._others:
+            ops.append(None)
+
+    def member_graphs(self) -> list:
+        """Members 1 .. T-1's recorded work, each captured as a graph (after member 0's capture has ended)."""
+        import warp as wp
+
+        graphs = []
+        for ops in self._others:
+            with wp.ScopedCapture(device="cpu") as capture:
+                for task in ops:
+                    (task or self.barrier.launch)()
+            graphs.append(capture.graph)
+        return graphs
+
+
+class FrameTeam:
+    """A captured frame of a CPU thread team: ``graphs[t]`` replayed by thread t, all at once (a PhaseTeam of one
+    phase); the graphs meet at their native barriers. An error in one member sets the barrier's abort flag, so that
+    the others do not wait for it forever, and the team refuses to run again."""
+
+    def __init__(self, graphs: list, recording: TeamRecording):
+        self._flags = recording.barrier_state.numpy()  # the barrier's own memory (a CPU array)
+        self._team = PhaseTeam([[self._replay(graph) for graph in graphs]], repeats=1)
+
+    def _replay(self, graph) -> Callable[[], None]:
+        import warp as wp
+
+        flags = self._flags
+
+        def replay() -> None:
+            try:
+                wp.capture_launch(graph)
+            except BaseException:
+                flags[2] = 1  # release the members waiting at a barrier for this one
+                raise
+
+        return replay
+
+    def run(self) -> None:
+        self._team.run()
+
+    def close(self) -> None:
+        self._team.close()

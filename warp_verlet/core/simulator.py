@@ -20,6 +20,7 @@ cut every colour over several threads (warp_verlet/core/cpu_team.py); the result
 from __future__ import annotations
 
 import warnings
+from contextlib import nullcontext
 from dataclasses import dataclass, replace
 from typing import Callable
 
@@ -33,6 +34,7 @@ from ..machine import available_host_bytes
 from .memory import check_fits
 from .model import Model
 from ..input.scene import Scene
+from .cpu_team import FrameTeam
 from .solver import VerletSolver
 from .budget import FLOAT32_FLOOR, MAX_SUBSTEPS, Budget
 from ..constraints import kinds as constraint_kinds
@@ -195,7 +197,14 @@ class Simulator:
         self._sticks = self.model.stick_request
         with wp.ScopedDevice(self.device):
             self.state = State(self.model)
-        self.solver = VerletSolver(self.model, self.settings, req, threads)
+        # A frame's substeps are captured once and replayed: a CUDA graph, or on the CPU Warp's own capture
+        # (replayed in C++, bit-identical, and faster: bench/results/code_choices.md); on CPU threads one graph a
+        # thread, which meet at barriers in C++ (cpu_team.FrameTeam).
+        self._use_graph = use_graph and all(
+            kind.capturable(self.device) for kind in constraint_kinds() if kind.needed(req)) and all(
+            kind.capturable(specs, self.device) for kind, specs in self.model.colliders.kinds
+            if hasattr(kind, "capturable"))  # a collider kind may say its launches do not replay (a refit)
+        self.solver = VerletSolver(self.model, self.settings, req, threads, frames_captured=self._use_graph)
         self.threads = self.solver.threads
         self.min_dt = self.solver.min_dt
         self.precision = self.model.precision  # "float32" or "float64": the scene's precision, "auto" resolved
@@ -211,13 +220,6 @@ class Simulator:
         self.budget = self._new_budget()
         self._readback: StretchReadback | None = None  # the budget's stretch, reduced on the device
         self._pending_substeps: int | None = None  # a frame whose stretch is on its way to the host (CUDA)
-        # A frame's substeps are captured once and replayed: a CUDA graph, or on the CPU Warp's own capture
-        # (replayed in C++, bit-identical, and faster: bench/results/code_choices.md). Threaded relaxation needs
-        # its launches issued from Python, so it is not captured.
-        self._use_graph = use_graph and self.threads == 1 and all(
-            kind.capturable(self.device) for kind in constraint_kinds() if kind.needed(req)) and all(
-            kind.capturable(specs, self.device) for kind, specs in self.model.colliders.kinds
-            if hasattr(kind, "capturable"))  # a collider kind may say its launches do not replay (a refit)
         if self.dt < self.min_dt:
             raise WarpVerletError(self.solver.too_small(self.dt, scene_dt=True))
 
@@ -326,17 +328,31 @@ class Simulator:
                     self.solver.step(state, dt)
             else:
                 if n not in self._frame_graphs:
-                    time, steps = state.time, state.steps
-                    with wp.ScopedCapture() as capture:
-                        for _ in range(n):
-                            self.solver.step(state, dt)
-                    self._frame_graphs[n] = capture.graph
-                    state.time, state.steps = time, steps  # capture recorded the work; it has not run yet
+                    self._frame_graphs[n] = self._capture_frame(n, dt)
                 self.solver.before_replay(state)
-                wp.capture_launch(self._frame_graphs[n])
+                frame = self._frame_graphs[n]
+                if isinstance(frame, FrameTeam):
+                    frame.run()
+                else:
+                    wp.capture_launch(frame)
                 state.time += n * dt
                 state.steps += n
         self._end_frame()
+
+    def _capture_frame(self, n: int, dt: float):
+        """``n`` substeps of ``dt`` captured, not run: a graph, or on CPU threads a FrameTeam of one graph a thread
+        (the calling thread's capture records member 0's work and every stage's own; the others' are recorded by
+        the teams and captured after it)."""
+        state = self.state
+        time, steps = state.time, state.steps
+        with self.solver.recording() if self.threads > 1 else nullcontext() as recording:
+            with wp.ScopedCapture() as capture:
+                for _ in range(n):
+                    self.solver.step(state, dt)
+        state.time, state.steps = time, steps  # capture recorded the work; it has not run yet
+        if recording is None:
+            return capture.graph
+        return FrameTeam([capture.graph, *recording.member_graphs()], recording)
 
     def advance(self, frame_time: float, on_frame: Callable[[], bool | None] | None = None) -> float:
         """Real-time stepping: bank ``frame_time`` seconds, run as many fixed substeps as it pays for, and
@@ -432,13 +448,14 @@ class Simulator:
         if req.precision != self.model.precision:
             raise ArgumentError(f"these settings need {req.precision} positions and this model holds "
                                 f"{self.model.precision}: build a new Simulator")
-        solver = VerletSolver(self.model, settings, req, self.threads if self.device.is_cpu else None)
+        solver = VerletSolver(self.model, settings, req, self.threads if self.device.is_cpu else None,
+                              frames_captured=self._use_graph)
         if 1.0 / (settings.fps * settings.substeps) < solver.min_dt:
             raise WarpVerletError(solver.too_small(1.0 / (settings.fps * settings.substeps), scene_dt=True))
         self.solver.close()
         self.scene, self.settings, self.solver = scene, settings, solver
         self.min_dt = solver.min_dt
-        self._frame_graphs.clear()  # they replay the old solver's launches
+        self._drop_frames()  # they replay the old solver's launches
         if changes.keys() & {"target_stretch", "substeps", "max_substeps", "min_substeps"}:
             self.settle_budget()
             self.budget = self._new_budget()
@@ -590,4 +607,12 @@ class Simulator:
 
     def close(self) -> None:
         """Stop the CPU relaxation threads now (they also stop when the simulator is collected)."""
+        self._drop_frames()
         self.solver.close()
+
+    def _drop_frames(self) -> None:
+        """Forget the captured frames, stopping the threads of those captured on CPU threads."""
+        for frame in self._frame_graphs.values():
+            if isinstance(frame, FrameTeam):
+                frame.close()
+        self._frame_graphs.clear()

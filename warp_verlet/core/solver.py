@@ -9,14 +9,16 @@ model: a checkpoint and its clone give the same result.
 from __future__ import annotations
 
 import weakref
-from typing import Callable
+from contextlib import contextmanager
+from typing import Callable, Iterator
 
 import numpy as np
 import warp as wp
 
 from warp_verlet.kernels.integrate import verlet_start
 
-from .cpu_team import COLOURED_SECONDS_PER_STICK, JACOBI_SECONDS_PER_ENTRY, MAX_THREADS, PhaseTeam, auto_threads
+from .cpu_team import (COLOURED_SECONDS_PER_STICK, JACOBI_SECONDS_PER_ENTRY, MAX_THREADS, PhaseTeam, TeamRecording,
+                       auto_threads)
 from ..errors import ArgumentError, WarpVerletError
 from .model import Model
 from .precision import RESOLVED_SPACINGS, acceleration, smallest_dt, spacing_at
@@ -30,10 +32,12 @@ class VerletSolver:
     """Verlet integration with graph-coloured (or Jacobi) relaxation, collider clamping and tearing.
 
     ``req`` (stages.Requirements) says which stages run; ``threads`` is the CPU relaxation's thread count (None:
-    chosen from the cores and the work per colour; CUDA always 1).
+    chosen from the cores and the work per colour, and from what a phase costs each thread: less where the caller
+    replays ``frames_captured``, cpu_team.auto_threads; CUDA always 1).
     """
 
-    def __init__(self, model: Model, settings: SimulationSettings, req: Requirements, threads: int | None = None):
+    def __init__(self, model: Model, settings: SimulationSettings, req: Requirements, threads: int | None = None,
+                 frames_captured: bool = False):
         self.model, self.settings, self.req = model, settings, req
         if req.precision != model.precision:
             raise ArgumentError(f"req.precision = {req.precision!r} but the model's positions are {model.precision}")
@@ -46,17 +50,18 @@ class VerletSolver:
         accel = np.add(settings.gravity, settings.wind)
         self.accel = model.position_dtype(*accel)  # in the positions' type, as every factor of the step
         self.accel_magnitude = acceleration(settings)
-        self.threads = self._thread_count(threads)
+        self.threads = self._thread_count(threads, frames_captured)
         self.stage_names = tuple(s.name for s in STAGES if s.needed(req))
         self._scratch: dict[str, wp.array] = {}
         self._bound: weakref.WeakKeyDictionary[State, list] = weakref.WeakKeyDictionary()
         # Held weakly: a team belongs to the launches bound for one state (the relaxation stage holds it), so a
         # dropped state's team is collected and its worker threads stop (PhaseTeam's finalizer).
         self._teams: weakref.WeakSet[PhaseTeam] = weakref.WeakSet()
+        self._recording: TeamRecording | None = None  # set while a frame on CPU threads is captured
         self.min_dt = self._smallest_resolved_dt()
 
     # ------------------------------------------------------------------ set-up
-    def _thread_count(self, threads: int | None) -> int:
+    def _thread_count(self, threads: int | None, frames_captured: bool) -> int:
         if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int)
                                     or not 1 <= threads <= MAX_THREADS):
             raise ArgumentError(f"threads must be a whole number in 1 .. {MAX_THREADS}, got {threads!r}")
@@ -73,7 +78,7 @@ class VerletSolver:
             phase = m.stick_count / max(m.colour_count, 1) * COLOURED_SECONDS_PER_STICK
         else:
             phase = m.stick_count * JACOBI_SECONDS_PER_ENTRY  # two entries per stick over two phases per sweep
-        return auto_threads(phase)
+        return auto_threads(phase, captured=frames_captured)
 
     def scratch(self, name: str, count: int, dtype) -> wp.array:
         """A buffer that no step carries over to the next, shared by every state this solver steps."""
@@ -95,8 +100,24 @@ class VerletSolver:
             return None
         team = PhaseTeam([[t.run if t is not None else None for t in phase] for phase in phases],
                          self.settings.iterations if repeats is None else repeats)
+        team.recording = self._recording
         self._teams.add(team)
         return team
+
+    @contextmanager
+    def recording(self) -> Iterator[TeamRecording]:
+        """While a frame is captured on CPU threads: every team's run records its members' work
+        (cpu_team.TeamRecording), member 0's issued into the capture around it."""
+        self._recording = TeamRecording(self.threads)
+        teams = list(self._teams)
+        for team in teams:
+            team.recording = self._recording
+        try:
+            yield self._recording
+        finally:
+            for team in teams + list(self._teams):
+                team.recording = None
+            self._recording = None
 
     def bind(self, state: State) -> list[tuple[str, Callable[[State, float], None]]]:
         """The stages of one substep against ``state``'s arrays, as (name, run(state, dt)), recorded once per
