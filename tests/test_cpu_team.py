@@ -43,6 +43,11 @@ def test_auto_threads_balances_work_per_thread_against_the_cost_per_thread():
     assert auto_threads(16 * cost, cores=2) == 2  # never more than the cores
     assert auto_threads(10_000 * cost, cores=64) == cpu_team.MAX_AUTO_THREADS
     assert auto_threads(0.0, cores=8) == 1
+    # Where frames are captured a phase costs each thread less (a barrier in C++), so smaller colours are cut
+    captured = cpu_team.CAPTURED_PHASE_COST_S
+    assert captured < cost
+    assert auto_threads(16 * captured, cores=8, captured=True) == 4
+    assert auto_threads(16 * captured, cores=8) == 2  # sqrt(16 x 4 us / 13 us), rounded down
 
 
 def busy_scene(solver: str):

@@ -35,9 +35,11 @@ LAUNCH_COST_S = 13e-6
 """Fixed cost per thread and phase. With it, a 128^2 colour stays on one thread (two were slower on a 2-core
 machine) and a 256^2 colour is cut over a few (bench/results/code_choices.md)."""
 
-CAPTURED_PHASE_COST_S = 1.5e-6
-"""The same cost where a frame is captured, one graph a thread meeting at barriers in C++ (``FrameTeam``): about
-1.2 us a phase on two threads of the 2-core EPYC (bench/results/cpu_threads/captured-frames.md)."""
+CAPTURED_PHASE_COST_S = 4e-6
+"""The same cost where a frame is captured, one graph a thread meeting at barriers in C++ (``FrameTeam``). The
+barrier alone costs 1.4-1.6 us a phase on two threads of the 2-core EPYC; 4 us keeps a 64^2 cloth on one thread
+there, where a run's cache is written beside the relaxation and two threads made the whole run slower, and gives
+a 128^2 one two, which ran it 1.7x faster (bench/results/cpu_threads/captured/README.md)."""
 
 MAX_AUTO_THREADS = 8
 """The barrier's cost grows with the thread count, and past 8 threads the speed-up stopped being repeatable
