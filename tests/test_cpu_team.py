@@ -156,8 +156,8 @@ def test_frames_captured_on_cpu_threads_give_one_threads_positions_bit_for_bit(s
         for _ in range(20):
             runs.clear()
             sim.step_frame()
-        frame = sim._frame_graphs[sim.settings.substeps]
-        assert isinstance(frame, FrameTeam) and runs == [frame._team]  # the last frame: one hand-off
+        assert isinstance(sim._frame_graphs[sim.settings.substeps], FrameTeam)
+        assert runs == [sim._replayer._team]  # the last frame: one hand-off to the threads
         assert sim.torn_count() == torn_one > 0
         assert np.array_equal(sim.positions(), one), f"{threads} threads changed the result"
         sim.close()
@@ -294,7 +294,7 @@ def test_dropping_a_threaded_simulator_stops_its_threads(solver):
     for _ in range(3):
         sim.step_frame()  # the first frame's teams, and the frames captured after it
     workers = [w for team in sim.solver._teams for w in team._workers]
-    workers += [w for frame in sim._frame_graphs.values() for w in frame._team._workers]
+    workers += sim._replayer._team._workers
     assert len(workers) == 3 * 2  # the sweeps', the clamps' and the captured frame's, two workers each
     assert workers and all(w.is_alive() for w in workers)
     del sim

@@ -229,30 +229,45 @@ class TeamRecording:
 
 
 class FrameTeam:
-    """A captured frame of a CPU thread team: ``graphs[t]`` replayed by thread t, all at once (a PhaseTeam of one
-    phase); the graphs meet at their native barriers. An error in one member sets the barrier's abort flag, so that
-    the others do not wait for it forever, and the team refuses to run again."""
+    """A frame captured on a CPU thread team: ``graphs[t]`` is thread t's, all meeting at the barriers of
+    ``recording``'s state (whose abort flag, ``flags[2]``, releases them). A FrameReplayer runs it."""
 
     def __init__(self, graphs: list, recording: TeamRecording):
-        self._flags = recording.barrier_state.numpy()  # the barrier's own memory (a CPU array)
-        self._team = PhaseTeam([[self._replay(graph) for graph in graphs]], repeats=1)
+        self.graphs = graphs
+        self.barrier_state = recording.barrier_state  # kept alive with the graphs that read it
+        self.flags = recording.barrier_state.numpy()  # the barrier's own memory (a CPU array)
 
-    def _replay(self, graph) -> Callable[[], None]:
+
+class FrameReplayer:
+    """T threads (a PhaseTeam of one phase) that replay a FrameTeam's graphs, thread t graph t, all at once. One
+    replayer serves every frame captured for a simulator (a frame of each substep count), so that its threads are
+    started once. An error in one thread sets the frame's abort flag, so that the others do not wait for it at a
+    barrier forever, and the replayer refuses to run again."""
+
+    def __init__(self, threads: int):
+        self._current: list[FrameTeam | None] = [None]
+        self._team = PhaseTeam([[self._member(t, self._current) for t in range(threads)]], repeats=1)
+
+    @staticmethod
+    def _member(t: int, current: list) -> Callable[[], None]:
         import warp as wp
 
-        flags = self._flags
-
         def replay() -> None:
+            frame = current[0]
             try:
-                wp.capture_launch(graph)
+                wp.capture_launch(frame.graphs[t])
             except BaseException:
-                flags[2] = 1  # release the members waiting at a barrier for this one
+                frame.flags[2] = 1  # release the threads waiting at a barrier for this one
                 raise
 
         return replay
 
-    def run(self) -> None:
-        self._team.run()
+    def run(self, frame: FrameTeam) -> None:
+        self._current[0] = frame
+        try:
+            self._team.run()
+        finally:
+            self._current[0] = None
 
     def close(self) -> None:
         self._team.close()

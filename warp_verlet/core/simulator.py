@@ -34,7 +34,7 @@ from ..machine import available_host_bytes
 from .memory import check_fits
 from .model import Model
 from ..input.scene import Scene
-from .cpu_team import FrameTeam
+from .cpu_team import FrameReplayer, FrameTeam
 from .solver import VerletSolver
 from .budget import FLOAT32_FLOOR, MAX_SUBSTEPS, Budget
 from ..constraints import kinds as constraint_kinds
@@ -214,7 +214,8 @@ class Simulator:
         self._gather = None  # render_points: (the particles asked for, their device copy, the output)
         self._scene_order = None  # positions() of a renumbered cloth: (each scene particle's device index, output)
         self._stretch_arrays = None  # device_stretch: structural sticks and the sums, made at its first call
-        self._frame_graphs: dict[int, object] = {}  # substeps -> the captured frame
+        self._frame_graphs: dict[int, object] = {}  # substeps -> the captured frame (a FrameTeam on CPU threads)
+        self._replayer: FrameReplayer | None = None  # the threads that replay a FrameTeam, started at the first
         self._substep_in_frame = 0  # substeps advance() has taken since the last frame boundary
         self.clamped_seconds = 0.0  # what the last advance() dropped from its bank (a stall)
         self.budget = self._new_budget()
@@ -332,7 +333,9 @@ class Simulator:
                 self.solver.before_replay(state)
                 frame = self._frame_graphs[n]
                 if isinstance(frame, FrameTeam):
-                    frame.run()
+                    if self._replayer is None:
+                        self._replayer = FrameReplayer(self.threads)
+                    self._replayer.run(frame)
                 else:
                     wp.capture_launch(frame)
                 state.time += n * dt
@@ -611,8 +614,8 @@ class Simulator:
         self.solver.close()
 
     def _drop_frames(self) -> None:
-        """Forget the captured frames, stopping the threads of those captured on CPU threads."""
-        for frame in self._frame_graphs.values():
-            if isinstance(frame, FrameTeam):
-                frame.close()
+        """Forget the captured frames, and stop the threads that replay them on the CPU."""
         self._frame_graphs.clear()
+        if self._replayer is not None:
+            self._replayer.close()
+            self._replayer = None
