@@ -13,8 +13,9 @@ substep is
 4. ``tear_sticks``, only when a cloth of the scene can tear,
 
 and nothing else unless the scene asks for it. A frame's fixed-dt substeps are captured once (a CUDA graph, or
-Warp's CPU capture) and replayed, so the host issues one launch per frame. On the CPU, large grids instead
-cut every colour over several threads (warp_verlet/core/cpu_team.py); the result is bit-identical either way.
+Warp's CPU capture) and replayed, so the host issues one launch per frame. On the CPU, larger grids also cut
+every colour over several threads (warp_verlet/core/cpu_team.py), each replaying its own graph of the frame; the
+result is bit-identical either way.
 """
 
 from __future__ import annotations
@@ -215,7 +216,7 @@ class Simulator:
         self._scene_order = None  # positions() of a renumbered cloth: (each scene particle's device index, output)
         self._stretch_arrays = None  # device_stretch: structural sticks and the sums, made at its first call
         self._frame_graphs: dict[int, object] = {}  # substeps -> the captured frame (a FrameTeam on CPU threads)
-        self._replayer: FrameReplayer | None = None  # the threads that replay a FrameTeam, started at the first
+        self._replayer: FrameReplayer | None = None  # the threads that replay FrameTeams, started at the first replay
         self._substep_in_frame = 0  # substeps advance() has taken since the last frame boundary
         self.clamped_seconds = 0.0  # what the last advance() dropped from its bank (a stall)
         self.budget = self._new_budget()
