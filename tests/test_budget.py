@@ -1,6 +1,7 @@
 """A substep budget chosen from a target stretch: the controller's rules, a simulation that meets its target at
 the least substeps it found, and the scene keys."""
 
+import numpy as np
 import pytest
 
 from warp_verlet.core.budget import CALM_FRAMES, Budget
@@ -53,6 +54,21 @@ def test_the_budget_keeps_a_hanging_cloth_under_its_target_and_spends_less_on_a_
     assert tight.state.steps > 2 * loose.state.steps
     # It changed dt on the way, as the Verlet step's time-step-corrected form allows, and time stayed exact.
     assert tight.time == pytest.approx(40 / 60.0, rel=1e-12)
+
+
+def test_the_budget_on_cpu_threads_gives_one_threads_frames_and_replays_them_on_one_set_of_threads():
+    # Each substep count the budget picks is captured once (on threads, a graph a thread); one replayer, its
+    # threads started once, replays every count's frame, and the positions are one thread's bit for bit.
+    one = run(0.002)
+    sim = Simulator(scene(0.002), "cpu", threads=2)
+    replayers = set()
+    for _ in range(40):
+        sim.step_frame()
+        replayers.add(id(sim._replayer))
+    assert len([n for n, frame in sim._frame_graphs.items() if n in one.budget.frames_at]) >= 2
+    assert len(replayers - {id(None)}) == 1
+    assert sim.budget.frames_at == one.budget.frames_at
+    assert np.array_equal(sim.positions(), one.positions())
 
 
 def test_without_a_target_the_substeps_are_the_scene_s():
