@@ -3,7 +3,7 @@
 On the CPU, a frame cut over T threads can be captured as T graphs, one a thread, each replayed by its own thread
 in Warp's C++ loop. Between two phases (two colours of a sweep, say) every thread must finish the first before any
 starts the second: each graph then launches ``team_barrier``, which waits in C++ for the others, where a Python
-barrier would cost each thread a trip through the interpreter and the GIL (13-40 us a phase, ``PhaseTeam``).
+barrier would cost each thread a trip through the interpreter and the GIL (13-70 us a phase, ``PhaseTeam``).
 
 The barrier is the usual counter and generation (a sense-reversing barrier): the last thread to arrive resets the
 counter and advances the generation, and the others wait until the generation moves. Its atomics order memory
