@@ -34,6 +34,9 @@ run the random scenes on the CPU too. A form that does not take a scene refuses 
 (an ``ArgumentError`` that names the form and the reason): that counts as refused, any other ``ArgumentError`` as a
 finding.
 
+With ``--threads T`` each scene runs on T CPU relaxation threads (its frames captured, one graph a thread) and again
+on one; positions that differ at the end, which the threads must give bit for bit, are a finding.
+
 A scene the loader refuses (a ``SceneError``, one clear message) counts as refused; one the simulator stops with a
 ``WarpVerletError`` of its own (a divergence it detects, a step below the float type's limit, memory it lacks:
 named) as stopped. An ``ArgumentError`` or ``StateError`` is the project calling itself wrongly, not a refusal of
@@ -342,17 +345,19 @@ def _stopped(e: WarpVerletError) -> str:
     return f"stopped: {str(e)[:200]}"
 
 
-def run_scene(data: dict, frames: int, device: str = "cpu", cache: Path | None = None, sticks: str = "auto") -> str:
+def run_scene(data: dict, frames: int, device: str = "cpu", cache: Path | None = None, sticks: str = "auto",
+              threads: int | None = None) -> str:
     """Run the scene tables ``data`` for ``frames`` frames: "finite", "refused: ...", "stopped: ..." or a finding,
-    "non-finite at frame F", "invalid cache: ..." or "error: ...". With ``cache`` (a path ending .usdc or .usda),
-    run it as ``warp-verlet run`` does, writing its cache there, and validate the cache. ``sticks``: the form of the
-    sticks the simulator is asked for; where it is not "auto", the form's refusal of the scene counts as refused.
-    Never raises."""
+    "non-finite at frame F", "invalid cache: ...", "threads differ: ..." or "error: ...". With ``cache`` (a path
+    ending .usdc or .usda), run it as ``warp-verlet run`` does, writing its cache there, and validate the cache.
+    ``sticks``: the form of the sticks the simulator is asked for; where it is not "auto", the form's refusal of the
+    scene counts as refused. ``threads``: the CPU relaxation's threads; above one, the scene runs again on one and
+    must end with the same positions. Never raises."""
     try:
         scene = parse_scene(data, file="<fuzz>")
         if cache is not None:
             return _run_with_cache(scene, frames, device, cache)
-        sim = Simulator(scene, device, sticks=sticks)
+        sim = Simulator(scene, device, sticks=sticks, threads=threads)
     except SceneError as e:
         return f"refused: {str(e)[:200]}"
     except WarpVerletError as e:
@@ -366,13 +371,33 @@ def run_scene(data: dict, frames: int, device: str = "cpu", cache: Path | None =
             sim.step_frame()
             if not np.isfinite(sim.positions()).all():
                 return f"non-finite at frame {frame}"
+        positions = sim.positions()
     except WarpVerletError as e:
         return _stopped(e)
     except Exception as e:  # noqa: BLE001
         return f"error: {type(e).__name__}: {str(e)[:300]}"
     finally:
         sim.close()
+    if threads is not None and threads > 1:
+        return _same_on_one_thread(scene, frames, device, sticks, threads, positions)
     return "finite"
+
+
+def _same_on_one_thread(scene, frames: int, device: str, sticks: str, threads: int, positions: np.ndarray) -> str:
+    """"finite" where ``frames`` frames of ``scene`` on one thread end at ``positions`` bit for bit, else a finding."""
+    try:
+        sim = Simulator(scene, device, sticks=sticks, threads=1)
+        try:
+            for _ in range(frames):
+                sim.step_frame()
+            one = sim.positions()
+        finally:
+            sim.close()
+    except Exception as e:  # noqa: BLE001 - it ran on threads, so on one it must too
+        return f"error: on one thread: {type(e).__name__}: {str(e)[:300]}"
+    if np.array_equal(one, positions):
+        return "finite"
+    return f"threads differ: {threads} threads end {np.abs(one - positions).max():.3g} m from one thread"
 
 
 def _run_with_cache(scene, frames: int, device: str, cache: Path) -> str:
@@ -389,20 +414,21 @@ def _run_with_cache(scene, frames: int, device: str, cache: Path) -> str:
 
 
 def is_finding(outcome: str) -> bool:
-    return outcome.startswith(("non-finite", "invalid cache", "error"))
+    return outcome.startswith(("non-finite", "invalid cache", "threads differ", "error"))
 
 
 def fuzz(kind: str, seed: int, scenes: int, frames: int | None = None, device: str = "cpu",
-         cache_dir: Path | None = None, log=print, sticks: str = "auto") -> dict[str, int]:
+         cache_dir: Path | None = None, log=print, sticks: str = "auto", threads: int | None = None) -> dict[str, int]:
     """Generate and run ``scenes`` scenes of ``kind`` from ``seed`` for ``frames`` frames each (None: each scene's
-    own), writing and validating each cache in ``cache_dir`` when given, with the sticks' form ``sticks``; print
-    each finding with its tables. The count of each outcome: finite, refused, stopped, findings."""
+    own), writing and validating each cache in ``cache_dir`` when given, with the sticks' form ``sticks`` and the
+    CPU threads ``threads``; print each finding with its tables. The count of each outcome: finite, refused,
+    stopped, findings."""
     rng = np.random.default_rng(seed)
     counts = {"finite": 0, "refused": 0, "stopped": 0, "findings": 0}
     for index in range(scenes):
         data = KINDS[kind](rng)
         cache = None if cache_dir is None else cache_dir / f"scene{index}{'.usda' if index % 2 else '.usdc'}"
-        outcome = run_scene(data, frames or data["simulation"]["frames"], device, cache, sticks)
+        outcome = run_scene(data, frames or data["simulation"]["frames"], device, cache, sticks, threads)
         if is_finding(outcome):
             counts["findings"] += 1
             log(f"finding: scene {index}: {outcome}\n  {data}")
@@ -423,21 +449,26 @@ def main(argv=None) -> int:
                                                         "cache (.usdc and .usda in turn), and validate the cache")
     p.add_argument("--sticks", choices=STICK_FORMS, default="auto",
                    help="the form of the sticks each simulator is asked for (not with --cache)")
+    p.add_argument("--threads", type=int, default=None,
+                   help="CPU relaxation threads for every scene (default: the simulator's choice); above one, each "
+                        "scene also runs on one and must end bit for bit the same")
     p.add_argument("--out", type=Path, default=None, help="write fuzz-KIND-SEED.md and .csv there")
     args = p.parse_args(argv)
-    if args.cache and args.sticks != "auto":
-        p.error("--sticks runs the simulator directly; --cache runs each scene as warp-verlet run does")
+    if args.cache and (args.sticks != "auto" or args.threads is not None):
+        p.error("--sticks and --threads run the simulator directly; --cache runs each scene as warp-verlet run does")
+    if args.threads is not None and (args.threads < 1 or args.device != "cpu"):
+        p.error(f"--threads: expected 1 or more CPU threads (with --device cpu), got {args.threads}")
     quiet_warp()
     frames = args.frames
     with tempfile.TemporaryDirectory() as scratch:
         counts = fuzz(args.kind, args.seed, args.scenes, frames, args.device,
-                      Path(scratch) if args.cache else None, sticks=args.sticks)
+                      Path(scratch) if args.cache else None, sticks=args.sticks, threads=args.threads)
     command = ["bench.fuzz", *(argv if argv is not None else sys.argv[1:])]
     header = "\n".join(machine(args.device).lines(command))
-    forced = "" if args.sticks == "auto" else f"-{args.sticks}"
+    forced = ("" if args.sticks == "auto" else f"-{args.sticks}") + (f"-{args.threads}threads" if args.threads else "")
     write_table([{"kind": args.kind, "seed": args.seed, "scenes": args.scenes,
                   "frames": frames or "each scene's", "caches": "written and validated" if args.cache else "none",
-                  "sticks": args.sticks, **counts}],
+                  "sticks": args.sticks, "threads": args.threads or "auto", **counts}],
                 args.out, f"fuzz-{args.kind}-{args.seed}{'-cache' if args.cache else ''}{forced}",
                 f"Fuzz: {args.kind}, seed {args.seed}\n\n{header}")
     return 1 if counts["findings"] else 0
