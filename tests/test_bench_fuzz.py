@@ -33,6 +33,16 @@ def test_a_run_that_ends_non_finite_is_a_finding(monkeypatch):
     assert outcome == "non-finite at frame 0" and fuzz.is_finding(outcome)
 
 
+def test_threads_that_end_elsewhere_than_one_thread_are_a_finding(monkeypatch):
+    threaded = {**SMALL, "simulation": {**SMALL["simulation"], "frames": 3}}
+    assert fuzz.run_scene(threaded, 3, threads=2) == "finite"  # captured on two threads, one thread's positions
+    original = Simulator.positions
+    monkeypatch.setattr(Simulator, "positions",
+                        lambda self: original(self) + (1e-3 if self.threads > 1 else 0.0))
+    outcome = fuzz.run_scene(threaded, 3, threads=2)
+    assert outcome.startswith("threads differ: 2 threads end 0.001 m") and fuzz.is_finding(outcome)
+
+
 def test_the_project_calling_itself_wrongly_is_a_finding_and_a_refusal_to_go_on_is_not(monkeypatch):
     from warp_verlet.errors import ArgumentError, WarpVerletError
 
