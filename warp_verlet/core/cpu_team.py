@@ -230,12 +230,16 @@ class TeamRecording:
 
 class FrameTeam:
     """A frame captured on a CPU thread team: ``graphs[t]`` is thread t's, all meeting at the barriers of
-    ``recording``'s state (whose abort flag, ``flags[2]``, releases them). A FrameReplayer runs it."""
+    ``recording``'s state (kept alive with the graphs that read it). A FrameReplayer runs it."""
 
     def __init__(self, graphs: list, recording: TeamRecording):
         self.graphs = graphs
-        self.barrier_state = recording.barrier_state  # kept alive with the graphs that read it
-        self.flags = recording.barrier_state.numpy()  # the barrier's own memory (a CPU array)
+        self.barrier_state = recording.barrier_state
+
+    def abort(self) -> None:
+        """Release every thread waiting at one of the frame's barriers (its abort flag, in the CPU array's own
+        memory)."""
+        self.barrier_state.numpy()[2] = 1
 
 
 class FrameReplayer:
@@ -257,7 +261,7 @@ class FrameReplayer:
             try:
                 wp.capture_launch(frame.graphs[t])
             except BaseException:
-                frame.flags[2] = 1  # release the threads waiting at a barrier for this one
+                frame.abort()  # the other threads would wait for this one at a barrier forever
                 raise
 
         return replay
