@@ -66,8 +66,65 @@ def streamed_float(values: wp.array(dtype=float), i: int) -> float:
     ...
 
 
+_WAIT_FOR_CLUSTER = """
+#if defined(__CUDA_ARCH__)
+    volatile int* flag = (volatile int*)wp::address(done, d);
+    while ((int)(*flag - need) < 0) { __nanosleep(32); }
+    __threadfence();
+    return 0;
+#else
+    return (int)(wp::index(done, d) - need) < 0 ? 1 : 0;
+#endif
+"""
+
+
+@wp.func_native(_WAIT_FOR_CLUSTER)
+def wait_for_cluster(done: wp.array(dtype=int), d: int, need: int) -> int:
+    """Wait until cluster d's count of finished sweeps, done[d], reaches ``need`` (compared as a wrapping
+    difference), then see every store it made before. On the CPU, where a launch's blocks run one after another,
+    nothing can be waited for: return 1 where it has not been reached (the items' order is broken), else 0."""
+    ...
+
+
+@wp.func_native("""
+#if defined(__CUDA_ARCH__)
+    __threadfence();
+#endif
+""")
+def release_fence():
+    """This thread's global stores are seen by the whole device before any store it makes after this."""
+    ...
+
+
+@wp.func_native("""
+#if defined(__CUDA_ARCH__)
+    atomicExch((int*)wp::address(done, c), value);
+#else
+    wp::index(done, c) = value;
+#endif
+""")
+def publish_done(done: wp.array(dtype=int), c: int, value: int):
+    """done[c] = value, as one store another block may be spinning on."""
+    ...
+
+
+@wp.func_native("""
+#if defined(__CUDA_ARCH__)
+    const float* p = (const float*)wp::address(x, i);
+    return wp::vec3(__ldcg(p), __ldcg(p + 1), __ldcg(p + 2));
+#else
+    return wp::index(x, i);
+#endif
+""")
+def load_from_l2(x: wp.array(dtype=wp.vec3), i: int) -> wp.vec3:
+    """x[i], read from L2, where another block's stores of this launch are seen (a multiprocessor's L1 may still
+    hold what an earlier block on it read)."""
+    ...
+
+
 def relax_stick_clusters(region_capacity: int, stick_capacity: int, colours: int, compliant: bool = False,
-                         max_registers: int | None = None, stage_soft: bool = True, *, block_dim: int):
+                         max_registers: int | None = None, stage_soft: bool = True, *, block_dim: int,
+                         chained: bool = False):
     """The clustered sweep's kernel for regions of at most ``region_capacity`` particles, clusters of at most
     ``stick_capacity`` sticks, and ``colours`` stick colours (the shared arrays' lengths and the colour loop's
     bound, compile-time constants), for blocks of ``block_dim`` threads on CUDA (it sizes the staging's batches;
@@ -75,15 +132,18 @@ def relax_stick_clusters(region_capacity: int, stick_capacity: int, colours: int
     ``compliant``: XPBD sticks (kernels/relax.py), each with its compliance and the tension it has accumulated over
     the substep's sweeps, staged in shared memory and written back with the sticks (``stage_soft``) or read and
     written in global memory; otherwise the compliance and tension arrays are not read. ``max_registers`` caps a
-    CUDA thread's registers (None: the compiler's)."""
-    key = (region_capacity, stick_capacity, colours, compliant, max_registers, compliant and stage_soft, block_dim)
+    CUDA thread's registers (None: the compiler's). ``chained``: one launch a sweep, each block taking the next
+    cluster in order and waiting for its neighbours (the module's docstring); otherwise one launch a cluster colour
+    (``first_cluster`` its first cluster), and the chain's arrays are not read."""
+    key = (region_capacity, stick_capacity, colours, compliant, max_registers, compliant and stage_soft, block_dim,
+           chained)
     if key not in _KERNELS:
         _KERNELS[key] = _make_kernel(*key)
     return _KERNELS[key]
 
 
 def _make_kernel(region_capacity: int, stick_capacity: int, colours: int, compliant: bool, max_registers: int | None,
-                 stage_soft: bool, block_dim: int):
+                 stage_soft: bool, block_dim: int, chained: bool):
     CAPACITY = region_capacity
     STICKS = stick_capacity
     # Loads a lane issues before it stores any of them: all of its share of the block's sticks (or region) at
@@ -100,6 +160,7 @@ def _make_kernel(region_capacity: int, stick_capacity: int, colours: int, compli
     SOFT_STICKS = stick_capacity if STAGED_SOFT else 1  # the compliances' and tensions' shared arrays
     COLOURS = colours
     STARTS = colours + 1
+    CHAINED = chained
 
     @wp.func_native("t.data(wp::tile_coord(i)) = value;")
     def put_point(t: wp.tile(dtype=wp.vec3, shape=(CAPACITY,), storage="shared"), i: int, value: wp.vec3): ...
@@ -144,15 +205,47 @@ def _make_kernel(region_capacity: int, stick_capacity: int, colours: int, compli
         inv_dt2: float,
         tension: wp.array(dtype=float),
         first_cluster: int,
+        neighbour_start: wp.array(dtype=int),
+        neighbour: wp.array(dtype=int),
+        chain: wp.array(dtype=int),
+        done: wp.array(dtype=int),
+        order_broken: wp.array(dtype=int),
     ):
         """One sweep over the clusters first_cluster, first_cluster + 1, ... (one cluster colour; block k takes
         cluster first_cluster + k). Cluster c's region is region[region_start[c] : region_start[c + 1]]; its
         sticks of colour n are stick_start[c * COLOURS + n] .. stick_start[c * COLOURS + n + 1] - 1, each given
         by its ends' places in the region, packed a | b << 16. Compliant: stick_compliance (m/N) and tension (the
-        substep's mu so far, updated) are in the same order as the sticks."""
+        substep's mu so far, updated) are in the same order as the sticks.
+
+        Chained (a launch of every cluster, blocks = clusters): a block takes the next cluster c from chain[0] and
+        waits for each cluster of neighbour[neighbour_start[c] : neighbour_start[c + 1]] (those whose regions share
+        a particle with c's, and c itself) to have finished chain[2] + 1 sweeps if it comes before c, chain[2] if
+        not (done[d]: the sweeps cluster d has finished); it then sets done[c] to chain[2] + 1. The block that
+        finishes last starts the next launch's count: chain[0] and chain[1] (blocks finished) to 0, chain[2] + 1.
+        On the CPU a wait that would not be met sets order_broken[0] to 1 instead."""
         block, lane = wp.tid()
         threads = wp.block_dim()
+        starts = wp.tile_empty(shape=STARTS, dtype=int, storage="shared")
         c = first_cluster + block
+        finished_sweeps = int(0)
+        if wp.static(CHAINED):
+            if lane == 0:
+                put_start(starts, 0, wp.atomic_add(chain, 0, 1))
+                put_start(starts, 1, chain[2])
+            block_barrier()
+            c = starts[0]
+            finished_sweeps = starts[1]
+            block_barrier()  # every lane has read them before the staging reuses the starts
+            k = neighbour_start[c] + lane
+            while k < neighbour_start[c + 1]:
+                other = neighbour[k]
+                need = finished_sweeps
+                if other < c:
+                    need = finished_sweeps + 1
+                if wait_for_cluster(done, other, need) != 0:
+                    order_broken[0] = 1
+                k += threads
+            block_barrier()
         r0 = region_start[c]
         count = region_start[c + 1] - r0
         base = c * COLOURS
@@ -162,7 +255,6 @@ def _make_kernel(region_capacity: int, stick_capacity: int, colours: int, compli
         weights = wp.tile_empty(shape=CAPACITY, dtype=float, storage="shared")
         ends = wp.tile_empty(shape=STICKS, dtype=int, storage="shared")
         rests = wp.tile_empty(shape=STICKS, dtype=float, storage="shared")
-        starts = wp.tile_empty(shape=STARTS, dtype=int, storage="shared")
         alphas = wp.tile_empty(shape=SOFT_STICKS, dtype=float, storage="shared")
         tensions = wp.tile_empty(shape=SOFT_STICKS, dtype=float, storage="shared")
         if wp.static(STAGED_SOFT):
@@ -182,7 +274,10 @@ def _make_kernel(region_capacity: int, stick_capacity: int, colours: int, compli
                 held = region_floats()
                 if e_region < count:
                     for j in range(REGION_BATCH):
-                        moved[j] = x[places[j]]
+                        if wp.static(CHAINED):
+                            moved[j] = load_from_l2(x, places[j])
+                        else:
+                            moved[j] = x[places[j]]
                         held[j] = inv_mass[places[j]]
                 packed_ends = stick_ints()
                 rest_lengths = stick_floats()
@@ -220,7 +315,10 @@ def _make_kernel(region_capacity: int, stick_capacity: int, colours: int, compli
                 moved = region_points()
                 held = region_floats()
                 for j in range(REGION_BATCH):
-                    moved[j] = x[places[j]]
+                    if wp.static(CHAINED):
+                        moved[j] = load_from_l2(x, places[j])
+                    else:
+                        moved[j] = x[places[j]]
                     held[j] = inv_mass[places[j]]
                 for j in range(REGION_BATCH):
                     if e0 + j * threads < count:
@@ -283,5 +381,14 @@ def _make_kernel(region_capacity: int, stick_capacity: int, colours: int, compli
             while e < sticks:
                 tension[s0 + e] = tensions[e]
                 e += threads
+        if wp.static(CHAINED):
+            release_fence()
+            block_barrier()
+            if lane == 0:
+                publish_done(done, c, finished_sweeps + 1)
+                if wp.atomic_add(chain, 1, 1) == region_start.shape[0] - 2:
+                    chain[0] = 0
+                    chain[1] = 0
+                    chain[2] = finished_sweeps + 1
 
     return relax_stick_clusters

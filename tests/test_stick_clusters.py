@@ -74,17 +74,19 @@ def scene(request, tmp_path):
     return triangle_scene(tmp_path)
 
 
-def test_a_clustered_sweep_is_the_sequential_sweep_in_cluster_order_bit_for_bit(scene, monkeypatch):
+@pytest.mark.parametrize("chained", [True, False], ids=["chained", "a launch per cluster colour"])
+def test_a_clustered_sweep_is_the_sequential_sweep_in_cluster_order_bit_for_bit(scene, monkeypatch, chained):
     from warp_verlet.constraints import stick_clusters
 
     monkeypatch.setattr(stick_clusters, "CLUSTER_PARTICLES", 64)  # many clusters and cluster colours
+    monkeypatch.setattr(stick_clusters, "CHAINED_SWEEP", chained)
     clustered = Simulator(scene, "cpu", threads=1, sticks="clustered")
     assert "stick clusters" in clustered.constraint_sets and "sticks" not in clustered.constraint_sets
     data = clustered.model.constraints["stick clusters"]
     assert len(data.launches) >= 4
     start = perturbed(clustered)
     bound = StickClusters().bind(clustered.model, clustered.state, clustered.solver)
-    assert len(bound.phases) == len(data.launches)  # one launch per cluster colour
+    assert len(bound.phases) == (1 if chained else len(data.launches))
     clustered.state.set_positions(start)
     for phase in bound.phases:
         for task in phase:
@@ -100,6 +102,24 @@ def test_a_clustered_sweep_is_the_sequential_sweep_in_cluster_order_bit_for_bit(
                       wp.array(np.ones(len(ends), np.float32), dtype=float, device="cpu"), 0, 1])
     assert np.abs(x.numpy() - start).max() > 1e-4  # the sweep did something
     np.testing.assert_array_equal(clustered.state.positions(), x.numpy())
+
+
+def test_a_chained_sweep_takes_its_clusters_in_order_and_counts_each_clusters_sweeps(tmp_path, monkeypatch):
+    """On the CPU a launch's blocks run one after another, so every wait of a chained sweep must already be met:
+    a cluster's neighbours before it in the order have finished this sweep, those after it (and itself) the one
+    before. After each launch the chain's counts are reset for the next, and every cluster has done one more
+    sweep."""
+    from warp_verlet.constraints import stick_clusters
+
+    monkeypatch.setattr(stick_clusters, "CLUSTER_PARTICLES", 64)
+    monkeypatch.setattr(stick_clusters, "CHAINED_SWEEP", True)
+    sim = Simulator(triangle_scene(tmp_path), "cpu", threads=1, sticks="clustered")
+    clusters = len(sim.model.constraints["stick clusters"].neighbour_start) - 1
+    sweep(sim, perturbed(sim), 5)
+    chain = sim.solver.cached("cluster_chain", lambda: None)
+    assert chain.counts.numpy().tolist() == [0, 0, 5]
+    np.testing.assert_array_equal(chain.done.numpy(), np.full(clusters, 5))
+    assert chain.order_broken.numpy()[0] == 0
 
 
 @pytest.mark.parametrize("staged", [True, False], ids=["staged", "in global memory"])
@@ -158,6 +178,13 @@ def test_the_layout_holds_every_stick_once_and_no_cluster_colour_shares_a_partic
     twice[1] = twice[0]
     with pytest.raises(AssertionError, match="exactly once"):
         check_layout(dataclasses.replace(layout, stick=twice), sticks)
+    # A chained sweep's waits: each cluster lists itself and every cluster whose region shares a particle with its.
+    assert np.all(np.diff(layout.neighbour_start) >= 2)  # itself and at least one other
+    for dropped in (layout.neighbour_start[3], layout.neighbour_start[3] + 1):  # another cluster, or itself
+        short = np.delete(layout.neighbour, dropped)
+        starts = layout.neighbour_start - (np.arange(len(layout.neighbour_start)) > 3)
+        with pytest.raises(AssertionError, match="neighbours"):
+            check_layout(dataclasses.replace(layout, neighbour=short, neighbour_start=starts), sticks)
 
 
 def test_clusters_that_share_a_particle_get_different_colours():
@@ -235,6 +262,39 @@ def test_a_clustered_sweep_on_cuda_is_repeatable_and_agrees_with_the_cpu(tmp_pat
     again = sweep(gpu, start, 3)
     np.testing.assert_array_equal(first, again)
     np.testing.assert_allclose(first, on_cpu, atol=1e-5)
+
+
+@pytest.mark.cuda
+@pytest.mark.skipif(not wp.is_cuda_available(), reason="no CUDA device")
+@pytest.mark.parametrize("cloth, staged", [({}, True), ({"compliance": {"bend": 0.02}}, True),
+                                           ({"compliance": {"bend": 0.02}}, False)],
+                         ids=["rigid", "soft bend", "soft bend in global memory"])
+@pytest.mark.parametrize("rows, cluster", [(ROWS, 64), (256, 16)], ids=["all clusters at once", "more than fit"])
+def test_a_chained_sweep_on_cuda_is_a_launch_per_cluster_colour_bit_for_bit(tmp_path, monkeypatch, cloth, staged,
+                                                                             rows, cluster):
+    """On CUDA the chained sweep's blocks run at once, each waiting for its neighbours: it must give the launch
+    per cluster colour's positions exactly, over sweeps, with every cluster's blocks in flight together (without
+    the waits, a cluster would read its neighbours' particles before they moved) and with more clusters than the
+    GPU holds at once (the blocks waited for are those that took earlier clusters)."""
+    from warp_verlet.constraints import stick_clusters
+
+    monkeypatch.setattr(stick_clusters, "CLUSTER_PARTICLES", cluster)
+    monkeypatch.setattr(stick_clusters, "stage_soft_sticks", lambda layout: staged)
+    points, quads = grid_mesh(rows, rows)
+    path = write_obj(tmp_path / "sheet.obj", points, triangulated(quads))
+    scene = mesh_scene(tmp_path, {"mesh": path.name, "sticks": ["structural", "bend"], **cloth},
+                       {"substeps": 2, "iterations": 4})
+    result = {}
+    for chained in (False, True):
+        monkeypatch.setattr(stick_clusters, "CHAINED_SWEEP", chained)
+        sim = Simulator(scene, "cuda", sticks="clustered")
+        start = perturbed(sim)
+        result[chained] = [sweep(sim, start, 4), sweep(sim, start, 4)]
+    clusters = len(sim.model.constraints["stick clusters"].neighbour_start) - 1
+    assert clusters == -(-rows * rows // cluster)
+    assert np.abs(result[False][0] - start).max() > 1e-4
+    np.testing.assert_array_equal(result[True][0], result[False][0])
+    np.testing.assert_array_equal(result[True][1], result[False][0])
 
 
 def test_a_region_larger_than_packed_ends_can_name_is_refused_with_the_reason(tmp_path, monkeypatch):

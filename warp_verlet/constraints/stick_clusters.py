@@ -32,6 +32,9 @@ CLUSTER_BLOCK = 256
 """Threads per block of the clustered sweep: more than a colour's sticks (half the threads sit out each colour), but
 each lane's staging batch is half as long and the block has twice the warps to hide its loads' latency: faster than
 128 on an H100 and an H200 (bench/results/mesh/batched-staging)."""
+CHAINED_SWEEP = False
+"""One launch a sweep, each block taking the next cluster and waiting only for its neighbours
+(kernels/stick_clusters.py), rather than a launch per cluster colour: the same positions bit for bit."""
 MAX_REGION = 2048
 """The most particles a cluster's region (its own and its sticks' other ends) may hold: a stick's two places in it
 are packed into one int, 16 bits each."""
@@ -67,7 +70,8 @@ class ClusterLayout:
     (``region_start`` (C + 1,), ``region`` the particles) and its sticks by stick colour (``stick_start``
     (C * colours + 1,)); per stored stick its ends as places in its cluster's region (``stick_local``), its rest
     length and its index in the Model's stick arrays (``stick``); ``launches`` (first cluster, clusters) per cluster
-    colour; ``capacity`` and ``stick_capacity`` the shared arrays' lengths (the largest region and the most sticks
+    colour; per cluster the clusters whose regions share a particle with its own, and itself (``neighbour_start``
+    (C + 1,), ``neighbour``), for the chained sweep's waits; ``capacity`` and ``stick_capacity`` the shared arrays' lengths (the largest region and the most sticks
     a cluster holds, rounded up to 32 and 64, so that near sizes share a kernel)."""
 
     region_start: np.ndarray
@@ -78,6 +82,8 @@ class ClusterLayout:
     stick: np.ndarray
     colours: int
     launches: list[tuple[int, int]]
+    neighbour_start: np.ndarray
+    neighbour: np.ndarray
     capacity: int
     stick_capacity: int
 
@@ -94,13 +100,19 @@ def _regions(cluster_of: np.ndarray, sticks: np.ndarray) -> np.ndarray:
     return np.unique(np.concatenate([cluster_of * n + np.arange(n), cluster_of[sticks[:, 0]] * n + sticks[:, 1]]))
 
 
-def colour_clusters(keys: np.ndarray, particles: int, clusters: int) -> np.ndarray:
-    """A colour per cluster such that the regions (``keys``: cluster * particles + particle) of one colour share
-    no particle: greedy, in cluster order (the lowest colour no coloured neighbour holds)."""
+def neighbour_pairs(keys: np.ndarray, particles: int) -> np.ndarray:
+    """(c, d) for every two distinct clusters whose regions (``keys``: cluster * particles + particle) share a
+    particle, both ways, sorted by c then d."""
     pairs = np.unique(shared_particle_pairs(keys // particles, keys % particles), axis=0)
     pairs = pairs[pairs[:, 0] != pairs[:, 1]]
     pairs = np.concatenate([pairs, pairs[:, ::-1]])
-    pairs = pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))]
+    return pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))]
+
+
+def colour_clusters(keys: np.ndarray, particles: int, clusters: int) -> np.ndarray:
+    """A colour per cluster such that the regions (``keys``: cluster * particles + particle) of one colour share
+    no particle: greedy, in cluster order (the lowest colour no coloured neighbour holds)."""
+    pairs = neighbour_pairs(keys, particles)
     offsets = np.searchsorted(pairs[:, 0], np.arange(clusters + 1))
     colour = np.full(clusters, -1, np.int64)
     for c in range(clusters):
@@ -130,6 +142,9 @@ def cluster_layout(sticks: np.ndarray, rest: np.ndarray, stick_colour: np.ndarra
     renumber[np.lexsort((np.arange(clusters), colour))] = np.arange(clusters)
     cluster_of = renumber[cluster_of]
     keys = np.sort(renumber[keys // n] * n + keys % n)
+    pairs = np.concatenate([neighbour_pairs(keys, n), np.repeat(np.arange(clusters), 2).reshape(-1, 2)])
+    pairs = pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))]
+    neighbour_start = np.searchsorted(pairs[:, 0], np.arange(clusters + 1))
     region_start = np.zeros(clusters + 1, np.int64)
     np.cumsum(np.bincount(keys // n, minlength=clusters), out=region_start[1:])
     stick_cluster = cluster_of[sticks[:, 0]]
@@ -146,7 +161,8 @@ def cluster_layout(sticks: np.ndarray, rest: np.ndarray, stick_colour: np.ndarra
     most_sticks = int(np.diff(stick_start[::colours]).max())
     layout = ClusterLayout(region_start.astype(np.int32), (keys % n).astype(np.int32), stick_start.astype(np.int32),
                            local.astype(np.int32), np.asarray(rest, np.float32)[order], order,
-                           colours, [(int(f), int(s)) for f, s in zip(firsts, sizes)], -(-largest // 32) * 32,
+                           colours, [(int(f), int(s)) for f, s in zip(firsts, sizes)],
+                           neighbour_start.astype(np.int32), pairs[:, 1].astype(np.int32), -(-largest // 32) * 32,
                            -(-most_sticks // 64) * 64)
     check_layout(layout, sticks)
     return layout
@@ -167,6 +183,12 @@ def check_layout(layout: ClusterLayout, sticks: np.ndarray) -> None:
         mine = (owner >= start) & (owner < start + count)
         if np.bincount(layout.region[mine]).max(initial=0) > 1:
             raise AssertionError("two clusters of one cluster colour share a particle")
+    listed = np.stack([np.repeat(np.arange(len(layout.neighbour_start) - 1),
+                                 np.diff(layout.neighbour_start)), layout.neighbour], axis=1)
+    sharing = shared_particle_pairs(owner, layout.region)
+    sharing = np.concatenate([sharing, sharing[:, ::-1], np.repeat(np.arange(len(first)), 2).reshape(-1, 2)])
+    if not np.array_equal(np.unique(sharing, axis=0), listed):
+        raise AssertionError("a cluster's neighbours are not the clusters whose regions share a particle with its own")
 
 
 class StickClusters(ConstraintSet):
@@ -219,15 +241,23 @@ class StickClusters(ConstraintSet):
 
         data = model.constraints[self.name]
         soft = data.compliance is not None
+        chained = CHAINED_SWEEP
         kernel = relax_stick_clusters(data.capacity, data.stick_capacity, data.colours, soft,
-                                      stage_soft=data.stage_soft, block_dim=CLUSTER_BLOCK)
+                                      stage_soft=data.stage_soft, block_dim=CLUSTER_BLOCK, chained=chained)
         # XPBD: the tension of each stick over the substep's sweeps, in the clusters' order of the sticks.
         tension = solver.scratch("cluster_tension", len(data.rest), float) if soft else data.no_tension
         compliance = data.compliance if soft else data.no_tension
+        if chained:
+            chain = solver.cached("cluster_chain", lambda: ClusterChain(len(data.neighbour_start) - 1, model.device))
+            launches = [(0, len(data.neighbour_start) - 1)]
+            waits = [data.neighbour_start, data.neighbour, chain.counts, chain.done, chain.order_broken]
+        else:
+            launches = data.launches
+            waits = [data.no_ints] * 5
         tasks = []
-        for first, count in data.launches:
+        for first, count in launches:
             inputs = [state.particle_q, model.inv_mass, data.region_start, data.region, data.stick_start,
-                      data.stick_ends, data.rest, compliance, 0.0, tension, first]
+                      data.stick_ends, data.rest, compliance, 0.0, tension, first, *waits]
             launch = wp.launch_tiled(kernel, dim=[count], block_dim=CLUSTER_BLOCK, record_cmd=True,
                                      device=model.device, inputs=inputs)
             tasks.append(PhaseTask(kernel.key, launch.launch, launch))
@@ -236,6 +266,19 @@ class StickClusters(ConstraintSet):
         # process, so two threads' launches would write over each other. The CPU thread team's other threads wait.
         idle = [None] * (solver.threads - 1)
         return BoundStage(prepare, [[task, *idle] for task in tasks])
+
+
+class ClusterChain:
+    """The chained sweep's state on the device, kept by the solver from launch to launch: ``counts`` (3,) the
+    clusters taken and finished in the running launch, and the sweeps finished before it; ``done`` (C,) the sweeps
+    each cluster has finished; ``order_broken`` (1,) set on the CPU where a cluster would have had to wait."""
+
+    def __init__(self, clusters: int, device):
+        import warp as wp
+
+        self.counts = wp.zeros(3, dtype=int, device=device)
+        self.done = wp.zeros(clusters, dtype=int, device=device)
+        self.order_broken = wp.zeros(1, dtype=int, device=device)
 
 
 class DeviceClusters:
@@ -247,11 +290,14 @@ class DeviceClusters:
         self.region_start = wp.array(layout.region_start, dtype=int, device=device)
         self.region = wp.array(layout.region, dtype=int, device=device)
         self.stick_start = wp.array(layout.stick_start, dtype=int, device=device)
+        self.neighbour_start = wp.array(layout.neighbour_start, dtype=int, device=device)
+        self.neighbour = wp.array(layout.neighbour, dtype=int, device=device)
         self.stick_ends = wp.array(layout.packed_ends, dtype=int, device=device)
         self.rest = wp.array(layout.rest, dtype=float, device=device)
         # Soft sticks' compliances (m/N) in the stored order; None where every stick is rigid.
         self.compliance = None if compliance is None else wp.array(compliance, dtype=float, device=device)
         self.no_tension = wp.empty(0, dtype=float, device=device)  # the rigid kernel's unread XPBD arrays
+        self.no_ints = wp.empty(0, dtype=int, device=device)  # the chain's arrays, unread by a launch per colour
         self.colours = layout.colours
         self.launches = layout.launches
         self.capacity = layout.capacity
