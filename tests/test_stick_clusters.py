@@ -114,12 +114,27 @@ def test_a_chained_sweep_takes_its_clusters_in_order_and_counts_each_clusters_sw
     monkeypatch.setattr(stick_clusters, "CLUSTER_PARTICLES", 64)
     monkeypatch.setattr(stick_clusters, "CHAINED_SWEEP", True)
     sim = Simulator(triangle_scene(tmp_path), "cpu", threads=1, sticks="clustered")
-    clusters = len(sim.model.constraints["stick clusters"].neighbour_start) - 1
+    clusters = sim.model.constraints["stick clusters"].clusters
     sweep(sim, perturbed(sim), 5)
     chain = sim.solver.cached("cluster_chain", lambda: None)
     assert chain.counts.numpy().tolist() == [0, 0, 5]
     np.testing.assert_array_equal(chain.done.numpy(), np.full(clusters, 5))
     assert chain.order_broken.numpy()[0] == 0
+
+
+def test_a_cluster_with_more_neighbours_than_the_chain_allows_takes_a_launch_per_cluster_colour(tmp_path,
+                                                                                            monkeypatch):
+    from warp_verlet.constraints import stick_clusters
+
+    monkeypatch.setattr(stick_clusters, "CLUSTER_PARTICLES", 64)
+    monkeypatch.setattr(stick_clusters, "CHAINED_SWEEP", True)
+    most = int(np.diff(layout_of(Simulator(triangle_scene(tmp_path), "cpu", sticks="explicit")).neighbour_start).max())
+    for limit, launches in ((most, 1), (most - 1, None)):
+        monkeypatch.setattr(stick_clusters, "MAX_CHAINED_NEIGHBOURS", limit)
+        sim = Simulator(triangle_scene(tmp_path), "cpu", threads=1, sticks="clustered")
+        data = sim.model.constraints["stick clusters"]
+        bound = StickClusters().bind(sim.model, sim.state, sim.solver)
+        assert len(bound.phases) == (launches or len(data.launches)) and (data.neighbour is None) == (not launches)
 
 
 @pytest.mark.parametrize("staged", [True, False], ids=["staged", "in global memory"])
@@ -290,7 +305,7 @@ def test_a_chained_sweep_on_cuda_is_a_launch_per_cluster_colour_bit_for_bit(tmp_
         sim = Simulator(scene, "cuda", sticks="clustered")
         start = perturbed(sim)
         result[chained] = [sweep(sim, start, 4), sweep(sim, start, 4)]
-    clusters = len(sim.model.constraints["stick clusters"].neighbour_start) - 1
+    clusters = sim.model.constraints["stick clusters"].clusters
     assert clusters == -(-rows * rows // cluster)
     assert np.abs(result[False][0] - start).max() > 1e-4
     np.testing.assert_array_equal(result[True][0], result[False][0])

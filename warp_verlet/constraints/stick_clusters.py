@@ -35,6 +35,10 @@ each lane's staging batch is half as long and the block has twice the warps to h
 CHAINED_SWEEP = False
 """One launch a sweep, each block taking the next cluster and waiting only for its neighbours
 (kernels/stick_clusters.py), rather than a launch per cluster colour: the same positions bit for bit."""
+MAX_CHAINED_NEIGHBOURS = 32
+"""The most clusters (itself among them) a cluster of a chained sweep may wait for, which bounds the neighbour
+lists' memory before the layout is built; a layout with more (sticks that reach far across the cloth) is swept with
+a launch per cluster colour. The meshes measured have at most 13 (bench/results/mesh/chained)."""
 MAX_REGION = 2048
 """The most particles a cluster's region (its own and its sticks' other ends) may hold: a stick's two places in it
 are packed into one int, 16 bits each."""
@@ -210,8 +214,11 @@ class StickClusters(ConstraintSet):
 
         clusters = -(-req.particles // CLUSTER_PARTICLES)
         soft = req.sticks * 3 * FLOAT if req.compliant else 0  # the Model's compliances, the stored ones, tensions
+        # A chained sweep's neighbour lists (at most MAX_CHAINED_NEIGHBOURS a cluster, and their starts) and the
+        # solver's chain (three counts, a count per cluster, a flag).
+        chain = (clusters * MAX_CHAINED_NEIGHBOURS + clusters + 1) * INT + (clusters + 4) * INT if CHAINED_SWEEP else 0
         return (req.sticks * (VEC2I + 2 * FLOAT) + req.sticks * (INT + FLOAT) + (req.particles + req.sticks) * INT
-                + (clusters + 1) * INT + (clusters * MAX_COLOURS + 1) * INT + soft)
+                + (clusters + 1) * INT + (clusters * MAX_COLOURS + 1) * INT + soft + chain)
 
     def build(self, model, scene, device):
         if model.colouring is None or model.colouring.overflow:
@@ -241,15 +248,15 @@ class StickClusters(ConstraintSet):
 
         data = model.constraints[self.name]
         soft = data.compliance is not None
-        chained = CHAINED_SWEEP
+        chained = data.neighbour is not None
         kernel = relax_stick_clusters(data.capacity, data.stick_capacity, data.colours, soft,
                                       stage_soft=data.stage_soft, block_dim=CLUSTER_BLOCK, chained=chained)
         # XPBD: the tension of each stick over the substep's sweeps, in the clusters' order of the sticks.
         tension = solver.scratch("cluster_tension", len(data.rest), float) if soft else data.no_tension
         compliance = data.compliance if soft else data.no_tension
         if chained:
-            chain = solver.cached("cluster_chain", lambda: ClusterChain(len(data.neighbour_start) - 1, model.device))
-            launches = [(0, len(data.neighbour_start) - 1)]
+            chain = solver.cached("cluster_chain", lambda: ClusterChain(data.clusters, model.device))
+            launches = [(0, data.clusters)]
             waits = [data.neighbour_start, data.neighbour, chain.counts, chain.done, chain.order_broken]
         else:
             launches = data.launches
@@ -290,8 +297,12 @@ class DeviceClusters:
         self.region_start = wp.array(layout.region_start, dtype=int, device=device)
         self.region = wp.array(layout.region, dtype=int, device=device)
         self.stick_start = wp.array(layout.stick_start, dtype=int, device=device)
-        self.neighbour_start = wp.array(layout.neighbour_start, dtype=int, device=device)
-        self.neighbour = wp.array(layout.neighbour, dtype=int, device=device)
+        self.clusters = len(layout.region_start) - 1
+        # A chained sweep's neighbour lists; None where the sweep takes a launch per cluster colour.
+        self.neighbour_start = self.neighbour = None
+        if CHAINED_SWEEP and np.diff(layout.neighbour_start).max() <= MAX_CHAINED_NEIGHBOURS:
+            self.neighbour_start = wp.array(layout.neighbour_start, dtype=int, device=device)
+            self.neighbour = wp.array(layout.neighbour, dtype=int, device=device)
         self.stick_ends = wp.array(layout.packed_ends, dtype=int, device=device)
         self.rest = wp.array(layout.rest, dtype=float, device=device)
         # Soft sticks' compliances (m/N) in the stored order; None where every stick is rigid.
