@@ -7,6 +7,17 @@ sticks colour by colour in the stick colouring's order, a thread per stick of th
 no particle; a barrier separates the colours), and writes the region back. Clusters are coloured so that the
 regions of one cluster colour share no particle: a launch per cluster colour, Gauss-Seidel across them.
 
+Chained (large meshes, constraints/stick_clusters.py ``MIN_CHAINED_PARTICLES``), a sweep is one launch of every
+cluster instead: a block takes the next cluster from a counter, in the cluster colours' order, and before it reads
+its region waits only for the clusters whose regions share a particle with its own (each one before it in the
+order to have finished this sweep, each one after it, and itself, the sweep before), then publishes its own count
+of finished sweeps. Two clusters that share a particle update it in the launches' order, so the positions are the
+same bit for bit; blocks of different colours overlap instead of a launch's blocks staging, projecting and writing
+back in step. A block waits only for clusters taken before its own, by blocks that are running or done, so none
+waits forever. Rigid sticks are staged before the wait, since they do not move. The positions are read from L2
+(``__ldcg``), since a multiprocessor's L1 may hold what an earlier block read, and published behind a
+``__threadfence`` (bench/results/mesh/chained).
+
 Each stick is stored once, in the order the blocks read it (cluster colour, cluster, stick colour), with its two
 ends as places in its cluster's region packed into one int (``a | b << 16``; a region holds at most 2048
 particles), so that a block reads its sticks as one contiguous run. A block stages its sticks (ends, rest lengths
@@ -42,8 +53,6 @@ import warp as wp
 from .grid_tiles import block_barrier, shared_sweep_options
 from .positions import scaled
 from .relax import compliant_correction, stick_correction
-
-_KERNELS: dict = {}
 
 _STREAMED_LOAD = """
 #if defined(__CUDA_ARCH__)
@@ -122,6 +131,26 @@ def load_from_l2(x: wp.array(dtype=wp.vec3), i: int) -> wp.vec3:
     ...
 
 
+_KERNELS: dict = {}
+
+
+@wp.func
+def wait_for_neighbours(c: int, finished_sweeps: int, lane: int, threads: int, neighbour_start: wp.array(dtype=int),
+                        neighbour: wp.array(dtype=int), done: wp.array(dtype=int), order_broken: wp.array(dtype=int)):
+    """A chained sweep's wait before cluster c reads its region: each neighbour before c in the order has finished
+    this sweep (finished_sweeps + 1), each after it, and c itself, the one before. The block's lanes share the
+    list; a barrier must follow before any lane reads the region."""
+    k = neighbour_start[c] + lane
+    while k < neighbour_start[c + 1]:
+        other = neighbour[k]
+        need = finished_sweeps
+        if other < c:
+            need = finished_sweeps + 1
+        if wait_for_cluster(done, other, need) != 0:
+            order_broken[0] = 1
+        k += threads
+
+
 def relax_stick_clusters(region_capacity: int, stick_capacity: int, colours: int, compliant: bool = False,
                          max_registers: int | None = None, stage_soft: bool = True, *, block_dim: int,
                          chained: bool = False):
@@ -189,6 +218,26 @@ def _make_kernel(region_capacity: int, stick_capacity: int, colours: int, compli
     @wp.func_native("t.data(wp::tile_coord(i)) = value;")
     def put_start(t: wp.tile(dtype=int, shape=(STARTS,), storage="shared"), i: int, value: int): ...
 
+    @wp.func
+    def stage_sticks(ends: wp.tile(dtype=int, shape=(STICKS,), storage="shared"),
+                     rests: wp.tile(dtype=float, shape=(STICKS,), storage="shared"),
+                     stick_ends: wp.array(dtype=int), stick_rest: wp.array(dtype=float), s0: int, sticks: int,
+                     lane: int, threads: int):
+        """A rigid cluster's sticks into shared memory, a batch's loads before its stores."""
+        e0 = lane
+        while e0 < sticks:
+            packed_ends = stick_ints()
+            rest_lengths = stick_floats()
+            for j in range(STICK_BATCH):
+                s = s0 + wp.min(e0 + j * threads, sticks - 1)
+                packed_ends[j] = streamed_int(stick_ends, s)
+                rest_lengths[j] = streamed_float(stick_rest, s)
+            for j in range(STICK_BATCH):
+                if e0 + j * threads < sticks:
+                    put_ends(ends, e0 + j * threads, packed_ends[j])
+                    put_rest(rests, e0 + j * threads, rest_lengths[j])
+            e0 += STICK_BATCH * threads
+
     options = shared_sweep_options(max_registers)
     options["module_options"] = {**options["module_options"], "max_unroll": max(STICK_BATCH, REGION_BATCH)}
 
@@ -236,16 +285,6 @@ def _make_kernel(region_capacity: int, stick_capacity: int, colours: int, compli
             c = starts[0]
             finished_sweeps = starts[1]
             block_barrier()  # every lane has read them before the staging reuses the starts
-            k = neighbour_start[c] + lane
-            while k < neighbour_start[c + 1]:
-                other = neighbour[k]
-                need = finished_sweeps
-                if other < c:
-                    need = finished_sweeps + 1
-                if wait_for_cluster(done, other, need) != 0:
-                    order_broken[0] = 1
-                k += threads
-            block_barrier()
         r0 = region_start[c]
         count = region_start[c + 1] - r0
         base = c * COLOURS
@@ -258,6 +297,9 @@ def _make_kernel(region_capacity: int, stick_capacity: int, colours: int, compli
         alphas = wp.tile_empty(shape=SOFT_STICKS, dtype=float, storage="shared")
         tensions = wp.tile_empty(shape=SOFT_STICKS, dtype=float, storage="shared")
         if wp.static(STAGED_SOFT):
+            if wp.static(CHAINED):
+                wait_for_neighbours(c, finished_sweeps, lane, threads, neighbour_start, neighbour, done, order_broken)
+                block_barrier()
             # One batch: region indices and colour starts, then positions and weights, then the sticks, before any
             # store (the module's docstring says why only here).
             e_region = lane
@@ -308,6 +350,11 @@ def _make_kernel(region_capacity: int, stick_capacity: int, colours: int, compli
                 e_stick += STICK_BATCH * threads
                 e_start += threads
         else:
+            if wp.static(CHAINED):
+                # The sticks do not move: staged while the neighbours finish, before the wait.
+                stage_sticks(ends, rests, stick_ends, stick_rest, s0, sticks, lane, threads)
+                wait_for_neighbours(c, finished_sweeps, lane, threads, neighbour_start, neighbour, done, order_broken)
+                block_barrier()
             e0 = lane
             while e0 < count:
                 # A batch's loads first, then its stores.
@@ -325,19 +372,8 @@ def _make_kernel(region_capacity: int, stick_capacity: int, colours: int, compli
                         put_point(points, e0 + j * threads, moved[j])
                         put_weight(weights, e0 + j * threads, held[j])
                 e0 += REGION_BATCH * threads
-            e0 = lane
-            while e0 < sticks:
-                packed_ends = stick_ints()
-                rest_lengths = stick_floats()
-                for j in range(STICK_BATCH):
-                    s = s0 + wp.min(e0 + j * threads, sticks - 1)
-                    packed_ends[j] = streamed_int(stick_ends, s)
-                    rest_lengths[j] = streamed_float(stick_rest, s)
-                for j in range(STICK_BATCH):
-                    if e0 + j * threads < sticks:
-                        put_ends(ends, e0 + j * threads, packed_ends[j])
-                        put_rest(rests, e0 + j * threads, rest_lengths[j])
-                e0 += STICK_BATCH * threads
+            if wp.static(not CHAINED):
+                stage_sticks(ends, rests, stick_ends, stick_rest, s0, sticks, lane, threads)
             e = lane
             while e < STARTS:
                 put_start(starts, e, stick_start[base + e] - s0)

@@ -79,7 +79,7 @@ def test_a_clustered_sweep_is_the_sequential_sweep_in_cluster_order_bit_for_bit(
     from warp_verlet.constraints import stick_clusters
 
     monkeypatch.setattr(stick_clusters, "CLUSTER_PARTICLES", 64)  # many clusters and cluster colours
-    monkeypatch.setattr(stick_clusters, "CHAINED_SWEEP", chained)
+    monkeypatch.setattr(stick_clusters, "MIN_CHAINED_PARTICLES", 0 if chained else 10**12)
     clustered = Simulator(scene, "cpu", threads=1, sticks="clustered")
     assert "stick clusters" in clustered.constraint_sets and "sticks" not in clustered.constraint_sets
     data = clustered.model.constraints["stick clusters"]
@@ -112,7 +112,7 @@ def test_a_chained_sweep_takes_its_clusters_in_order_and_counts_each_clusters_sw
     from warp_verlet.constraints import stick_clusters
 
     monkeypatch.setattr(stick_clusters, "CLUSTER_PARTICLES", 64)
-    monkeypatch.setattr(stick_clusters, "CHAINED_SWEEP", True)
+    monkeypatch.setattr(stick_clusters, "MIN_CHAINED_PARTICLES", 0)
     sim = Simulator(triangle_scene(tmp_path), "cpu", threads=1, sticks="clustered")
     clusters = sim.model.constraints["stick clusters"].clusters
     sweep(sim, perturbed(sim), 5)
@@ -127,7 +127,7 @@ def test_a_cluster_with_more_neighbours_than_the_chain_allows_takes_a_launch_per
     from warp_verlet.constraints import stick_clusters
 
     monkeypatch.setattr(stick_clusters, "CLUSTER_PARTICLES", 64)
-    monkeypatch.setattr(stick_clusters, "CHAINED_SWEEP", True)
+    monkeypatch.setattr(stick_clusters, "MIN_CHAINED_PARTICLES", 0)
     most = int(np.diff(layout_of(Simulator(triangle_scene(tmp_path), "cpu", sticks="explicit")).neighbour_start).max())
     for limit, launches in ((most, 1), (most - 1, None)):
         monkeypatch.setattr(stick_clusters, "MAX_CHAINED_NEIGHBOURS", limit)
@@ -301,7 +301,7 @@ def test_a_chained_sweep_on_cuda_is_a_launch_per_cluster_colour_bit_for_bit(tmp_
                        {"substeps": 2, "iterations": 4})
     result = {}
     for chained in (False, True):
-        monkeypatch.setattr(stick_clusters, "CHAINED_SWEEP", chained)
+        monkeypatch.setattr(stick_clusters, "MIN_CHAINED_PARTICLES", 0 if chained else 10**12)
         sim = Simulator(scene, "cuda", sticks="clustered")
         start = perturbed(sim)
         result[chained] = [sweep(sim, start, 4), sweep(sim, start, 4)]

@@ -7,7 +7,7 @@ launch also reads positions out of order. Here the particles are cut into cluste
 ``CLUSTER_PARTICLES`` consecutive particles in Morton order of their rest positions (a compact patch of cloth),
 each cluster owns the sticks whose first particle it holds, and a block projects every colour of its cluster's
 sticks on positions held in shared memory: a sweep reads and writes each position about once, in a few launches
-(one per cluster colour) instead of one per stick colour.
+(one per cluster colour, or on a large mesh one launch, chained) instead of one per stick colour.
 
 Everything here is host-side numpy, built once per model.
 """
@@ -32,9 +32,11 @@ CLUSTER_BLOCK = 256
 """Threads per block of the clustered sweep: more than a colour's sticks (half the threads sit out each colour), but
 each lane's staging batch is half as long and the block has twice the warps to hide its loads' latency: faster than
 128 on an H100 and an H200 (bench/results/mesh/batched-staging)."""
-CHAINED_SWEEP = False
-"""One launch a sweep, each block taking the next cluster and waiting only for its neighbours
-(kernels/stick_clusters.py), rather than a launch per cluster colour: the same positions bit for bit."""
+MIN_CHAINED_PARTICLES = 640 * 640
+"""From this many particles on, a clustered sweep is chained: one launch a sweep, each block taking the next cluster
+and waiting only for its neighbours (kernels/stick_clusters.py), rather than a launch per cluster colour; the same
+positions bit for bit. On an H100 it took 7-13% off a triangle mesh's frame from 640^2 to 1024^2, and cost 6-10% at
+512^2, where every cluster of a sweep fits on the GPU at once (bench/results/mesh/chained)."""
 MAX_CHAINED_NEIGHBOURS = 32
 """The most clusters (itself among them) a cluster of a chained sweep may wait for, which bounds the neighbour
 lists' memory before the layout is built; a layout with more (sticks that reach far across the cloth) is swept with
@@ -46,6 +48,12 @@ MAX_SHARED_BYTES = 48 * 1024
 """The most shared memory a block of the clustered sweep may take (a CUDA block's static limit): its region's
 positions and weights, its sticks' packed ends and rest lengths (and, where staged, soft sticks' compliances and
 tensions), and its colours' starts."""
+
+
+def chained_sweep(particles: int) -> bool:
+    """Whether a clustered sweep of a cloth of ``particles`` is chained (MIN_CHAINED_PARTICLES), where its clusters'
+    neighbour lists stay within MAX_CHAINED_NEIGHBOURS."""
+    return particles >= MIN_CHAINED_PARTICLES
 
 
 def shared_bytes(region_capacity: int, stick_capacity: int, colours: int, staged_soft: bool = False) -> int:
@@ -216,7 +224,7 @@ class StickClusters(ConstraintSet):
         soft = req.sticks * 3 * FLOAT if req.compliant else 0  # the Model's compliances, the stored ones, tensions
         # A chained sweep's neighbour lists (at most MAX_CHAINED_NEIGHBOURS a cluster, and their starts) and the
         # solver's chain (three counts, a count per cluster, a flag).
-        chain = (clusters * MAX_CHAINED_NEIGHBOURS + clusters + 1) * INT + (clusters + 4) * INT if CHAINED_SWEEP else 0
+        chain = (clusters * MAX_CHAINED_NEIGHBOURS + clusters + 1) * INT + (clusters + 4) * INT if chained_sweep(req.particles) else 0
         return (req.sticks * (VEC2I + 2 * FLOAT) + req.sticks * (INT + FLOAT) + (req.particles + req.sticks) * INT
                 + (clusters + 1) * INT + (clusters * MAX_COLOURS + 1) * INT + soft + chain)
 
@@ -239,7 +247,7 @@ class StickClusters(ConstraintSet):
                                    f"{MAX_SHARED_BYTES} a block may hold (sticks reach far across the cloth, or many "
                                    "sticks meet at a particle): use sticks = 'explicit'")
         compliance = model.stick_compliance.numpy()[layout.stick] if model.compliant else None
-        return DeviceClusters(layout, compliance, device)
+        return DeviceClusters(layout, compliance, model.particle_count, device)
 
     def bind(self, model, state, solver) -> BoundStage:
         import warp as wp
@@ -291,7 +299,7 @@ class ClusterChain:
 class DeviceClusters:
     """A ClusterLayout's arrays on the device."""
 
-    def __init__(self, layout: ClusterLayout, compliance: np.ndarray | None, device):
+    def __init__(self, layout: ClusterLayout, compliance: np.ndarray | None, particles: int, device):
         import warp as wp
 
         self.region_start = wp.array(layout.region_start, dtype=int, device=device)
@@ -300,7 +308,8 @@ class DeviceClusters:
         self.clusters = len(layout.region_start) - 1
         # A chained sweep's neighbour lists; None where the sweep takes a launch per cluster colour.
         self.neighbour_start = self.neighbour = None
-        if CHAINED_SWEEP and np.diff(layout.neighbour_start).max() <= MAX_CHAINED_NEIGHBOURS:
+        if chained_sweep(particles) and \
+                np.diff(layout.neighbour_start).max() <= MAX_CHAINED_NEIGHBOURS:
             self.neighbour_start = wp.array(layout.neighbour_start, dtype=int, device=device)
             self.neighbour = wp.array(layout.neighbour, dtype=int, device=device)
         self.stick_ends = wp.array(layout.packed_ends, dtype=int, device=device)

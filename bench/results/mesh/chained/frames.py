@@ -3,6 +3,7 @@ clustered sweep as one launch per cluster colour and chained (one launch a sweep
 (frames 3-60 in 3 batches, median) and whether the positions at frame 60 are the same bit for bit.
 
     PYTHONPATH=. python bench/results/mesh/chained/frames.py 1024
+    SOFT_BEND=1.0 ROUNDS=1 VARIANTS="triangle mesh" PYTHONPATH=. python bench/results/mesh/chained/frames.py 1024
 """
 import json
 import os
@@ -22,14 +23,17 @@ from warp_verlet.core.simulator import Simulator
 wp.config.quiet = True
 DEV = os.environ.get("DEV", "cuda")
 FRAMES = int(os.environ.get("FRAMES", "60"))
+ROUNDS = int(os.environ.get("ROUNDS", "2"))  # each build, per-colour then chained, this many times
+VARIANTS = os.environ.get("VARIANTS", "triangle mesh,quad mesh").split(",")
+SOFT = {"bend": float(os.environ["SOFT_BEND"])} if os.environ.get("SOFT_BEND") else None  # compliance, m/N
 out = Path(os.environ.get("OUT", "/tmp"))
 rows = []
 for n in [int(a) for a in sys.argv[1:]] or [1024]:
     with tempfile.TemporaryDirectory() as d:
-        scenes = grid_and_meshes(n, 4, 8, "corners", "ply", Path(d))
-        for variant in ("triangle mesh", "quad mesh"):
+        scenes = grid_and_meshes(n, 4, 8, "corners", "ply", Path(d), compliance=SOFT)
+        for variant in VARIANTS:
             final = {}
-            for chained in (False, True, False, True):
+            for chained in (False, True) * ROUNDS:
                 sc.CHAINED_SWEEP = chained
                 sim = Simulator(scenes[variant][0], DEV, sticks="clustered")
                 sim.step_frame()
@@ -49,7 +53,7 @@ for n in [int(a) for a in sys.argv[1:]] or [1024]:
                 if chained in final:
                     same = bool(np.array_equal(final[chained], x))
                 final.setdefault(chained, x)
-                row = {"size": n, "variant": variant, "chained": chained, "ms/frame": round(statistics.median(batches), 4),
+                row = {"size": n, "variant": variant, "soft": SOFT, "chained": chained, "ms/frame": round(statistics.median(batches), 4),
                        "batches": [round(b, 4) for b in batches], "rms": float(stretch.rms), "max": float(stretch.max),
                        "repeat bit for bit": same}
                 rows.append(row)
