@@ -78,11 +78,11 @@ def streamed_float(values: wp.array(dtype=float), i: int) -> float:
 _WAIT_FOR_CLUSTER = """
 #if defined(__CUDA_ARCH__)
     volatile int* flag = (volatile int*)wp::address(done, d);
-    while ((int)(*flag - need) < 0) { __nanosleep(32); }
+    while ((int)((unsigned)*flag - (unsigned)need) < 0) { __nanosleep(32); }
     __threadfence();
     return 0;
 #else
-    return (int)(wp::index(done, d) - need) < 0 ? 1 : 0;
+    return (int)((unsigned)wp::index(done, d) - (unsigned)need) < 0 ? 1 : 0;
 #endif
 """
 
