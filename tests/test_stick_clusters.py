@@ -312,6 +312,30 @@ def test_a_chained_sweep_on_cuda_is_a_launch_per_cluster_colour_bit_for_bit(tmp_
     np.testing.assert_array_equal(result[True][1], result[False][0])
 
 
+@pytest.mark.parametrize("device", ["cpu", pytest.param("cuda", marks=[
+    pytest.mark.cuda, pytest.mark.skipif(not wp.is_cuda_available(), reason="no CUDA device")])])
+def test_frames_with_a_chained_sweep_are_frames_with_a_launch_per_cluster_colour_bit_for_bit(tmp_path, monkeypatch,
+                                                                                             device):
+    """The chained sweep inside the solver: frames stepped (captured in a graph on CUDA) with soft bend sticks, as a
+    Simulator runs them, end where a launch per cluster colour ends, bit for bit."""
+    from warp_verlet.constraints import stick_clusters
+
+    monkeypatch.setattr(stick_clusters, "CLUSTER_PARTICLES", 64)
+    scene = triangle_scene(tmp_path, compliance={"bend": 0.02})
+    ends = {}
+    for chained in (False, True):
+        monkeypatch.setattr(stick_clusters, "MIN_CHAINED_PARTICLES", 0 if chained else 10**12)
+        sim = Simulator(scene, device, sticks="clustered")
+        assert (sim.model.constraints["stick clusters"].neighbour is not None) == chained
+        start = sim.state.positions()
+        for _ in range(6):
+            sim.step_frame()
+        ends[chained] = sim.state.positions()
+        sim.close()
+    assert np.abs(ends[True] - start).max() > 1e-3  # the cloth fell and swung
+    np.testing.assert_array_equal(ends[True], ends[False])
+
+
 def test_a_region_larger_than_packed_ends_can_name_is_refused_with_the_reason(tmp_path, monkeypatch):
     from warp_verlet.constraints import stick_clusters
 
