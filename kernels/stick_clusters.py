@@ -78,7 +78,11 @@ def streamed_float(values: wp.array(dtype=float), i: int) -> float:
 _WAIT_FOR_CLUSTER = """
 #if defined(__CUDA_ARCH__)
     volatile int* flag = (volatile int*)wp::address(done, d);
-    while ((int)((unsigned)*flag - (unsigned)need) < 0) { __nanosleep(32); }
+    while ((int)((unsigned)*flag - (unsigned)need) < 0) {
+#if __CUDA_ARCH__ >= 700
+        __nanosleep(32);  // leave the issue slots to the blocks being waited for
+#endif
+    }
     __threadfence();
     return 0;
 #else
