@@ -470,6 +470,9 @@ def test_the_run_summary_says_how_the_sticks_were_swept_and_why_auto_did_not_clu
     monkeypatch.setattr(model_module, "stick_form", lambda sticks, colouring, device: sticks)  # as on a GPU
     monkeypatch.setattr(stages, "MIN_CLUSTERED_PARTICLES", 1)
     assert sweep_description(Simulator(mesh, "cpu").model) == SWEEP_FORMS["clustered"]
+    monkeypatch.setattr(stick_clusters, "MIN_CHAINED_PARTICLES", mesh.particle_count)
+    assert sweep_description(Simulator(mesh, "cpu").model) == SWEEP_FORMS["clustered"] + ", chained (one launch a sweep)"
+    monkeypatch.setattr(stick_clusters, "MIN_CHAINED_PARTICLES", mesh.particle_count + 1)
     monkeypatch.setattr(stick_clusters, "MAX_SHARED_BYTES", 1024)
     kept = sweep_description(Simulator(mesh, "cpu").model)
     assert kept.startswith(SWEEP_FORMS["explicit"] + " (clustered refused: ") and "shared memory" in kept

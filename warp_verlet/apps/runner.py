@@ -189,6 +189,8 @@ def sweep_description(model) -> str:
     if model.relaxation == "jacobi":
         return "stick arrays, a Jacobi gather per particle"
     form = SWEEP_FORMS[model.sticks_form]
+    if model.sticks_form == "clustered" and model.constraints["stick clusters"].neighbour is not None:
+        form += ", chained (one launch a sweep)"
     return form if model.clusters_refused is None else f"{form} (clustered refused: {model.clusters_refused})"
 
 
