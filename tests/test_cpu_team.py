@@ -253,8 +253,19 @@ def test_an_error_in_a_worker_reaches_the_caller_and_stops_the_team():
         raise RuntimeError("boom in worker")
 
     team = PhaseTeam([[lambda: done.append(0), fail], [lambda: done.append(1), None]], repeats=2)
-    with pytest.raises(RuntimeError, match="boom in worker"):
-        team.run()
+    raised = []
+
+    def run():  # member 0 waits for the failed worker at the native barrier: its abort flag must release it
+        try:
+            team.run()
+        except RuntimeError as exc:
+            raised.append(exc)
+
+    caller = threading.Thread(target=run, daemon=True)
+    caller.start()
+    caller.join(timeout=60)
+    assert not caller.is_alive(), "the caller still waits at the barrier for the failed worker"
+    assert len(raised) == 1 and "boom in worker" in str(raised[0])
     with pytest.raises(WarpVerletError, match="stopped after an earlier error"):
         team.run()
     assert all(not w.is_alive() for w in _joined(team))
@@ -264,10 +275,13 @@ def test_an_interrupt_in_the_caller_releases_the_workers():
     def interrupt():
         raise KeyboardInterrupt
 
-    team = PhaseTeam([[interrupt, lambda: None, lambda: None]], repeats=1)
-    with pytest.raises(KeyboardInterrupt):
-        team.run()
-    assert all(not w.is_alive() for w in _joined(team))
+    for phases in ([[interrupt, lambda: None, lambda: None]],
+                   # in a later phase, where the workers wait for the caller at the native barrier
+                   [[lambda: None] * 3, [interrupt, lambda: None, lambda: None]]):
+        team = PhaseTeam(phases, repeats=1)
+        with pytest.raises(KeyboardInterrupt):
+            team.run()
+        assert all(not w.is_alive() for w in _joined(team))
 
 
 def test_phases_run_in_order_with_every_member_and_workers_stop_on_close():

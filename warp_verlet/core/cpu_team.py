@@ -6,6 +6,9 @@ runs, so the pieces run in parallel. The colours still run one after the other (
 every particle sees its sticks in the same order as with one thread, and the result is bit-for-bit the same
 whatever T is. Jacobi is cut by particle instead (each thread gathers, then copies back, its own particles).
 
+The threads meet after each phase at a barrier in C++ (kernels/team_barrier.py), launched from Python with the GIL
+released; a Python barrier's wake-ups cost more (bench/results/cpu_threads/native-phases).
+
 Each thread pays a fixed cost per phase (its Python launch, under the GIL, and its share of the barrier),
 so a phase of one-thread time W is fastest on about sqrt(W / LAUNCH_COST_S) threads (W / T + T x cost is
 least there). ``auto_threads`` picks that, capped by the cores and MAX_AUTO_THREADS.
@@ -78,8 +81,11 @@ class PhaseTeam:
     """T threads that run ``repeats`` passes over ``phases``, with a barrier after every phase.
 
     ``phases[p][t]`` is thread t's work in phase p (a callable, or None for nothing). The calling thread is
-    member 0, so T - 1 worker threads are started; they sleep on the barrier between runs. An exception in
-    any member stops the team and is raised by ``run``; a stopped team refuses to run again.
+    member 0, so T - 1 worker threads are started; they sleep on a Python barrier between runs, and meet after
+    each phase at the native one (kernels/team_barrier.py: a launch that waits in C++ with the GIL released,
+    where a Python barrier's wake-ups cost each thread tens of microseconds a phase). An exception in any member
+    sets the native barrier's abort flag, stops the team and is raised by ``run``; a stopped team refuses to run
+    again.
     """
 
     def __init__(self, phases: Sequence[Sequence[Callable[[], None] | None]], repeats: int):
@@ -91,7 +97,7 @@ class PhaseTeam:
         self._phases = [list(phase) for phase in phases]
         self._repeats = int(repeats)
         self._barrier = threading.Barrier(self.threads)
-        self._state = {"error": None, "closed": False}
+        self._state = {"error": None, "closed": False, "phase_barrier": NativeBarrier(self.threads)}
         self._workers = [
             threading.Thread(target=PhaseTeam._serve, args=(self._barrier, self._state, self._work_of(t)),
                              name=f"warp-verlet-relax-{t}", daemon=True)
@@ -111,14 +117,19 @@ class PhaseTeam:
 
     def _work_of(self, member: int) -> Callable[[], None]:
         tasks = [phase[member] for phase in self._phases]
-        barrier, repeats = self._barrier, self._repeats
+        repeats = self._repeats
+        phase_barrier = self._state["phase_barrier"]
+        meet = phase_barrier.member_launch().launch
+        aborted = phase_barrier.flags
 
         def work() -> None:
             for _ in range(repeats):
                 for task in tasks:
                     if task is not None:
                         task()
-                    barrier.wait()
+                    meet()
+                    if aborted[2]:  # another member failed: its error is the one to raise
+                        raise threading.BrokenBarrierError
 
         return work
 
@@ -134,12 +145,14 @@ class PhaseTeam:
                 return
             except BaseException as exc:  # hand it to run(), and stop the others
                 state["error"] = exc
+                state["phase_barrier"].abort()
                 barrier.abort()
                 return
 
     @staticmethod
     def _release(barrier: threading.Barrier, state: dict) -> None:
         state["closed"] = True
+        state["phase_barrier"].abort()
         barrier.abort()
 
     def run(self) -> None:
@@ -166,6 +179,30 @@ class PhaseTeam:
         self._finalizer()
 
 
+class NativeBarrier:
+    """The state of a barrier in C++ (kernels/team_barrier.py) for ``threads`` threads: ``member_launch()`` is a
+    recorded launch of it (one for each thread that meets there), ``abort()`` releases every thread waiting at it,
+    and at every later arrival, for good."""
+
+    def __init__(self, threads: int):
+        import warp as wp
+
+        self.threads = threads
+        self.state = wp.zeros(3, dtype=int, device="cpu")  # arrived, generation, aborted
+        self.flags = self.state.numpy()  # a view of the CPU array's own memory
+
+    def member_launch(self):
+        import warp as wp
+
+        from warp_verlet.kernels.team_barrier import team_barrier
+
+        return wp.launch(team_barrier, 1, inputs=[self.state, self.threads, wp.uint64(yield_address())],
+                         device="cpu", record_cmd=True)
+
+    def abort(self) -> None:
+        self.flags[2] = 1
+
+
 def yield_address() -> int:
     """The address of the C library's ``sched_yield`` (``SwitchToThread`` on Windows): what a thread waiting at the
     native barrier calls to give its core to the others."""
@@ -187,14 +224,9 @@ class TeamRecording:
     starts a phase before member 0 has done the frame's work that comes before it."""
 
     def __init__(self, threads: int):
-        import warp as wp
-
-        from warp_verlet.kernels.team_barrier import team_barrier
-
         self.threads = threads
-        self.barrier_state = wp.zeros(3, dtype=int, device="cpu")  # arrived, generation, aborted
-        self.barrier = wp.launch(team_barrier, 1, inputs=[self.barrier_state, threads, wp.uint64(yield_address())],
-                                 device="cpu", record_cmd=True)
+        self.native_barrier = NativeBarrier(threads)
+        self.barrier = self.native_barrier.member_launch()  # the same launch in every member's graph
         self._others: list[list[Callable[[], None] | None]] = [[] for _ in range(threads - 1)]  # None: a barrier
 
     def team_run(self, phases: Sequence[Sequence[Callable[[], None] | None]], repeats: int) -> None:
@@ -234,12 +266,11 @@ class FrameTeam:
 
     def __init__(self, graphs: list, recording: TeamRecording):
         self.graphs = graphs
-        self.barrier_state = recording.barrier_state
+        self.barrier = recording.native_barrier
 
     def abort(self) -> None:
-        """Release every thread waiting at one of the frame's barriers (its abort flag, in the CPU array's own
-        memory)."""
-        self.barrier_state.numpy()[2] = 1
+        """Release every thread waiting at one of the frame's barriers."""
+        self.barrier.abort()
 
 
 class FrameReplayer:
