@@ -471,7 +471,8 @@ def test_the_run_summary_says_how_the_sticks_were_swept_and_why_auto_did_not_clu
     monkeypatch.setattr(stages, "MIN_CLUSTERED_PARTICLES", 1)
     assert sweep_description(Simulator(mesh, "cpu").model) == SWEEP_FORMS["clustered"]
     monkeypatch.setattr(stick_clusters, "MIN_CHAINED_PARTICLES", mesh.particle_count)
-    assert sweep_description(Simulator(mesh, "cpu").model) == SWEEP_FORMS["clustered"] + ", chained (one launch a sweep)"
+    chained = SWEEP_FORMS["clustered"] + ", chained (one launch a sweep)"
+    assert sweep_description(Simulator(mesh, "cpu").model) == chained
     monkeypatch.setattr(stick_clusters, "MIN_CHAINED_PARTICLES", mesh.particle_count + 1)
     monkeypatch.setattr(stick_clusters, "MAX_SHARED_BYTES", 1024)
     kept = sweep_description(Simulator(mesh, "cpu").model)

@@ -40,7 +40,7 @@ positions bit for bit. On an H100 it took 7-13% off a triangle mesh's frame from
 MAX_CHAINED_NEIGHBOURS = 32
 """The most clusters (itself among them) a cluster of a chained sweep may wait for, which bounds the neighbour
 lists' memory before the layout is built; a layout with more (sticks that reach far across the cloth) is swept with
-a launch per cluster colour. The meshes measured have at most 13 (bench/results/mesh/chained)."""
+a launch per cluster colour. The benchmark's meshes have at most 9 (bench/results/mesh/chained)."""
 MAX_REGION = 2048
 """The most particles a cluster's region (its own and its sticks' other ends) may hold: a stick's two places in it
 are packed into one int, 16 bits each."""
@@ -51,8 +51,8 @@ tensions), and its colours' starts."""
 
 
 def chained_sweep(particles: int) -> bool:
-    """Whether a clustered sweep of a cloth of ``particles`` is chained (MIN_CHAINED_PARTICLES), where its clusters'
-    neighbour lists stay within MAX_CHAINED_NEIGHBOURS."""
+    """Whether a clustered sweep of ``particles`` is chained (MIN_CHAINED_PARTICLES), provided that no cluster has
+    more than MAX_CHAINED_NEIGHBOURS neighbours (DeviceClusters checks that once the layout is built)."""
     return particles >= MIN_CHAINED_PARTICLES
 
 
@@ -83,8 +83,9 @@ class ClusterLayout:
     (C * colours + 1,)); per stored stick its ends as places in its cluster's region (``stick_local``), its rest
     length and its index in the Model's stick arrays (``stick``); ``launches`` (first cluster, clusters) per cluster
     colour; per cluster the clusters whose regions share a particle with its own, and itself (``neighbour_start``
-    (C + 1,), ``neighbour``), for the chained sweep's waits; ``capacity`` and ``stick_capacity`` the shared arrays' lengths (the largest region and the most sticks
-    a cluster holds, rounded up to 32 and 64, so that near sizes share a kernel)."""
+    (C + 1,), ``neighbour``), for the chained sweep's waits; ``capacity`` and ``stick_capacity`` the shared arrays'
+    lengths (the largest region and the most sticks a cluster holds, rounded up to 32 and 64, so that near sizes
+    share a kernel)."""
 
     region_start: np.ndarray
     region: np.ndarray
@@ -224,7 +225,9 @@ class StickClusters(ConstraintSet):
         soft = req.sticks * 3 * FLOAT if req.compliant else 0  # the Model's compliances, the stored ones, tensions
         # A chained sweep's neighbour lists (at most MAX_CHAINED_NEIGHBOURS a cluster, and their starts) and the
         # solver's chain (three counts, a count per cluster, a flag).
-        chain = (clusters * MAX_CHAINED_NEIGHBOURS + clusters + 1) * INT + (clusters + 4) * INT if chained_sweep(req.particles) else 0
+        chain = 0
+        if chained_sweep(req.particles):
+            chain = (clusters * MAX_CHAINED_NEIGHBOURS + clusters + 1) * INT + (clusters + 4) * INT
         return (req.sticks * (VEC2I + 2 * FLOAT) + req.sticks * (INT + FLOAT) + (req.particles + req.sticks) * INT
                 + (clusters + 1) * INT + (clusters * MAX_COLOURS + 1) * INT + soft + chain)
 
@@ -308,8 +311,7 @@ class DeviceClusters:
         self.clusters = len(layout.region_start) - 1
         # A chained sweep's neighbour lists; None where the sweep takes a launch per cluster colour.
         self.neighbour_start = self.neighbour = None
-        if chained_sweep(particles) and \
-                np.diff(layout.neighbour_start).max() <= MAX_CHAINED_NEIGHBOURS:
+        if chained_sweep(particles) and np.diff(layout.neighbour_start).max() <= MAX_CHAINED_NEIGHBOURS:
             self.neighbour_start = wp.array(layout.neighbour_start, dtype=int, device=device)
             self.neighbour = wp.array(layout.neighbour, dtype=int, device=device)
         self.stick_ends = wp.array(layout.packed_ends, dtype=int, device=device)
