@@ -1,8 +1,9 @@
-"""What a phase costs each CPU thread, by barrier: T threads run PHASES phases of tiny pieces (each thread's piece
-of a 64-element array, reading a neighbour the other thread wrote in the phase before), meeting after every phase
-at the Python barrier of ``PhaseTeam`` (a recorded launch a phase, from Python) or at the native barrier of a
-captured frame (kernels/team_barrier.py; one graph a thread, replayed from C++). Prints microseconds a phase for
-each, and whether both ended with the sequential result bit for bit.
+"""What a phase costs each CPU thread, captured or not: T threads run PHASES phases of tiny pieces (each thread's
+piece of a 64-element array, reading a neighbour the other thread wrote in the phase before), run by ``PhaseTeam``
+from Python (a recorded launch a phase, then the barrier: a Python barrier until 2026-12-06, the native barrier
+launched from Python since, native-phases/README.md) or as a captured frame (kernels/team_barrier.py; one graph a
+thread, replayed from C++ by a ``FrameReplayer``). Prints microseconds a phase for each, and whether both ended
+with the sequential result bit for bit.
 
     PYTHONPATH=. python bench/results/cpu_threads/barrier_cost.py [THREADS] [PHASES]
 """
@@ -13,7 +14,7 @@ import numpy as np
 import warp as wp
 
 from bench.common import quiet_warp
-from warp_verlet.core.cpu_team import FrameTeam, PhaseTeam, TeamRecording
+from warp_verlet.core.cpu_team import FrameReplayer, FrameTeam, PhaseTeam, TeamRecording
 
 quiet_warp()
 THREADS = int(sys.argv[1]) if len(sys.argv) > 1 else 2
@@ -64,10 +65,11 @@ team.recording = recording
 with wp.ScopedCapture(device="cpu") as capture:
     team.run()
 frame = FrameTeam([capture.graph, *recording.member_graphs()], recording)
+replayer = FrameReplayer(THREADS)
 start = time.perf_counter()
-frame.run()
+replayer.run(frame)
 native_us = (time.perf_counter() - start) / PHASES * 1e6
 native_same = np.array_equal(a.numpy(), expected)
-frame.close()
-print(f"{THREADS} threads, {PHASES} phases: Python barrier {python_us:.1f} us a phase (bit for bit: {python_same}); "
-      f"captured, native barrier {native_us:.2f} us a phase (bit for bit: {native_same})")
+replayer.close()
+print(f"{THREADS} threads, {PHASES} phases: from Python {python_us:.1f} us a phase (bit for bit: {python_same}); "
+      f"captured {native_us:.2f} us a phase (bit for bit: {native_same})")
