@@ -125,7 +125,11 @@ def neighbour_pairs(keys: np.ndarray, particles: int) -> np.ndarray:
 def colour_clusters(keys: np.ndarray, particles: int, clusters: int) -> np.ndarray:
     """A colour per cluster such that the regions (``keys``: cluster * particles + particle) of one colour share
     no particle: greedy, in cluster order (the lowest colour no coloured neighbour holds)."""
-    pairs = neighbour_pairs(keys, particles)
+    return _greedy_colours(neighbour_pairs(keys, particles), clusters)
+
+
+def _greedy_colours(pairs: np.ndarray, clusters: int) -> np.ndarray:
+    """colour_clusters' colouring, given every neighbouring pair of clusters both ways, sorted (neighbour_pairs)."""
     offsets = np.searchsorted(pairs[:, 0], np.arange(clusters + 1))
     colour = np.full(clusters, -1, np.int64)
     for c in range(clusters):
@@ -148,14 +152,16 @@ def cluster_layout(sticks: np.ndarray, rest: np.ndarray, stick_colour: np.ndarra
     cluster_of = np.empty(n, np.int64)
     cluster_of[np.argsort(morton_codes(rest_positions), kind="stable")] = np.arange(n) // cluster_particles
     keys = _regions(cluster_of, sticks)
-    colour = colour_clusters(keys, n, clusters)
+    pairs = neighbour_pairs(keys, n)
+    colour = _greedy_colours(pairs, clusters)
     # Renumber the clusters in colour order, so that a cluster colour is one run of consecutive clusters: the
     # regions keep their particles, so their keys are renumbered and sorted again rather than rebuilt.
     renumber = np.empty(clusters, np.int64)
     renumber[np.lexsort((np.arange(clusters), colour))] = np.arange(clusters)
     cluster_of = renumber[cluster_of]
     keys = np.sort(renumber[keys // n] * n + keys % n)
-    pairs = np.concatenate([neighbour_pairs(keys, n), np.repeat(np.arange(clusters), 2).reshape(-1, 2)])
+    # The chained sweep's neighbour lists: the same pairs renumbered, and each cluster itself.
+    pairs = np.concatenate([renumber[pairs], np.repeat(np.arange(clusters), 2).reshape(-1, 2)])
     pairs = pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))]
     neighbour_start = np.searchsorted(pairs[:, 0], np.arange(clusters + 1))
     region_start = np.zeros(clusters + 1, np.int64)
