@@ -1,9 +1,11 @@
-"""A barrier between the CPU threads of a captured frame (warp_verlet/core/cpu_team.py, ``FrameTeam``).
+"""A barrier between the CPU threads of a relaxation team (warp_verlet/core/cpu_team.py, ``NativeBarrier``).
 
-On the CPU, a frame cut over T threads can be captured as T graphs, one a thread, each replayed by its own thread
-in Warp's C++ loop. Between two phases (two colours of a sweep, say) every thread must finish the first before any
-starts the second: each graph then launches ``team_barrier``, which waits in C++ for the others, where a Python
-barrier would cost each thread a trip through the interpreter and the GIL (13-70 us a phase, ``PhaseTeam``).
+Between two phases (two colours of a sweep, say) every thread must finish the first before any starts the second.
+On the CPU, a frame cut over T threads is captured as T graphs, one a thread, each replayed by its own thread in
+Warp's C++ loop, and each graph launches ``team_barrier`` after each of its thread's pieces (``FrameTeam``); a team
+that steps without capture launches it from Python after each piece (``PhaseTeam``). Either way the thread waits
+in C++, with the GIL released, where a Python barrier's wake-ups cost each thread more
+(bench/results/cpu_threads/native-phases).
 
 The barrier is the usual counter and generation (a sense-reversing barrier): the last thread to arrive resets the
 counter and advances the generation, and the others wait until the generation moves. Its atomics order memory
@@ -53,5 +55,6 @@ def wait_for_team(state: wp.array(dtype=int), threads: int, yield_to_os: wp.uint
 
 @wp.kernel
 def team_barrier(state: wp.array(dtype=int), threads: int, yield_to_os: wp.uint64):
-    """Launched with dim 1 in each thread's captured graph: that thread waits here for the others."""
+    """Launched with dim 1 by each thread of a team, or in its captured graph: that thread waits here for the
+    others."""
     wait_for_team(state, threads, yield_to_os)

@@ -140,9 +140,9 @@ CLUSTERED = ["coloured", "tethers", "compliance", "multilevel", "moving-sphere",
 @pytest.mark.parametrize("case", list(CASES) + [f"{c}/implicit" for c in IMPLICIT] + [f"{c}/tiled" for c in TILED]
                          + [f"{c}/clustered" for c in CLUSTERED] + [f"{CLUSTERED[0]}/chained"])
 def test_estimate_matches_the_arrays_allocated(case, monkeypatch):
-    case_name = case
     case, _, sticks = case.partition("/")
-    if sticks == "chained":  # a clustered sweep chained (of any size here): its neighbour lists and chain counted
+    chained = sticks == "chained"
+    if chained:  # a clustered sweep chained (of any size here): its neighbour lists and chain counted
         from warp_verlet.constraints import stick_clusters
 
         monkeypatch.setattr(stick_clusters, "MIN_CHAINED_PARTICLES", 0)
@@ -174,7 +174,7 @@ def test_estimate_matches_the_arrays_allocated(case, monkeypatch):
         clusters = data.region_start.shape[0] - 1
         slack = 4 * (scene.particle_count + sim.model.stick_count - data.region.shape[0]
                      + clusters * (MAX_COLOURS - data.colours))
-        assert (data.neighbour is not None) == (case_name.endswith("chained"))
+        assert (data.neighbour is not None) == chained
         if data.neighbour is not None:  # a chained sweep's lists, bounded by MAX_CHAINED_NEIGHBOURS a cluster
             slack += 4 * (clusters * MAX_CHAINED_NEIGHBOURS - data.neighbour.shape[0])
     assert allocated - estimate(scene, sim.model.sticks_form).device_bytes == counters - slack
